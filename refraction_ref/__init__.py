@@ -1,0 +1,19 @@
+"""refraction_ref: a CPU reference (NumPy + Numba) for three GPU methods of
+rendering light refracted through transparent objects and water.
+
+>>> import refraction_ref as rr
+>>> scene = rr.load_scene()                       # the bundled glass bunny
+>>> result = rr.render(scene, method="imagespace", overrides={"imagespace.iterations": 10})
+>>> result.arrays["exit_dir"].shape
+(512, 512, 3)
+"""
+
+__version__ = "0.1.0"
+
+from .camera import Camera
+from .render import METHODS, render
+from .result import Result, load_result
+from .scene import Scene, SceneError, default_scene, load_scene
+
+__all__ = ["Camera", "METHODS", "Result", "Scene", "SceneError", "default_scene", "load_result",
+           "load_scene", "render", "__version__"]

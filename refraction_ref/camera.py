@@ -1,0 +1,171 @@
+"""The one pinhole camera model shared by every method.
+
+View space is right-handed and looks down -z (OpenGL); "depth" is the
+view-space distance along the view axis, ``d = -z_view > 0``. Pixel (row i,
+column j) is sampled at its centre, normalised screen coordinates
+``((j + 0.5) / W, (i + 0.5) / H)`` with row 0 at the top (ORACLE.md).
+
+Screen coordinates used by the kernels are continuous pixel units:
+``col = j + 0.5`` and ``row = i + 0.5`` at pixel centres. The projection of
+a view-space point ``(x, y, z)`` with ``d = -z`` is::
+
+    col = (x / (d * sx) * 0.5 + 0.5) * W
+    row = (0.5 - y / (d * sy) * 0.5) * H
+
+with ``sy = tan(fov_y / 2)`` and ``sx = sy * W / H``; it is the texture
+coordinate mapping of Chaudhari (2008), §3.6, scaled to pixels.
+
+References
+----------
+.. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+   Objects", M.S. thesis, UMBC, 2008, §3.5 (unprojection of a pixel with a
+   known view-space depth) and §3.6 (texture coordinates of a point).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+__all__ = ["Camera", "project_point", "unproject_pixel"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective pinhole camera.
+
+    Parameters
+    ----------
+    eye, target, up : (3,) array_like
+        Position, look-at point and up hint in world space.
+    fov_y : float
+        Full vertical field of view in degrees.
+    width, height : int
+        Image size in pixels.
+    near, far : float
+        Clip distances along the view axis (depth).
+    """
+
+    eye: tuple
+    target: tuple
+    up: tuple
+    fov_y: float
+    width: int
+    height: int
+    near: float
+    far: float
+
+    @classmethod
+    def from_dict(cls, c):
+        return cls(
+            eye=tuple(float(v) for v in c["eye"]),
+            target=tuple(float(v) for v in c["target"]),
+            up=tuple(float(v) for v in c["up"]),
+            fov_y=float(c["fov_y"]),
+            width=int(c["width"]),
+            height=int(c["height"]),
+            near=float(c["near"]),
+            far=float(c["far"]),
+        )
+
+    # -- frames ---------------------------------------------------------
+    @property
+    def basis(self):
+        """(3, 3) rows: camera right, up and backward (+z view) axes in world space."""
+        eye = np.asarray(self.eye)
+        f = np.asarray(self.target) - eye
+        f = f / np.linalg.norm(f)
+        r = np.cross(f, np.asarray(self.up))
+        r = r / np.linalg.norm(r)
+        u = np.cross(r, f)
+        return np.stack([r, u, -f])
+
+    @property
+    def sx(self):
+        return float(np.tan(np.radians(self.fov_y) / 2.0) * self.width / self.height)
+
+    @property
+    def sy(self):
+        return float(np.tan(np.radians(self.fov_y) / 2.0))
+
+    @property
+    def shape(self):
+        return (self.height, self.width)
+
+    def world_to_view(self, p):
+        """Transform world points (..., 3) into view space."""
+        p = np.asarray(p, dtype=np.float64)
+        return (p - np.asarray(self.eye)) @ self.basis.T
+
+    def view_to_world(self, p):
+        """Transform view-space points (..., 3) into world space."""
+        return np.asarray(p, dtype=np.float64) @ self.basis + np.asarray(self.eye)
+
+    def dir_view_to_world(self, v):
+        """Rotate view-space directions (..., 3) into world space."""
+        return np.asarray(v, dtype=np.float64) @ self.basis
+
+    def dir_world_to_view(self, v):
+        """Rotate world-space directions (..., 3) into view space."""
+        return np.asarray(v, dtype=np.float64) @ self.basis.T
+
+    def projection_matrix(self):
+        """The OpenGL perspective matrix M_p (view to clip space)."""
+        n, f = self.near, self.far
+        m = np.zeros((4, 4))
+        m[0, 0] = 1.0 / self.sx
+        m[1, 1] = 1.0 / self.sy
+        m[2, 2] = -(f + n) / (f - n)
+        m[2, 3] = -2.0 * f * n / (f - n)
+        m[3, 2] = -1.0
+        return m
+
+    def primary_rays_view(self):
+        """Unit view-space directions through every pixel centre, (H, W, 3)."""
+        H, W = self.height, self.width
+        x = ((np.arange(W) + 0.5) / W * 2.0 - 1.0) * self.sx
+        y = (1.0 - (np.arange(H) + 0.5) / H * 2.0) * self.sy
+        d = np.empty((H, W, 3))
+        d[..., 0] = x[None, :]
+        d[..., 1] = y[:, None]
+        d[..., 2] = -1.0
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def primary_rays(self):
+        """World-space origins and unit directions of the primary rays, each (H, W, 3)."""
+        d = self.dir_view_to_world(self.primary_rays_view())
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        o = np.broadcast_to(np.asarray(self.eye, dtype=np.float64), d.shape).copy()
+        return o, d
+
+    def to_screen(self, p_view):
+        """Project view-space points (..., 3) to (col, row, depth) in pixel units."""
+        p = np.asarray(p_view, dtype=np.float64)
+        d = -p[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            col = (p[..., 0] / (d * self.sx) * 0.5 + 0.5) * self.width
+            row = (0.5 - p[..., 1] / (d * self.sy) * 0.5) * self.height
+        return col, row, d
+
+    def kernel_args(self):
+        """Scalars the Numba kernels need: (W, H, sx, sy)."""
+        return self.width, self.height, self.sx, self.sy
+
+
+@nb.njit(cache=True, inline="always")
+def project_point(x, y, z, W, H, sx, sy):
+    """Project a view-space point to (col, row, depth); Chaudhari (2008) §3.6."""
+    d = -z
+    col = (x / (d * sx) * 0.5 + 0.5) * W
+    row = (0.5 - y / (d * sy) * 0.5) * H
+    return col, row, d
+
+
+@nb.njit(cache=True, inline="always")
+def unproject_pixel(col, row, d, W, H, sx, sy):
+    """View-space point at depth ``d`` seen at screen position (col, row); §3.5."""
+    x = (col / W * 2.0 - 1.0) * sx * d
+    y = (1.0 - row / H * 2.0) * sy * d
+    return x, y, -d

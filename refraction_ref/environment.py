@@ -1,0 +1,103 @@
+"""Environment maps: what a ray sees when it leaves the scene.
+
+``checker``
+    A procedural latitude-longitude checkerboard, ``tiles`` squares around
+    the horizon and ``tiles / 2`` from pole to pole, alternating the two
+    ``colors``. Its sharp edges make refraction errors visible.
+``latlong``
+    An equirectangular image (any format imageio reads; HDR stays linear,
+    8-bit images are decoded from sRGB), sampled bilinearly.
+``constant``
+    One colour, ``colors[0]`` (useful for energy tests).
+
+The lat-long parameterisation: ``u = atan2(x, -z) / (2 pi) + 1/2`` (u = 1/2
+looks down -z), ``v = acos(y) / pi`` (v = 0 is straight up, +y).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["environment_lookup", "latlong_uv"]
+
+
+def latlong_uv(dirs):
+    """Lat-long texture coordinates (u, v) in [0, 1] of unit directions (..., 3)."""
+    d = np.asarray(dirs, dtype=np.float64)
+    u = np.arctan2(d[..., 0], -d[..., 2]) / (2 * np.pi) + 0.5
+    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
+    return u, v
+
+
+@functools.lru_cache(maxsize=4)
+def _load_image(path):
+    import imageio.v3 as iio
+
+    img = np.asarray(iio.imread(path))
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    img = img[..., :3]
+    if img.dtype.kind in "ui":
+        img = img.astype(np.float64) / np.iinfo(img.dtype).max
+        img = np.where(img <= 0.04045, img / 12.92, ((img + 0.055) / 1.055) ** 2.4)
+    img = img.astype(np.float32)
+    img.setflags(write=False)
+    return img
+
+
+def _bilinear(img, u, v):
+    H, W = img.shape[:2]
+    x = u * W - 0.5
+    y = v * H - 0.5
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None]
+    xa, xb = x0 % W, (x0 + 1) % W          # wraps around in longitude
+    ya, yb = np.clip(y0, 0, H - 1), np.clip(y0 + 1, 0, H - 1)
+    return ((img[ya, xa] * (1 - fx) + img[ya, xb] * fx) * (1 - fy)
+            + (img[yb, xa] * (1 - fx) + img[yb, xb] * fx) * fy)
+
+
+def environment_lookup(env, dirs, base_dir="."):
+    """Linear RGB radiance seen along unit directions.
+
+    Parameters
+    ----------
+    env : dict
+        The scene's ``environment`` block.
+    dirs : (..., 3) array_like
+        World-space directions; rows holding NaN give black.
+    base_dir : str
+        Folder for a relative ``path``.
+
+    Returns
+    -------
+    (..., 3) float32
+    """
+    import os
+
+    d = np.asarray(dirs, dtype=np.float64)
+    bad = ~np.all(np.isfinite(d), axis=-1)
+    d = np.where(bad[..., None], np.array([0.0, 0.0, -1.0]), d)
+    colors = np.asarray(env.get("colors", [[0.9, 0.9, 0.9], [0.1, 0.1, 0.1]]), dtype=np.float64)
+    t = env.get("type", "checker")
+    if t == "constant":
+        out = np.broadcast_to(colors[0], d.shape).astype(np.float64)
+    elif t == "checker":
+        u, v = latlong_uv(d)
+        n = int(env.get("tiles", 16))
+        iu = np.floor(u * n).astype(np.int64)
+        iv = np.floor(v * (n / 2.0)).astype(np.int64)
+        out = colors[(iu + iv) % 2]
+    elif t == "latlong":
+        p = env["path"] if os.path.isabs(env["path"]) else os.path.join(base_dir, env["path"])
+        u, v = latlong_uv(d)
+        out = _bilinear(_load_image(os.path.abspath(p)), u, v)
+    else:
+        raise ValueError(f"environment: unknown type {t!r}")
+    out = np.asarray(out, dtype=np.float64) * float(env.get("intensity", 1.0))
+    out[bad] = 0.0
+    return out.astype(np.float32)

@@ -1,0 +1,46 @@
+"""Min / max depth pass (Chaudhari 2008, §3.3).
+
+The mesh is rasterized once without culling or hidden-surface removal, and
+each pixel keeps the smallest (Zmin) and largest (Zmax) fragment depth: the
+thesis writes ``d`` and ``Zfar - d`` to two channels with *max* blending.
+These per-pixel *local bounds* make the slicing of the voxelization pass
+tight; the *global bounds* are their extremes over the image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..raster import rasterize
+
+__all__ = ["depth_bounds", "global_bounds"]
+
+
+def depth_bounds(tri_view, camera):
+    """Per-pixel local depth bounds.
+
+    Parameters
+    ----------
+    tri_view : (T, 3, 3) ndarray
+        Triangles in view space, already clipped to the near plane.
+    camera : Camera
+
+    Returns
+    -------
+    zmin, zmax : (H, W) float64
+        Nearest and farthest fragment depth; ``+inf`` / ``-inf`` where no
+        fragment was drawn.
+
+    References
+    ----------
+    Chaudhari (2008), §3.3, first rendering pass.
+    """
+    return rasterize(tri_view, camera, "minmax", clip=False)
+
+
+def global_bounds(zmin, zmax):
+    """Global object bounds (scalars) from the local ones; (inf, -inf) for an empty view."""
+    cov = np.isfinite(zmin)
+    if not cov.any():
+        return np.inf, -np.inf
+    return float(zmin[cov].min()), float(zmax[cov].max())

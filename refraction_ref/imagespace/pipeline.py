@@ -1,0 +1,233 @@
+"""The image-space multiple-refraction pipeline (Chaudhari 2008, ch. 3), pass by pass.
+
+======================  ===========================================  =========
+stage (``timings_ms``)  pass                                          section
+======================  ===========================================  =========
+``minmax``              min / max depth, per-pixel local bounds       §3.3
+``voxelize``            bitmask voxelization (or the float A-buffer)  §3.3
+``peel``                layered depth images                          §3.4
+``reduce``              search bounds per layer                       §3.7
+``trace``               binary search + Snell at every interface      §3.6-3.7
+``shade``               environment look-up, Beer-Lambert absorption  §3.8
+======================  ===========================================  =========
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..camera import Camera
+from ..environment import environment_lookup
+from ..meshes import scene_geometry
+from ..optics import beer_lambert
+from ..raster import clip_near
+from ..scene import SceneError
+from .depth_bounds import depth_bounds, global_bounds
+from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
+from .search_bounds import search_bounds
+from .trace import trace_layers
+from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
+
+__all__ = ["render_imagespace", "check_materials"]
+
+
+def check_materials(geom):
+    """The bitmask cannot tell objects apart: all must share ior and absorption (§4.1)."""
+    if len(geom.ior) == 0:
+        return 1.0, np.zeros(3)
+    if np.ptp(geom.ior) > 0 or np.ptp(geom.absorption, axis=0).max() > 0:
+        raise SceneError("imagespace: objects have different materials "
+                         f"(ior {geom.ior.tolist()}); the occupancy bitmask cannot tell objects apart "
+                         "(Chaudhari 2008, §4.1). Give all objects the same material, or use --method exact")
+    return float(geom.ior[0]), geom.absorption[0]
+
+
+def eye_inside(geom, eye):
+    """True when the camera sits inside a closed refractive object (the method cannot start there)."""
+    v = geom.vertices
+    if len(v) == 0:
+        return False
+    eye = np.asarray(eye, dtype=np.float64)
+    for k in range(len(geom.ior)):
+        sel = geom.face_object == k
+        fv = v[geom.faces[sel]]
+        lo, hi = fv.reshape(-1, 3).min(0), fv.reshape(-1, 3).max(0)
+        if np.all(eye > lo) and np.all(eye < hi):
+            # parity of crossings along +x (exact enough for a refusal test)
+            a, b, c = fv[:, 0] - eye, fv[:, 1] - eye, fv[:, 2] - eye
+            # ray (t, 0, 0): triangle crosses the x axis where y = z = 0 in barycentric terms
+            def cr(p, q):
+                return p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1]
+            s1, s2, s3 = cr(a, b), cr(b, c), cr(c, a)
+            inside_tri = ((s1 > 0) & (s2 > 0) & (s3 > 0)) | ((s1 < 0) & (s2 < 0) & (s3 < 0))
+            den = s1 + s2 + s3
+            with np.errstate(invalid="ignore", divide="ignore"):
+                x = (s2 * a[:, 0] + s3 * b[:, 0] + s1 * c[:, 0]) / den
+            if np.count_nonzero(inside_tri & (x > 0)) % 2 == 1:
+                return True
+    return False
+
+
+def render_imagespace(scene, warm=True):
+    """Render a scene with the image-space method.
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene (:func:`~refraction_ref.scene.load_scene`).
+    warm : bool
+        Compile (or load from the cache) every kernel on a tiny scene first,
+        so that ``timings_ms`` measure run time, not JIT time.
+
+    Returns
+    -------
+    arrays : dict
+        The ORACLE.md per-pixel keys plus ``depth_complexity``.
+    info : dict
+        ``timings_ms``, ``plan`` and method statistics for ``meta``.
+
+    References
+    ----------
+    Chaudhari (2008), chapter 3.
+    """
+    if warm:
+        from .. import _warmup
+
+        _warmup.imagespace()
+    p = scene.data["imagespace"]
+    cam = Camera.from_dict(scene.data["camera"])
+    H, W = cam.shape
+    timings, plan = {}, []
+    tic = time.perf_counter
+
+    geom = scene_geometry(scene)
+    ior, absorption = check_materials(geom)
+    outside = float(scene.data["outside_ior"])
+    if eye_inside(geom, cam.eye):
+        raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
+                         "needs the viewer outside (its first layer is the front face). Move camera.eye "
+                         "outside, or use --method exact")
+    for k, nb in enumerate(geom.boundary_edges):
+        if nb:
+            plan.append({"stage": "geometry", "ran": True,
+                         "why": f"object {k} is open ({int(nb)} boundary edges): pixels can see an odd number "
+                                "of layers, and inside/outside then follows layer parity"})
+    for k, nd in enumerate(geom.degenerate):
+        if nd:
+            plan.append({"stage": "geometry", "ran": True,
+                         "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
+
+    t0 = tic()
+    tri_view = clip_near(cam.world_to_view(geom.tri), cam.near)
+    zmin, zmax = depth_bounds(tri_view, cam)
+    timings["minmax"] = (tic() - t0) * 1e3
+    plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
+    gmin, gmax = global_bounds(zmin, zmax)
+    S = int(p["slices"])
+    L = int(p["layers"])
+
+    t0 = tic()
+    lut = None
+    if p["depth"] == "bitmask":
+        zlo, zhi = slice_bounds(zmin, zmax, p["slicing"])
+        bits = voxelize_bitmask(tri_view, cam, zlo, zhi, S, p["blend"])
+        timings["voxelize"] = (tic() - t0) * 1e3
+        plan.append({"stage": "voxelize", "ran": True,
+                     "why": f"{S} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)"})
+        t0 = tic()
+        total = depth_complexity(bits)
+        if p["peeling"] == "separate":
+            ldi, total = peel_layers(bits, zlo, zhi, S, L, total)
+            plan.append({"stage": "peel", "ran": True,
+                         "why": f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
+                                f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)"})
+        else:
+            Lr = int(min(L, total.max(initial=0)))
+            ldi = np.broadcast_to(np.inf, (Lr, H, W))
+            lut = (True, bits, np.ascontiguousarray(zlo), np.ascontiguousarray(zhi), S, POPCOUNT8, SELECT8)
+            plan.append({"stage": "peel", "ran": False,
+                         "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"})
+        spacing = (zhi - zlo) / (S - 1)
+        timings["peel"] = (tic() - t0) * 1e3
+    else:
+        ldi, total = collect_depths(tri_view, cam, L)
+        Lr = int(min(L, total.max(initial=0)))
+        ldi = np.ascontiguousarray(ldi[:Lr])
+        timings["voxelize"] = (tic() - t0) * 1e3
+        timings["peel"] = 0.0
+        plan.append({"stage": "voxelize", "ran": True,
+                     "why": "float depth: exact fragment depths kept per pixel (A-buffer), no bitmask"})
+        plan.append({"stage": "peel", "ran": False, "why": "the A-buffer is already sorted into layers"})
+        spacing = (zmax - zmin) / (S - 1)
+    n_over = int(np.count_nonzero(total > L))
+
+    t0 = tic()
+    if lut is not None:
+        # no LDI to reduce: the exact global bound serves every layer
+        bhi = np.full(ldi.shape[0], gmax)
+        blo = np.full(ldi.shape[0], gmin)
+        plan.append({"stage": "reduce", "ran": False,
+                     "why": "on-the-fly peeling has no LDI: the global Zmax bounds every layer"})
+    else:
+        margin = float(p["bound_margin"]) * (gmax - gmin) if np.isfinite(gmax) else 0.0
+        bhi, blo = search_bounds(ldi, p["bounds"], int(p["mip_size"]), margin)
+        plan.append({"stage": "reduce", "ran": True,
+                     "why": (f"max-reduction of the {p['mip_size']}x{p['mip_size']} MIP level + margin "
+                             f"{margin:.3g} (§3.7)") if p["bounds"] == "mip" else "exact per-layer maxima"})
+    timings["reduce"] = (tic() - t0) * 1e3
+
+    t0 = tic()
+    dirs_view = cam.primary_rays_view()
+    with np.errstate(invalid="ignore"):
+        thr = np.where(np.isfinite(spacing), float(p["exit_threshold"]) * spacing, 0.0)
+    tr = trace_layers(ldi, total, zmax, thr, bhi, blo, dirs_view, cam, ior=ior, outside_ior=outside,
+                      iterations=int(p["iterations"]), normals=p["normals"], delta=int(p["delta"]),
+                      tir=bool(p["tir"]), max_interfaces=int(p["max_interfaces"]), layer_limit=L, lut=lut)
+    timings["trace"] = (tic() - t0) * 1e3
+    plan.append({"stage": "trace", "ran": True,
+                 "why": f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
+                        + (", total internal reflection followed" if p["tir"] else "")})
+
+    t0 = tic()
+    status = tr["status"]
+    hit = status != 0
+    exit_dir = cam.dir_view_to_world(tr["exit_dir"])
+    last_dir = cam.dir_view_to_world(tr["last_dir"])
+    exit_pos = cam.view_to_world(tr["exit_pos"])
+    env = scene.data["environment"]
+    image = environment_lookup(env, last_dir, scene.base_dir)
+    if np.any(absorption > 0):
+        trans = beer_lambert(absorption, tr["path_length"], ior)
+        image = (image * trans).astype(np.float32)
+        plan.append({"stage": "absorption", "ran": True, "why": "I = I0 exp(-alpha l eta) (§3.8)"})
+    else:
+        plan.append({"stage": "absorption", "ran": False, "why": "absorption is zero"})
+    timings["shade"] = (tic() - t0) * 1e3
+    if scene.data["receivers"] or scene.data["lights"]:
+        plan.append({"stage": "caustics", "ran": False,
+                     "why": "receivers and lights are not used by the refraction pass"})
+
+    origin, rdir = cam.primary_rays()
+    arrays = {
+        "ray_origin": origin,
+        "ray_dir": rdir,
+        "hit": hit,
+        "exit_pos": exit_pos,
+        "exit_dir": exit_dir,
+        "interfaces": tr["interfaces"],
+        "path_length": tr["path_length"],
+        "status": status,
+        "image": image,
+        "depth_complexity": total.astype(np.int16),
+    }
+    info = {
+        "timings_ms": timings,
+        "plan": plan,
+        "layers_used": int(ldi.shape[0]),
+        "pixels_over_layer_limit": n_over,
+        "depth_complexity_max": int(total.max(initial=0)),
+        "triangles": int(len(geom.faces)),
+    }
+    return arrays, info

@@ -1,0 +1,284 @@
+"""Image-space ray tracing through the layered depth images (Chaudhari 2008, §3.6-3.8).
+
+Every pixel's primary ray enters the object at layer 0 of its own pixel and
+is refracted there (Snell, with the normal of §3.5). Then, for each
+following interface, the intersection with the *next* layer is found by the
+binary search of Oliveira and Brauwers (2007): between the current point
+``S`` and the point ``E`` where the ray reaches the layer's search bound
+``Zmax(n)`` (§3.7),
+
+    E = S + (Zmax - S_d) / v_d * v,
+
+each midpoint ``P`` is projected to its texel ``t_P`` and compared with the
+layer's depth there: in front of the surface moves ``S`` to ``P``, behind it
+moves ``E``; after ``iterations`` halvings the midpoint is the intersection
+(5 iterations by default). Its normal is estimated at ``t_P`` and Snell's
+law gives the next direction. A ray that reaches the pixel's backmost depth
+(the last layer, or within ``exit_threshold`` slices of ``Zmax`` of §3.3)
+stops there: early termination, §3.7. The geometric length travelled
+inside gives the Beer-Lambert absorption ``I = I0 exp(-alpha l eta)``
+(§3.8), applied by the caller.
+
+Which side of a layer is inside follows the layers' order: the gap between
+layers ``2k`` and ``2k + 1`` is inside an object, the others are outside
+(exact for closed meshes; for open meshes a pixel may hold an odd number of
+layers and the parity is then a guess, as on the GPU).
+
+Beyond the thesis: with ``tir`` enabled, a total internal reflection (and
+any ray turned back towards the viewer) is followed by a *backward*
+binary search against the preceding layer, bounded by that layer's minimum
+depth - the extension the thesis sketches in §4.3 - instead of giving up.
+Every way a ray can be lost gets a status code (ORACLE.md):
+
+=== ==================================================================
+0   missed: the pixel shows no layer
+1   exited: left the object (behind the backmost layer, in front of
+    layer 0, or outside the object with no further layer on its path)
+2   stopped at the layer limit (a deeper layer than ``layers`` was
+    needed) or at ``max_interfaces`` events
+3   trapped by total internal reflection (``tir`` disabled, or the
+    event limit reached while reflecting)
+4   lost: the search could not resolve an intersection while inside the
+    object (a ray parallel to the image plane, turned towards the viewer
+    without ``tir``, leaving the screen, or converging where the layer is
+    absent)
+=== ==================================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..camera import project_point
+from ..optics import refract3
+from .normals import layer_depth, normal_at
+
+__all__ = ["trace_layers"]
+
+_PARALLEL_EPS = 1e-9  # |dd/dt| below this: the ray is parallel to the image plane
+
+
+@nb.njit(cache=True, inline="always")
+def _texel(x, y, z, W, H, sx, sy):
+    """Texel (row, col) of a view-space point; (-1, -1) when off screen or behind the eye."""
+    if -z <= 0.0:
+        return -1, -1
+    col, row, d = project_point(x, y, z, W, H, sx, sy)
+    if not (col >= 0.0 and col < W and row >= 0.0 and row < H):
+        return -1, -1
+    return np.int64(row), np.int64(col)
+
+
+@nb.njit(cache=True, inline="always")
+def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy):
+    """Has the point crossed layer n (beyond it in the direction of travel)?"""
+    ti, tj = _texel(x, y, z, W, H, sx, sy)
+    if ti < 0:
+        return False
+    ls = layer_depth(ldi, n, ti, tj, lut)
+    if not math.isfinite(ls):
+        return False
+    if forward:
+        return -z >= ls
+    return -z <= ls
+
+
+@nb.njit(cache=True, parallel=True)
+def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
+                  ior, outside_ior, iterations, nmethod, delta, tir, max_events, layer_limit, lut,
+                  exit_pos, exit_dir, last_dir, interfaces, path_len, status):
+    L = ldi.shape[0]
+    for i0 in nb.prange(H):
+        i = np.int64(i0)  # the prange index may be unsigned; texel indices are signed
+        for j0 in range(W):
+            j = np.int64(j0)
+            vx = dirs[i, j, 0]
+            vy = dirs[i, j, 1]
+            vz = dirs[i, j, 2]
+            last_dir[i, j, 0] = vx
+            last_dir[i, j, 1] = vy
+            last_dir[i, j, 2] = vz
+            d0 = layer_depth(ldi, 0, i, j, lut) if L > 0 else np.inf
+            if not math.isfinite(d0):
+                status[i, j] = 0
+                exit_dir[i, j, 0] = vx
+                exit_dir[i, j, 1] = vy
+                exit_dir[i, j, 2] = vz
+                continue
+            s = d0 / (-vz)
+            # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
+            qx, qy, qz = vx * s, vy * s, vz * s
+            px, py, pz = qx, qy, qz
+            t = 0
+            ti, tj = i, j
+            g = -1
+            forward = True
+            events = 0
+            nint = 0
+            plen = 0.0
+            st = 4
+            last_tir = False
+            while True:
+                # ---- interface at layer t: advance, refract (§3.6) --------------
+                if g % 2 == 0:
+                    plen += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
+                px, py, pz = qx, qy, qz
+                g2 = t if forward else t - 1
+                n1 = ior if g % 2 == 0 else outside_ior
+                n2 = ior if g2 % 2 == 0 else outside_ior
+                nx, ny, nz = normal_at(ldi, t, ti, tj, lut, nmethod, delta, W, H, sx, sy)
+                wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
+                events += 1
+                last_tir = is_tir
+                if is_tir and not tir:
+                    st = 3
+                    break
+                vx, vy, vz = wx, wy, wz
+                if not is_tir:
+                    g = g2
+                    nint += 1
+                    if g == -1:  # back out through the front layer
+                        st = 1
+                        break
+                    if forward and (t >= total[ti, tj] - 1
+                                    or zback[ti, tj] - layer_depth(ldi, t, ti, tj, lut) <= thr[ti, tj]):
+                        st = 1  # early termination at the backmost depth (§3.7)
+                        break
+                if events >= max_events:
+                    st = 3 if last_tir else 2
+                    break
+                # ---- next search: which layer, which bound (§3.7) ---------------
+                dd = -vz  # rate of change of depth along the ray
+                outside = g % 2 != 0
+                if dd > _PARALLEL_EPS:
+                    forward = True
+                    t = g + 1
+                    if t >= layer_limit:
+                        st = 2
+                        break
+                    zb = bhi[t] if t < L else -np.inf
+                elif dd < -_PARALLEL_EPS and tir:
+                    forward = False
+                    t = g
+                    zb = blo[t]
+                else:
+                    st = 1 if outside and dd < 0.0 else 4
+                    break
+                depth_p = -pz
+                if not math.isfinite(zb) or (forward and zb <= depth_p) or (not forward and zb >= depth_p):
+                    st = 1 if outside else 4  # no layer ahead: escaped, or lost inside
+                    break
+                k = (zb - depth_p) / dd
+                ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
+                # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
+                a = 0.0
+                b = 1.0
+                found = False
+                for _ in range(iterations):
+                    m = 0.5 * (a + b)
+                    if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
+                               forward, lut, W, H, sx, sy):
+                        b = m
+                        found = True
+                    else:
+                        a = m
+                if not found:
+                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy)
+                if not found:
+                    st = 1 if outside else 4
+                    break
+                m = 0.5 * (a + b)
+                qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
+                ti, tj = _texel(qx, qy, qz, W, H, sx, sy)
+                if ti < 0 or not math.isfinite(layer_depth(ldi, t, ti, tj, lut)):
+                    # the midpoint fell where the layer is absent: use the bracket's far end
+                    qx, qy, qz = px + b * (ex - px), py + b * (ey - py), pz + b * (ez - pz)
+                    ti, tj = _texel(qx, qy, qz, W, H, sx, sy)
+            status[i, j] = st
+            interfaces[i, j] = nint
+            path_len[i, j] = plen
+            last_dir[i, j, 0] = vx
+            last_dir[i, j, 1] = vy
+            last_dir[i, j, 2] = vz
+            if st == 1:
+                exit_pos[i, j, 0] = px
+                exit_pos[i, j, 1] = py
+                exit_pos[i, j, 2] = pz
+                exit_dir[i, j, 0] = vx
+                exit_dir[i, j, 1] = vy
+                exit_dir[i, j, 2] = vz
+
+
+def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
+                 iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
+                 layer_limit=None, lut=None):
+    """Trace every pixel's ray through the layered depth images.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) float64
+        Layer depths (``+inf`` where absent).
+    total : (H, W) int
+        Layers per pixel before the layer limit (the last one is the backmost).
+    zback : (H, W) float64
+        Backmost depth per pixel (Zmax of the min/max pass).
+    thr : (H, W) float64
+        Early-termination threshold in depth units.
+    bounds_hi, bounds_lo : (L,) float64
+        Forward and backward search bounds per layer (:func:`search_bounds`).
+    dirs_view : (H, W, 3) float64
+        Unit primary ray directions in view space.
+    camera : Camera
+    ior, outside_ior : float
+        Object and surrounding indices.
+    iterations : int
+        Binary-search iterations per interface.
+    normals : {'forward', 'central', 'mesh3x3'}
+    delta : int
+    tir : bool
+        Follow total internal reflection with backward searches.
+    max_interfaces : int
+        Event limit (refractions plus reflections) per ray.
+    layer_limit : int, optional
+        The user's layer limit (default ``L``); a search for a layer at or
+        beyond it stops the ray with status 2.
+    lut : tuple, optional
+        On-the-fly peeling inputs (see :func:`~refraction_ref.imagespace.normals.layer_depth`).
+
+    Returns
+    -------
+    dict
+        View-space ``exit_pos``, ``exit_dir``, ``last_dir`` (H, W, 3),
+        ``interfaces`` (H, W) int16, ``path_length`` (H, W) float64,
+        ``status`` (H, W) int8.
+
+    References
+    ----------
+    Chaudhari (2008), §3.6 (binary search at each interface), §3.7 (search
+    bounds, early termination), §3.8 (path length for absorption);
+    Oliveira and Brauwers (2007).
+    """
+    from .normals import NORMAL_METHODS, no_lut
+
+    H, W = total.shape
+    L = ldi.shape[0]
+    exit_pos = np.full((H, W, 3), np.nan)
+    exit_dir = np.full((H, W, 3), np.nan)
+    last_dir = np.empty((H, W, 3))
+    interfaces = np.zeros((H, W), np.int16)
+    path_len = np.zeros((H, W))
+    status = np.zeros((H, W), np.int8)
+    Wc, Hc, sx, sy = camera.kernel_args()
+    _trace_kernel(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
+                  np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
+                  np.ascontiguousarray(bounds_hi, dtype=np.float64), np.ascontiguousarray(bounds_lo, dtype=np.float64),
+                  np.ascontiguousarray(dirs_view, dtype=np.float64), Wc, Hc, sx, sy,
+                  float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
+                  int(max_interfaces), int(L if layer_limit is None else layer_limit),
+                  no_lut(None) if lut is None else lut,
+                  exit_pos, exit_dir, last_dir, interfaces, path_len, status)
+    return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir,
+            "interfaces": interfaces, "path_length": path_len, "status": status}

@@ -1,0 +1,213 @@
+"""Meshes: the built-in ones, file loading, fitting, transforms, deformation.
+
+Built-in meshes:
+
+``bunny``
+    The Stanford bunny, 69,451 triangles (open: holes in its base), shipped
+    in ``refraction_ref/data``.
+``teapot``
+    Newell's teapot, 6,320 triangles (open seams), shipped likewise.
+``sphere``
+    An icosphere of unit diameter, subdivision 5 (20,480 triangles), fine
+    enough to stand in for an analytic sphere.
+``plane``
+    A square in the xz plane with normal +y, sized by the object's
+    ``size: [sx, sz]``.
+
+A mesh with ``fit: s`` is centred on its bounding-box centre and scaled so
+that its largest extent is ``s``; then its ``transform`` is applied (scale,
+rotate in degrees about x, y, z in that order, translate), as ORACLE.md says.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import SceneError
+
+__all__ = ["BUILTIN_MESHES", "Geometry", "load_mesh", "object_mesh", "scene_geometry",
+           "rotation_matrix", "sine_displacement"]
+
+_DATA = os.path.join(os.path.dirname(__file__), "data")
+BUILTIN_MESHES = ("bunny", "teapot", "sphere", "plane")
+
+
+@functools.lru_cache(maxsize=16)
+def _read_mesh_file(path, mtime):
+    import trimesh
+
+    try:
+        m = trimesh.load(path, force="mesh", process=True)
+    except Exception as e:  # trimesh raises many types
+        raise SceneError(f"mesh file '{path}' could not be read ({type(e).__name__}: {e}); "
+                         "give a mesh format trimesh reads (PLY, OBJ, STL, OFF, GLB)") from None
+    v = np.asarray(m.vertices, dtype=np.float64)
+    f = np.asarray(m.faces, dtype=np.int64)
+    v.setflags(write=False)
+    f.setflags(write=False)
+    return v, f
+
+
+@functools.lru_cache(maxsize=8)
+def _icosphere(subdivisions):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.5)
+    v = np.asarray(m.vertices, dtype=np.float64)
+    f = np.asarray(m.faces, dtype=np.int64)
+    v.setflags(write=False)
+    f.setflags(write=False)
+    return v, f
+
+
+def load_mesh(name, size=None, base_dir="."):
+    """Vertices (V, 3) and faces (F, 3) of a built-in mesh or a mesh file.
+
+    Raises
+    ------
+    SceneError
+        For a missing, unreadable or empty mesh, or non-finite vertices.
+    """
+    if isinstance(name, (tuple, list)) and len(name) == 2:
+        v, f = (np.asarray(name[0], dtype=np.float64), np.asarray(name[1], dtype=np.int64))
+        where = "<arrays>"
+    elif name == "sphere":
+        v, f = _icosphere(5)
+        where = name
+    elif name == "plane":
+        sx, sz = (4.0, 4.0) if size is None else (float(size[0]), float(size[1]))
+        v = np.array([[-sx / 2, 0, -sz / 2], [sx / 2, 0, -sz / 2], [sx / 2, 0, sz / 2], [-sx / 2, 0, sz / 2]])
+        f = np.array([[0, 2, 1], [0, 3, 2]])  # counter-clockwise seen from +y
+        where = name
+    else:
+        path = os.path.join(_DATA, f"{name}.ply") if name in BUILTIN_MESHES else (
+            name if os.path.isabs(name) else os.path.join(base_dir, name))
+        if not os.path.isfile(path):
+            raise SceneError(f"mesh '{name}' not found (looked for {path}); "
+                             f"use a built-in mesh ({', '.join(BUILTIN_MESHES)}) or an existing file")
+        v, f = _read_mesh_file(os.path.abspath(path), os.path.getmtime(path))
+        where = path
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise SceneError(f"mesh '{where}' is empty or not a triangle mesh (vertices {v.shape}, "
+                         f"faces {f.shape}); give a mesh with at least one triangle")
+    if not np.all(np.isfinite(v)):
+        bad = int(np.count_nonzero(~np.all(np.isfinite(v), axis=1)))
+        raise SceneError(f"mesh '{where}' has {bad} vertices with NaN or infinite coordinates; "
+                         "repair the mesh (e.g. trimesh: mesh.update_faces / remove the vertices)")
+    if f.min() < 0 or f.max() >= len(v):
+        raise SceneError(f"mesh '{where}' has face indices outside 0..{len(v) - 1}")
+    return v, f
+
+
+def rotation_matrix(degrees):
+    """Rotation about x, then y, then z (degrees), as a (3, 3) matrix acting on column vectors."""
+    ax, ay, az = np.radians(np.asarray(degrees, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def vertex_normals(v, f):
+    """Area-weighted unit vertex normals (zero-area faces contribute nothing)."""
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+
+
+def sine_displacement(v, normals, amplitude, wavelength, direction, phase):
+    """Vertex displacement along the normal, ``a sin(2 pi / lambda (p . u) + phase)``.
+
+    The deforming-mesh demonstration of Chaudhari (2008), Fig. 4.2, where a
+    vertex shader displaces the vertices before every pass that rasterizes
+    the model.
+    """
+    u = np.asarray(direction, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    s = amplitude * np.sin(2.0 * np.pi / wavelength * (v @ u) + phase)
+    return v + s[:, None] * normals
+
+
+def object_mesh(obj, base_dir=".", deform_fn=None):
+    """World-space vertices and faces of one scene object (or receiver) dict."""
+    v, f = load_mesh(obj["mesh"], obj.get("size"), base_dir)
+    v = np.array(v, dtype=np.float64)
+    if obj.get("fit") is not None:
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        ext = float(np.max(hi - lo))
+        if ext <= 0:
+            raise SceneError(f"mesh '{obj['mesh']}' has zero extent and cannot be fitted")
+        v = (v - (lo + hi) / 2.0) * (float(obj["fit"]) / ext)
+    t = obj["transform"]
+    v = (v * float(t["scale"])) @ rotation_matrix(t["rotate"]).T + np.asarray(t["translate"], dtype=np.float64)
+    d = obj.get("deform")
+    if deform_fn is not None:
+        v = np.asarray(deform_fn(v.copy(), vertex_normals(v, f)), dtype=np.float64)
+        if v.shape != (len(v), 3) or not np.all(np.isfinite(v)):
+            raise SceneError("deform callable must return finite (V, 3) vertices")
+    elif isinstance(d, dict):
+        v = sine_displacement(v, vertex_normals(v, f), d["amplitude"], d["wavelength"], d["direction"], d["phase"])
+    return v, np.asarray(f)
+
+
+@dataclass
+class Geometry:
+    """All refractive objects of a scene merged into one triangle soup.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64, world space
+    faces : (F, 3) int64
+    face_object : (F,) int32, the object index of every face
+    ior : (K,) float64 and absorption : (K, 3) float64, per object
+    boundary_edges : (K,) int, edges used by one face only (0 = closed)
+    degenerate : (K,) int, zero-area faces
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_object: np.ndarray
+    ior: np.ndarray
+    absorption: np.ndarray
+    boundary_edges: np.ndarray
+    degenerate: np.ndarray
+
+    @property
+    def tri(self):
+        return self.vertices[self.faces]
+
+
+def _boundary_edge_count(f):
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, c = np.unique(e, axis=0, return_counts=True)
+    return int(np.count_nonzero(c == 1))
+
+
+def scene_geometry(scene):
+    """Merge the scene's refractive objects into one :class:`Geometry`."""
+    vs, fs, fo, iors, absn, bnd, deg = [], [], [], [], [], [], []
+    off = 0
+    for k, o in enumerate(scene.data["objects"]):
+        v, f = object_mesh(o, scene.base_dir, scene.callables.get(("deform", k)))
+        area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        vs.append(v)
+        fs.append(f + off)
+        fo.append(np.full(len(f), k, np.int32))
+        off += len(v)
+        iors.append(float(o["material"]["ior"]))
+        absn.append(np.asarray(o["material"]["absorption"], dtype=np.float64))
+        bnd.append(_boundary_edge_count(f))
+        deg.append(int(np.count_nonzero(area <= 0)))
+    if not vs:
+        return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32),
+                        np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    return Geometry(np.concatenate(vs), np.concatenate(fs), np.concatenate(fo), np.asarray(iors),
+                    np.stack(absn), np.asarray(bnd), np.asarray(deg))

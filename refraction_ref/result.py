@@ -1,0 +1,74 @@
+"""Run results: the output half of ``ORACLE.md`` (one ``.npz`` plus a PNG)."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Result", "tonemap", "load_result"]
+
+
+def tonemap(image):
+    """Clamp linear RGB to [0, 1] and apply the sRGB transfer curve; uint8 (H, W, 3)."""
+    x = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64), nan=0.0), 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    return np.round(s * 255.0).astype(np.uint8)
+
+
+@dataclass
+class Result:
+    """Arrays with the ORACLE.md names plus ``meta`` (scene, parameters, timings, plan)."""
+
+    arrays: dict
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, k):
+        return self.arrays[k]
+
+    def save(self, prefix, overwrite=False, png=True):
+        """Write ``PREFIX.npz`` (arrays + ``meta`` as a JSON string) and ``PREFIX.png``.
+
+        Refuses to overwrite existing files unless ``overwrite`` is true.
+        Returns the paths written.
+        """
+        prefix = os.fspath(prefix)
+        if prefix.endswith(".npz"):
+            prefix = prefix[:-4]
+        paths = [prefix + ".npz"] + ([prefix + ".png"] if png and "image" in self.arrays else [])
+        if not overwrite:
+            for p in paths:
+                if os.path.exists(p):
+                    raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite "
+                                          "(CLI: --force)")
+        d = os.path.dirname(prefix)
+        if d:
+            os.makedirs(d, exist_ok=True)
+        np.savez_compressed(paths[0], meta=np.array(json.dumps(self.meta, default=_json_default)),
+                            **self.arrays)
+        if len(paths) > 1:
+            import imageio.v3 as iio
+
+            iio.imwrite(paths[1], tonemap(self.arrays["image"]))
+        return paths
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def load_result(path):
+    """Read a ``.npz`` written by :meth:`Result.save`."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"result file '{path}' does not exist")
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files if k != "meta"}
+        meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+    return Result(arrays, meta)
