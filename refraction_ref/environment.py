@@ -17,7 +17,9 @@ looks down -z), ``v = acos(y) / pi`` (v = 0 is straight up, +y).
 from __future__ import annotations
 
 import functools
+import math
 
+import numba as nb
 import numpy as np
 
 __all__ = ["environment_lookup", "latlong_uv"]
@@ -45,6 +47,23 @@ def _load_image(path):
     img = img.astype(np.float32)
     img.setflags(write=False)
     return img
+
+
+@nb.njit(cache=True, parallel=True)
+def _checker_kernel(d, tiles, colors, intensity, out):
+    half = tiles / 2.0
+    for k in nb.prange(d.shape[0]):
+        x, y, z = d[k, 0], d[k, 1], d[k, 2]
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            out[k, 0] = 0.0
+            out[k, 1] = 0.0
+            out[k, 2] = 0.0
+            continue
+        u = math.atan2(x, -z) / (2.0 * math.pi) + 0.5
+        v = math.acos(min(1.0, max(-1.0, y))) / math.pi
+        c = (np.int64(math.floor(u * tiles)) + np.int64(math.floor(v * half))) % 2
+        for ch in range(3):
+            out[k, ch] = colors[c, ch] * intensity
 
 
 def _bilinear(img, u, v):
@@ -80,18 +99,17 @@ def environment_lookup(env, dirs, base_dir="."):
     import os
 
     d = np.asarray(dirs, dtype=np.float64)
+    t = env.get("type", "checker")
+    colors = np.asarray(env.get("colors", [[0.9, 0.9, 0.9], [0.1, 0.1, 0.1]]), dtype=np.float64)
+    if t == "checker":  # the common case, in one pass
+        flat = np.ascontiguousarray(d).reshape(-1, 3)
+        out = np.empty(flat.shape, np.float32)
+        _checker_kernel(flat, int(env.get("tiles", 16)), colors, float(env.get("intensity", 1.0)), out)
+        return out.reshape(d.shape)
     bad = ~np.all(np.isfinite(d), axis=-1)
     d = np.where(bad[..., None], np.array([0.0, 0.0, -1.0]), d)
-    colors = np.asarray(env.get("colors", [[0.9, 0.9, 0.9], [0.1, 0.1, 0.1]]), dtype=np.float64)
-    t = env.get("type", "checker")
     if t == "constant":
         out = np.broadcast_to(colors[0], d.shape).astype(np.float64)
-    elif t == "checker":
-        u, v = latlong_uv(d)
-        n = int(env.get("tiles", 16))
-        iu = np.floor(u * n).astype(np.int64)
-        iv = np.floor(v * (n / 2.0)).astype(np.int64)
-        out = colors[(iu + iv) % 2]
     elif t == "latlong":
         p = env["path"] if os.path.isabs(env["path"]) else os.path.join(base_dir, env["path"])
         u, v = latlong_uv(d)

@@ -186,9 +186,13 @@ class Geometry:
 
 
 def _boundary_edge_count(f):
+    """Edges used by exactly one face (0 for a closed, i.e. watertight, mesh)."""
     e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    _, c = np.unique(e, axis=0, return_counts=True)
-    return int(np.count_nonzero(c == 1))
+    key = e[:, 0].astype(np.int64) * (int(f.max()) + 1) + e[:, 1]
+    key.sort()
+    change = np.flatnonzero(np.diff(key)) + 1
+    runs = np.diff(np.concatenate([[0], change, [len(key)]]))
+    return int(np.count_nonzero(runs == 1))
 
 
 def scene_geometry(scene):

@@ -42,10 +42,12 @@ References
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
-__all__ = ["rasterize", "clip_near", "OPS"]
+__all__ = ["rasterize", "raster_setup", "RasterSetup", "clip_near", "OPS"]
 
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6}
 
@@ -110,6 +112,8 @@ def clip_near(tri_view, near):
         or two triangles, one entirely behind is dropped).
     """
     tv = np.ascontiguousarray(tri_view, dtype=np.float64)
+    if tv.size == 0 or -tv[..., 2].max() >= near:  # nothing crosses the near plane
+        return tv
     out = np.empty((2 * tv.shape[0], 3, 3))
     m = _clip_near_kernel(tv, float(near), out)
     return out[:m]
@@ -278,14 +282,49 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
                         ibuf[i, j] = n + 1
 
 
+class RasterSetup(NamedTuple):
+    """Projected, snapped and binned triangles, reusable by several passes.
+
+    The CPU counterpart of keeping transformed vertices on the GPU
+    (stream-out, Chaudhari 2008 §4.2): the min/max pass and the
+    voxelization pass rasterize the same triangles.
+    """
+
+    X: np.ndarray
+    Y: np.ndarray
+    D: np.ndarray
+    rows: np.ndarray
+    counts: np.ndarray
+    tris: np.ndarray
+    triangles: int
+    dropped: int
+    shape: tuple
+
+
+def raster_setup(tri_view, camera, clip=True):
+    """Clip, project to fixed-point screen coordinates and bin triangles into row bands."""
+    W, H, sx, sy = camera.kernel_args()
+    tv = np.ascontiguousarray(tri_view, dtype=np.float64).reshape(-1, 3, 3)
+    if clip:
+        tv = clip_near(tv, camera.near)
+    T = tv.shape[0]
+    X = np.zeros((T, 3), np.int64)
+    Y = np.zeros((T, 3), np.int64)
+    D = np.ones((T, 3), np.float64)
+    rows = np.zeros((T, 2), np.int64)
+    counts, tris, dropped = _setup(tv, W, H, sx, sy, X, Y, D, rows, BAND)
+    return RasterSetup(X, Y, D, rows, counts, tris, int(T), int(dropped), (H, W))
+
+
 def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=32,
               clip=True, return_stats=False):
     """Rasterize view-space triangles with one GPU-style blend operation.
 
     Parameters
     ----------
-    tri_view : (T, 3, 3) array_like
-        Triangle vertices in view space (see :class:`~refraction_ref.camera.Camera`).
+    tri_view : (T, 3, 3) array_like or RasterSetup
+        Triangle vertices in view space (see :class:`~refraction_ref.camera.Camera`),
+        or the result of :func:`raster_setup` to skip the set-up.
     camera : Camera
         Image size and projection.
     op : {'min', 'max', 'count', 'or', 'add', 'collect'}
@@ -320,15 +359,10 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if op not in OPS:
         raise ValueError(f"rasterize: unknown op {op!r}; expected one of {sorted(OPS)}")
     W, H, sx, sy = camera.kernel_args()
-    tv = np.ascontiguousarray(tri_view, dtype=np.float64).reshape(-1, 3, 3)
-    if clip:
-        tv = clip_near(tv, camera.near)
-    T = tv.shape[0]
-    X = np.zeros((T, 3), np.int64)
-    Y = np.zeros((T, 3), np.int64)
-    D = np.ones((T, 3), np.float64)
-    rows = np.zeros((T, 2), np.int64)
-    counts, tris, dropped = _setup(tv, W, H, sx, sy, X, Y, D, rows, BAND)
+    rs = tri_view if isinstance(tri_view, RasterSetup) else raster_setup(tri_view, camera, clip)
+    if rs.shape != (H, W):
+        raise ValueError(f"rasterize: the set-up was made for {rs.shape}, the camera is {(H, W)}")
+    X, Y, D, rows, counts, tris = rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris
     code = OPS[op]
     dummy_f = np.zeros((1, 1))
     dummy_i = np.zeros((1, 1), np.int32)
@@ -372,5 +406,5 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if return_stats:
         ax = (X[:, 1] - X[:, 0]) * (Y[:, 2] - Y[:, 0]) - (Y[:, 1] - Y[:, 0]) * (X[:, 2] - X[:, 0])
         area = int(np.count_nonzero(ax == 0))
-        return res, {"triangles": int(T), "dropped": int(dropped), "degenerate": area}
+        return res, {"triangles": rs.triangles, "dropped": rs.dropped, "degenerate": area}
     return res

@@ -63,7 +63,7 @@ IMAGESPACE_DEFAULTS = {
     "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
     "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
     "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4)
-    "delta": 1,               # pixel step of the central differences (eq. 3.2)
+    "delta": 2,               # pixel step of the central differences (eq. 3.2; smoother than 1, Fig. 3.4)
     "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
     "tir": False,             # follow total internal reflection back to preceding layers
     "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)

@@ -21,8 +21,9 @@ def depth_bounds(tri_view, camera):
 
     Parameters
     ----------
-    tri_view : (T, 3, 3) ndarray
-        Triangles in view space, already clipped to the near plane.
+    tri_view : (T, 3, 3) ndarray or RasterSetup
+        Triangles in view space (clipped to the near plane by
+        :func:`~refraction_ref.raster.raster_setup` when given raw).
     camera : Camera
 
     Returns
@@ -35,7 +36,7 @@ def depth_bounds(tri_view, camera):
     ----------
     Chaudhari (2008), §3.3, first rendering pass.
     """
-    return rasterize(tri_view, camera, "minmax", clip=False)
+    return rasterize(tri_view, camera, "minmax", clip=True)
 
 
 def global_bounds(zmin, zmax):

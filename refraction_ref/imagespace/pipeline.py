@@ -22,7 +22,7 @@ from ..camera import Camera
 from ..environment import environment_lookup
 from ..meshes import scene_geometry
 from ..optics import beer_lambert
-from ..raster import clip_near
+from ..raster import raster_setup
 from ..scene import SceneError
 from .depth_bounds import depth_bounds, global_bounds
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
@@ -120,7 +120,7 @@ def render_imagespace(scene, warm=True):
                          "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
 
     t0 = tic()
-    tri_view = clip_near(cam.world_to_view(geom.tri), cam.near)
+    tri_view = raster_setup(cam.world_to_view(geom.vertices)[geom.faces], cam)
     zmin, zmax = depth_bounds(tri_view, cam)
     timings["minmax"] = (tic() - t0) * 1e3
     plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})

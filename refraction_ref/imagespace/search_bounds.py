@@ -17,9 +17,39 @@ matching *minimum* bounds (minus the margin) are returned as well.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 __all__ = ["search_bounds", "mip_level"]
+
+
+@nb.njit(cache=True, parallel=True)
+def _mip_reduce(ldi, f, zmax, zmin):
+    """Max and min over the f x f box-filtered MIP texels of every layer (absent texels skipped)."""
+    L, H, W = ldi.shape
+    hb = (H + f - 1) // f
+    wb = (W + f - 1) // f
+    for n in nb.prange(L):
+        hi = -np.inf
+        lo = np.inf
+        for bi in range(hb):
+            for bj in range(wb):
+                s = 0.0
+                c = 0
+                for i in range(bi * f, min((bi + 1) * f, H)):
+                    for j in range(bj * f, min((bj + 1) * f, W)):
+                        v = ldi[n, i, j]
+                        if v < np.inf:
+                            s += v
+                            c += 1
+                if c:
+                    m = s / c
+                    if m > hi:
+                        hi = m
+                    if m < lo:
+                        lo = m
+        zmax[n] = hi
+        zmin[n] = lo
 
 
 def mip_level(layer, size):
@@ -65,21 +95,19 @@ def search_bounds(ldi, mode="mip", mip_size=256, margin=0.0):
     ----------
     Chaudhari (2008), §3.7; Oliveira and Brauwers (2007), parallel reduction.
     """
-    L = ldi.shape[0]
+    L, H, W = ldi.shape
     zmax = np.full(L, -np.inf)
     zmin = np.full(L, np.inf)
-    for n in range(L):
-        layer = ldi[n]
-        fin = np.isfinite(layer)
-        if not fin.any():
-            continue
-        if mode == "global":
-            zmax[n] = layer[fin].max()
-            zmin[n] = layer[fin].min()
-        elif mode == "mip":
-            m = mip_level(layer, mip_size)
-            zmax[n] = np.nanmax(m) + margin
-            zmin[n] = np.nanmin(m) - margin
-        else:
-            raise ValueError(f"search_bounds: unknown mode {mode!r}; use 'mip' or 'global'")
+    if mode == "global":
+        f = 1
+    elif mode == "mip":
+        f = max(1, int(np.ceil(max(H, W) / mip_size)))
+    else:
+        raise ValueError(f"search_bounds: unknown mode {mode!r}; use 'mip' or 'global'")
+    if L:
+        _mip_reduce(np.ascontiguousarray(ldi), f, zmax, zmin)
+    if mode == "mip":
+        present = np.isfinite(zmax)
+        zmax[present] += margin
+        zmin[present] -= margin
     return zmax, zmin

@@ -45,8 +45,8 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
 
     Parameters
     ----------
-    tri_view : (T, 3, 3) ndarray
-        Triangles in view space, clipped to the near plane.
+    tri_view : (T, 3, 3) ndarray or RasterSetup
+        Triangles in view space (see :func:`~refraction_ref.raster.raster_setup`).
     camera : Camera
     zlo, zhi : (H, W) ndarray
         Depth range of the slices at each pixel (see :func:`slice_bounds`).
@@ -64,7 +64,7 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
     ----------
     Chaudhari (2008), §3.3; Eisemann and Décoret (2006).
     """
-    return rasterize(tri_view, camera, blend, zlo=zlo, zhi=zhi, slices=slices, clip=False)
+    return rasterize(tri_view, camera, blend, zlo=zlo, zhi=zhi, slices=slices, clip=True)
 
 
 def collect_depths(tri_view, camera, capacity=32):
@@ -77,5 +77,5 @@ def collect_depths(tri_view, camera, capacity=32):
     total : (H, W) int32
         All fragments of the pixel, including those beyond ``capacity``.
     """
-    d, n = rasterize(tri_view, camera, "collect", capacity=capacity, clip=False)
+    d, n = rasterize(tri_view, camera, "collect", capacity=capacity, clip=True)
     return np.ascontiguousarray(np.moveaxis(d, 2, 0)), n

@@ -1,0 +1,97 @@
+"""Command line: ``refraction-ref render | compare | scene``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+__all__ = ["main"]
+
+
+def _parse_sets(items):
+    out = {}
+    for it in items or []:
+        if "=" not in it:
+            raise SystemExit(f"refraction-ref: --set expects key=value, got {it!r}")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _cmd_render(a):
+    from . import load_scene, render
+
+    scene = load_scene(a.scene, _parse_sets(a.set))
+    res = render(scene, method=a.method, progress=not a.quiet)
+    paths = res.save(a.out, overwrite=a.force)
+    st = res.arrays["status"]
+    import numpy as np
+
+    hist = np.bincount(st.ravel().astype(np.int64), minlength=5)
+    t = res.meta["timings_ms"]
+    print(f"{a.method}: {scene.data['camera']['width']}x{scene.data['camera']['height']}, "
+          f"{res.meta.get('triangles', 0)} triangles, {res.meta['total_ms']:.0f} ms in all")
+    print("stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
+    print("status 0 missed / 1 exited / 2 limit / 3 TIR / 4 lost: " + " / ".join(str(int(x)) for x in hist))
+    for p in res.meta.get("plan", []):
+        print(f"  [{'ran ' if p['ran'] else 'skip'}] {p['stage']}: {p['why']}")
+    print("wrote " + ", ".join(paths))
+    return 0
+
+
+def _cmd_compare(a):
+    from .compare import compare_arrays, format_comparison
+    from .result import load_result
+
+    A = load_result(a.a)
+    B = load_result(a.b)
+    c = compare_arrays(A.arrays, B.arrays)
+    if a.json:
+        print(json.dumps(c, indent=1))
+    else:
+        print(format_comparison(c, a.a, a.b))
+    return 0
+
+
+def _cmd_scene(a):
+    from . import load_scene
+
+    print(load_scene(a.scene, _parse_sets(a.set)).to_json())
+    return 0
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="refraction-ref",
+                                description="CPU reference renderer for refraction through transparent objects.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("render", help="render a scene (default: the bundled glass bunny)")
+    r.add_argument("scene", nargs="?", default=None, help="scene JSON (ORACLE.md); omit for the default scene")
+    r.add_argument("--method", default="imagespace", choices=["imagespace", "exact"])
+    r.add_argument("--out", default="out/render", help="output prefix: PREFIX.npz and PREFIX.png")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene key, e.g. --set imagespace.iterations=10 (repeatable)")
+    r.add_argument("--force", action="store_true", help="overwrite existing output files")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(fn=_cmd_render)
+    c = sub.add_parser("compare", help="diff two runs: exit-direction error, interfaces, status, image RMSE")
+    c.add_argument("a", help="run to test (.npz)")
+    c.add_argument("b", help="reference run (.npz), e.g. --method exact")
+    c.add_argument("--json", action="store_true", help="print the statistics as JSON")
+    c.set_defaults(fn=_cmd_compare)
+    s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
+    s.add_argument("scene", nargs="?", default=None)
+    s.add_argument("--set", action="append", metavar="KEY=VALUE")
+    s.set_defaults(fn=_cmd_scene)
+    a = p.parse_args(argv)
+    from .scene import SceneError
+
+    try:
+        return a.fn(a)
+    except (SceneError, FileExistsError, FileNotFoundError) as e:
+        print(f"refraction-ref: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
