@@ -124,20 +124,16 @@ class Camera:
 
     def primary_rays_view(self):
         """Unit view-space directions through every pixel centre, (H, W, 3)."""
-        H, W = self.height, self.width
-        x = ((np.arange(W) + 0.5) / W * 2.0 - 1.0) * self.sx
-        y = (1.0 - (np.arange(H) + 0.5) / H * 2.0) * self.sy
-        d = np.empty((H, W, 3))
-        d[..., 0] = x[None, :]
-        d[..., 1] = y[:, None]
-        d[..., 2] = -1.0
-        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+        d = np.empty((self.height, self.width, 3))
+        _primary_dirs(self.width, self.height, self.sx, self.sy, np.eye(3), d)
+        return d
 
     def primary_rays(self):
         """World-space origins and unit directions of the primary rays, each (H, W, 3)."""
-        d = self.dir_view_to_world(self.primary_rays_view())
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
-        o = np.broadcast_to(np.asarray(self.eye, dtype=np.float64), d.shape).copy()
+        d = np.empty((self.height, self.width, 3))
+        _primary_dirs(self.width, self.height, self.sx, self.sy, self.basis, d)
+        o = np.empty_like(d)
+        o[...] = np.asarray(self.eye, dtype=np.float64)
         return o, d
 
     def to_screen(self, p_view):
@@ -152,6 +148,18 @@ class Camera:
     def kernel_args(self):
         """Scalars the Numba kernels need: (W, H, sx, sy)."""
         return self.width, self.height, self.sx, self.sy
+
+
+@nb.njit(cache=True, parallel=True)
+def _primary_dirs(W, H, sx, sy, basis, out):
+    """Unit directions through pixel centres, rotated by ``basis`` (rows: right, up, back)."""
+    for i in nb.prange(H):
+        y = (1.0 - (i + 0.5) / H * 2.0) * sy
+        for j in range(W):
+            x = ((j + 0.5) / W * 2.0 - 1.0) * sx
+            s = 1.0 / np.sqrt(x * x + y * y + 1.0)
+            for k in range(3):
+                out[i, j, k] = (x * basis[0, k] + y * basis[1, k] - basis[2, k]) * s
 
 
 @nb.njit(cache=True, inline="always")

@@ -120,43 +120,50 @@ def clip_near(tri_view, near):
 
 
 @nb.njit(cache=True)
-def _setup(tv, W, H, sx, sy, X, Y, D, rows, band):
-    """Project, snap and bin the triangles; returns the CSR band lists."""
-    T = tv.shape[0]
+def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
+    """Project view-space vertices to 1/256-pixel fixed point; flag those outside the guard band."""
+    for k in range(vv.shape[0]):
+        d = -vv[k, 2]
+        col = (vv[k, 0] / (d * sx) * 0.5 + 0.5) * W
+        row = (0.5 - vv[k, 1] / (d * sy) * 0.5) * H
+        okv[k] = abs(col) < 4194304.0 and abs(row) < 4194304.0 and d > 0.0
+        if okv[k]:
+            XV[k] = np.int64(np.round(col * 256.0))
+            YV[k] = np.int64(np.round(row * 256.0))
+        else:
+            XV[k] = 0
+            YV[k] = 0
+        DV[k] = d
+
+
+@nb.njit(cache=True)
+def _bin(faces, XV, YV, DV, okv, H, X, Y, D, rows, band):
+    """Gather snapped triangles and bin them into bands of rows (CSR lists)."""
+    T = faces.shape[0]
     nb_bands = (H + band - 1) // band
     counts = np.zeros(nb_bands + 1, np.int64)
     dropped = 0
     for t in range(T):
-        lo = 1e300
-        hi = -1e300
         ok = True
+        lo = np.int64(1) << 62
+        hi = -lo
         for k in range(3):
-            d = -tv[t, k, 2]
-            col = (tv[t, k, 0] / (d * sx) * 0.5 + 0.5) * W
-            row = (0.5 - tv[t, k, 1] / (d * sy) * 0.5) * H
-            if not (abs(col) < 4194304.0 and abs(row) < 4194304.0 and d > 0.0):
+            v = faces[t, k]
+            if not okv[v]:
                 ok = False
-                break
-            X[t, k] = np.int64(np.round(col * 256.0))
-            Y[t, k] = np.int64(np.round(row * 256.0))
-            D[t, k] = d
-            yk = Y[t, k]
-            if yk < lo:
-                lo = yk
-            if yk > hi:
-                hi = yk
+            X[t, k] = XV[v]
+            Y[t, k] = YV[v]
+            D[t, k] = DV[v]
+            lo = min(lo, YV[v])
+            hi = max(hi, YV[v])
         if not ok:
             rows[t, 0] = 1
             rows[t, 1] = 0
             dropped += 1
             continue
         # pixel rows whose centre (256 i + 128) lies in [lo, hi]
-        i0 = np.int64(np.ceil((lo - 128.0) / 256.0))
-        i1 = np.int64(np.floor((hi - 128.0) / 256.0))
-        if i0 < 0:
-            i0 = 0
-        if i1 > H - 1:
-            i1 = H - 1
+        i0 = max(-((128 - lo) // 256), 0)
+        i1 = min((hi - 128) // 256, H - 1)
         rows[t, 0] = i0
         rows[t, 1] = i1
         if i0 <= i1:
@@ -217,8 +224,9 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
             i1 = min(rows[t, 1], r1)
             xmin = min(x0, min(x1, x2))
             xmax = max(x0, max(x1, x2))
-            j0 = max(np.int64(np.ceil((xmin - 128.0) / 256.0)), 0)
-            j1 = min(np.int64(np.floor((xmax - 128.0) / 256.0)), W - 1)
+            # columns whose centre 256 j + 128 lies in [xmin, xmax] (integer ceil / floor)
+            j0 = max(-((128 - xmin) // 256), 0)
+            j1 = min((xmax - 128) // 256, W - 1)
             if j0 > j1 or i0 > i1:
                 continue
             b0 = _bias(x1, y1, x2, y2)
@@ -228,13 +236,21 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
             i0d = 1.0 / d0
             i1d = 1.0 / d1
             i2d = 1.0 / d2
+            # edge functions at the first pixel centre, stepped incrementally
+            a0 = y2 - y1
+            a1 = y0 - y2
+            a2 = y1 - y0
+            px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
                 py = 256 * i + 128
+                w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
+                w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
+                w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
                 for j in range(j0, j1 + 1):
-                    px = 256 * j + 128
-                    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-                    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
-                    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
+                    if j > j0:
+                        w0 -= 256 * a0
+                        w1 -= 256 * a1
+                        w2 -= 256 * a2
                     if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                         continue
                     inv_d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
@@ -270,15 +286,15 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
                             layers[i, j, 1] = d
                     else:
                         n = ibuf[i, j]
-                        cap = layers.shape[2]
+                        cap = layers.shape[0]
                         k = min(n, cap)
                         # insertion keeping the `cap` nearest depths sorted
-                        while k > 0 and layers[i, j, k - 1] > d:
+                        while k > 0 and layers[k - 1, i, j] > d:
                             if k < cap:
-                                layers[i, j, k] = layers[i, j, k - 1]
+                                layers[k, i, j] = layers[k - 1, i, j]
                             k -= 1
                         if k < cap:
-                            layers[i, j, k] = d
+                            layers[k, i, j] = d
                         ibuf[i, j] = n + 1
 
 
@@ -301,18 +317,43 @@ class RasterSetup(NamedTuple):
     shape: tuple
 
 
-def raster_setup(tri_view, camera, clip=True):
-    """Clip, project to fixed-point screen coordinates and bin triangles into row bands."""
+def raster_setup(tri_view, camera, clip=True, faces=None):
+    """Clip, project to fixed-point screen coordinates and bin triangles into row bands.
+
+    Parameters
+    ----------
+    tri_view : (T, 3, 3) ndarray, or (V, 3) vertices when ``faces`` is given
+        View-space geometry.
+    camera : Camera
+    clip : bool
+        Clip against the near plane.
+    faces : (T, 3) int ndarray, optional
+        Indexed triangles: vertices are then projected once each (the
+        common case, when no triangle crosses the near plane).
+    """
     W, H, sx, sy = camera.kernel_args()
-    tv = np.ascontiguousarray(tri_view, dtype=np.float64).reshape(-1, 3, 3)
-    if clip:
-        tv = clip_near(tv, camera.near)
-    T = tv.shape[0]
-    X = np.zeros((T, 3), np.int64)
-    Y = np.zeros((T, 3), np.int64)
-    D = np.ones((T, 3), np.float64)
-    rows = np.zeros((T, 2), np.int64)
-    counts, tris, dropped = _setup(tv, W, H, sx, sy, X, Y, D, rows, BAND)
+    if faces is not None:
+        vv = np.ascontiguousarray(tri_view, dtype=np.float64).reshape(-1, 3)
+        fc = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        if clip and len(vv) and -vv[:, 2].max() < camera.near:
+            tri_view, faces = vv[fc], None  # something crosses the near plane: clip the soup
+    if faces is None:
+        tv = np.ascontiguousarray(tri_view, dtype=np.float64).reshape(-1, 3, 3)
+        if clip:
+            tv = clip_near(tv, camera.near)
+        vv = tv.reshape(-1, 3)
+        fc = np.arange(len(vv), dtype=np.int64).reshape(-1, 3)
+    T = fc.shape[0]
+    XV = np.empty(len(vv), np.int64)
+    YV = np.empty(len(vv), np.int64)
+    DV = np.empty(len(vv), np.float64)
+    okv = np.empty(len(vv), np.bool_)
+    _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv)
+    X = np.empty((T, 3), np.int64)
+    Y = np.empty((T, 3), np.int64)
+    D = np.empty((T, 3), np.float64)
+    rows = np.empty((T, 2), np.int64)
+    counts, tris, dropped = _bin(fc, XV, YV, DV, okv, H, X, Y, D, rows, BAND)
     return RasterSetup(X, Y, D, rows, counts, tris, int(T), int(dropped), (H, W))
 
 
@@ -350,7 +391,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         ``min``/``max``: (H, W) float64 depth; ``minmax``: a tuple of both;
         ``count``: (H, W) int32;
         ``or``/``add``: (H, W, S // 32) uint32; ``collect``: a tuple
-        ``(depths (H, W, capacity) float64 with +inf padding, count (H, W) int32)``.
+        ``(depths (capacity, H, W) float64 with +inf padding, count (H, W) int32)``.
 
     References
     ----------
@@ -390,7 +431,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         layers[..., 1] = -np.inf
     else:
         ibuf = np.zeros((H, W), np.int32)
-        layers = np.full((H, W, int(capacity)), np.inf)
+        layers = np.full((int(capacity), H, W), np.inf)
     _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code,
                    fbuf, ibuf, bits, lo, hi, int(slices), layers)
     if code in (0, 1):

@@ -61,7 +61,7 @@ def _point(ldi, n, i, j, lut, W, H, sx, sy):
     return unproject_pixel(j + 0.5, i + 0.5, d, W, H, sx, sy)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
     """Unit view-space normal of depth image ``layer`` at pixel (i, j).
 

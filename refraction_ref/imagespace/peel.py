@@ -117,8 +117,10 @@ def peel_layers(bits, zlo, zhi, slices, layers=32, total=None):
 
     Returns
     -------
-    ldi : (L, H, W) float64
-        Depth of each layer, front to back, ``L = min(layers, max(total))``;
+    ldi : (L, H, W) float32
+        Depth of each layer, front to back, ``L = min(layers, max(total))``
+        (32-bit floats, as in the thesis's render targets; also halves the
+        tracer's memory traffic);
         ``+inf`` where the pixel has fewer layers.
     total : (H, W) int32
         Set bits per pixel (above ``layers``: the layer limit cuts the
@@ -132,7 +134,7 @@ def peel_layers(bits, zlo, zhi, slices, layers=32, total=None):
     if total is None:
         total = depth_complexity(bits)
     L = int(min(layers, total.max(initial=0)))
-    ldi = np.empty((L, H, W))
+    ldi = np.empty((L, H, W), np.float32)
     if L:
         _peel_kernel(np.ascontiguousarray(bits), np.ascontiguousarray(zlo, dtype=np.float64),
                      np.ascontiguousarray(zhi, dtype=np.float64), int(slices), L, ldi)

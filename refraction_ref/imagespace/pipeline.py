@@ -120,7 +120,7 @@ def render_imagespace(scene, warm=True):
                          "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
 
     t0 = tic()
-    tri_view = raster_setup(cam.world_to_view(geom.vertices)[geom.faces], cam)
+    tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
     zmin, zmax = depth_bounds(tri_view, cam)
     timings["minmax"] = (tic() - t0) * 1e3
     plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
@@ -145,7 +145,7 @@ def render_imagespace(scene, warm=True):
                                 f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)"})
         else:
             Lr = int(min(L, total.max(initial=0)))
-            ldi = np.broadcast_to(np.inf, (Lr, H, W))
+            ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
             lut = (True, bits, np.ascontiguousarray(zlo), np.ascontiguousarray(zhi), S, POPCOUNT8, SELECT8)
             plan.append({"stage": "peel", "ran": False,
                          "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"})

@@ -219,7 +219,7 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
 
     Parameters
     ----------
-    ldi : (L, H, W) float64
+    ldi : (L, H, W) float32 (or float64)
         Layer depths (``+inf`` where absent).
     total : (H, W) int
         Layers per pixel before the layer limit (the last one is the backmost).

@@ -72,10 +72,13 @@ def collect_depths(tri_view, camera, capacity=32):
 
     Returns
     -------
-    depths : (capacity, H, W) float64
-        ``+inf`` where a pixel has fewer fragments.
+    depths : (L, H, W) float32
+        ``+inf`` where a pixel has fewer fragments (32-bit, like the LDI
+        array); ``L = min(capacity, max(total))``.
     total : (H, W) int32
         All fragments of the pixel, including those beyond ``capacity``.
     """
-    d, n = rasterize(tri_view, camera, "collect", capacity=capacity, clip=True)
-    return np.ascontiguousarray(np.moveaxis(d, 2, 0)), n
+    total = rasterize(tri_view, camera, "count", clip=True)
+    cap = int(min(capacity, total.max(initial=0)))  # never more than the depth complexity
+    d, n = rasterize(tri_view, camera, "collect", capacity=max(cap, 1), clip=True)
+    return d[:cap].astype(np.float32), n
