@@ -51,6 +51,10 @@ def _cmd_compare(a):
         print(json.dumps(c, indent=1))
     else:
         print(format_comparison(c, a.a, a.b))
+    if a.plot:
+        from .compare import plot_comparison
+
+        print("wrote " + plot_comparison(A.arrays, B.arrays, a.plot, "A", "B"))
     return 0
 
 
@@ -78,6 +82,7 @@ def main(argv=None):
     c.add_argument("a", help="run to test (.npz)")
     c.add_argument("b", help="reference run (.npz), e.g. --method exact")
     c.add_argument("--json", action="store_true", help="print the statistics as JSON")
+    c.add_argument("--plot", metavar="PNG", help="also write images, error map and status maps to PNG")
     c.set_defaults(fn=_cmd_compare)
     s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
     s.add_argument("scene", nargs="?", default=None)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["angular_error_deg", "compare_arrays", "format_comparison"]
+__all__ = ["angular_error_deg", "compare_arrays", "format_comparison", "plot_comparison"]
 
 
 def angular_error_deg(a, b):
@@ -77,3 +77,40 @@ def format_comparison(c, name_a="A", name_b="B"):
     if "image_rmse" in c:
         lines.append(f"image RMSE: {c['image_rmse']:.4f}")
     return "\n".join(lines)
+
+
+def plot_comparison(a, b, path, name_a="A", name_b="B"):
+    """Write a PNG: both images, the per-pixel exit-direction error map and both status maps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    from .result import tonemap
+
+    err = angular_error_deg(a["exit_dir"], b["exit_dir"])
+    err[~(np.asarray(b["hit"], bool) & (a["status"] == 1) & (b["status"] == 1))] = np.nan
+    cmap = ListedColormap(["#ffffff", "#4caf50", "#2196f3", "#ff9800", "#e91e63"])
+    fig, ax = plt.subplots(1, 5, figsize=(20, 4.4))
+    ax[0].imshow(tonemap(a["image"]))
+    ax[0].set_title(f"{name_a}: image")
+    ax[1].imshow(tonemap(b["image"]))
+    ax[1].set_title(f"{name_b}: image")
+    im = ax[2].imshow(err, cmap="magma", vmin=0, vmax=10)
+    fin = err[np.isfinite(err)]
+    med = float(np.median(fin)) if fin.size else float("nan")
+    ax[2].set_title(f"exit-direction error (deg), median {med:.2f}")
+    fig.colorbar(im, ax=ax[2], fraction=0.046)
+    for k, (r, nm) in enumerate(((a, name_a), (b, name_b))):
+        ax[3 + k].imshow(r["status"], cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")
+        ax[3 + k].set_title(f"{nm}: status")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=cmap(i)) for i in range(5)]
+    fig.legend(handles, ["0 missed", "1 exited", "2 limit", "3 TIR", "4 lost"], loc="lower center", ncol=5)
+    for x in ax:
+        x.set_xticks([])
+        x.set_yticks([])
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
