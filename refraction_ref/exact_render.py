@@ -8,7 +8,8 @@ import numpy as np
 
 from .camera import Camera
 from .environment import environment_lookup
-from .meshes import scene_geometry, vertex_normals
+from .meshes import eye_inside, scene_geometry, vertex_normals
+from .scene import SceneError
 
 __all__ = ["render_exact"]
 
@@ -29,6 +30,9 @@ def render_exact(scene, progress=False):
     timings, plan = {}, []
     t0 = time.perf_counter()
     geom = scene_geometry(scene)
+    if eye_inside(geom, cam.eye):
+        raise SceneError("exact: the camera is inside a refractive object; the reference tracer starts "
+                         "every ray in the outside medium. Move camera.eye outside the objects")
     origin, rdir = cam.primary_rays()
     n = H * W
     if len(geom.faces):

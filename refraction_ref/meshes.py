@@ -29,7 +29,7 @@ import numpy as np
 
 from .scene import SceneError
 
-__all__ = ["BUILTIN_MESHES", "Geometry", "load_mesh", "object_mesh", "scene_geometry",
+__all__ = ["BUILTIN_MESHES", "Geometry", "eye_inside", "load_mesh", "object_mesh", "scene_geometry",
            "rotation_matrix", "sine_displacement"]
 
 _DATA = os.path.join(os.path.dirname(__file__), "data")
@@ -215,3 +215,39 @@ def scene_geometry(scene):
                         np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
     return Geometry(np.concatenate(vs), np.concatenate(fs), np.concatenate(fo), np.asarray(iors),
                     np.stack(absn), np.asarray(bnd), np.asarray(deg))
+
+
+def eye_inside(geom, eye):
+    """True when the camera sits inside a refractive object (the methods cannot start there).
+
+    Counts the crossings of a ray from the eye in a fixed, irrational
+    direction (so that it does not graze the vertices of regular meshes)
+    with each object's triangles: odd means inside.
+    """
+    v = geom.vertices
+    if len(v) == 0:
+        return False
+    eye = np.asarray(eye, dtype=np.float64)
+    u = np.array([1.0, 0.3713, 0.1927])
+    u /= np.linalg.norm(u)
+    p = np.cross(u, [0.0, 0.0, 1.0])
+    p /= np.linalg.norm(p)
+    q = np.cross(u, p)
+    for k in range(len(geom.ior)):
+        fv = v[geom.faces[geom.face_object == k]] - eye
+        lo, hi = fv.reshape(-1, 3).min(0), fv.reshape(-1, 3).max(0)
+        if not (np.all(lo < 0) and np.all(hi > 0)):
+            continue
+        a, b, c = (fv[:, m] @ np.stack([p, q, u], axis=1) for m in range(3))
+
+        def cr(s, t):
+            return s[:, 0] * t[:, 1] - s[:, 1] * t[:, 0]
+
+        s1, s2, s3 = cr(a, b), cr(b, c), cr(c, a)
+        inside_tri = ((s1 > 0) & (s2 > 0) & (s3 > 0)) | ((s1 < 0) & (s2 < 0) & (s3 < 0))
+        den = s1 + s2 + s3
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = (s2 * a[:, 2] + s3 * b[:, 2] + s1 * c[:, 2]) / den
+        if np.count_nonzero(inside_tri & (t > 0)) % 2 == 1:
+            return True
+    return False

@@ -119,10 +119,10 @@ def clip_near(tri_view, near):
     return out[:m]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
     """Project view-space vertices to 1/256-pixel fixed point; flag those outside the guard band."""
-    for k in range(vv.shape[0]):
+    for k in nb.prange(vv.shape[0]):
         d = -vv[k, 2]
         col = (vv[k, 0] / (d * sx) * 0.5 + 0.5) * W
         row = (0.5 - vv[k, 1] / (d * sy) * 0.5) * H
@@ -136,36 +136,41 @@ def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
         DV[k] = d
 
 
-@nb.njit(cache=True)
-def _bin(faces, XV, YV, DV, okv, H, X, Y, D, rows, band):
-    """Gather snapped triangles and bin them into bands of rows (CSR lists)."""
-    T = faces.shape[0]
-    nb_bands = (H + band - 1) // band
-    counts = np.zeros(nb_bands + 1, np.int64)
-    dropped = 0
-    for t in range(T):
+@nb.njit(cache=True, parallel=True)
+def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
+    """Gather snapped triangles; rows[t] = the pixel rows they may cover, (1, 0) when none."""
+    for t in nb.prange(faces.shape[0]):
         ok = True
-        lo = np.int64(1) << 62
-        hi = -lo
         for k in range(3):
             v = faces[t, k]
-            if not okv[v]:
-                ok = False
+            ok = ok and okv[v]
             X[t, k] = XV[v]
             Y[t, k] = YV[v]
             D[t, k] = DV[v]
-            lo = min(lo, YV[v])
-            hi = max(hi, YV[v])
-        if not ok:
-            rows[t, 0] = 1
-            rows[t, 1] = 0
-            dropped += 1
-            continue
-        # pixel rows whose centre (256 i + 128) lies in [lo, hi]
+        lo = min(Y[t, 0], min(Y[t, 1], Y[t, 2]))
+        hi = max(Y[t, 0], max(Y[t, 1], Y[t, 2]))
+        xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
+        xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
+        # pixel rows / columns whose centre (256 i + 128) lies in [lo, hi]
         i0 = max(-((128 - lo) // 256), 0)
         i1 = min((hi - 128) // 256, H - 1)
+        j0 = max(-((128 - xlo) // 256), 0)
+        j1 = min((xhi - 128) // 256, W - 1)
+        if not ok or j0 > j1:
+            i0, i1 = 1, 0  # outside the guard band, or no pixel centre in its box
         rows[t, 0] = i0
         rows[t, 1] = i1
+
+
+@nb.njit(cache=True)
+def _bin(rows, H, band):
+    """Bin triangles into bands of rows (CSR lists, triangles in index order)."""
+    T = rows.shape[0]
+    nb_bands = (H + band - 1) // band
+    counts = np.zeros(nb_bands + 1, np.int64)
+    for t in range(T):
+        i0 = rows[t, 0]
+        i1 = rows[t, 1]
         if i0 <= i1:
             for b in range(i0 // band, i1 // band + 1):
                 counts[b + 1] += 1
@@ -180,7 +185,7 @@ def _bin(faces, XV, YV, DV, okv, H, X, Y, D, rows, band):
             for b in range(i0 // band, i1 // band + 1):
                 tris[fill[b]] = t
                 fill[b] += 1
-    return counts, tris, dropped
+    return counts, tris
 
 
 @nb.njit(cache=True, inline="always")
@@ -353,8 +358,10 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
     Y = np.empty((T, 3), np.int64)
     D = np.empty((T, 3), np.float64)
     rows = np.empty((T, 2), np.int64)
-    counts, tris, dropped = _bin(fc, XV, YV, DV, okv, H, X, Y, D, rows, BAND)
-    return RasterSetup(X, Y, D, rows, counts, tris, int(T), int(dropped), (H, W))
+    _gather(fc, XV, YV, DV, okv, W, H, X, Y, D, rows)
+    counts, tris = _bin(rows, H, BAND)
+    dropped = int(np.count_nonzero(~okv[fc].all(axis=1))) if not okv.all() else 0
+    return RasterSetup(X, Y, D, rows, counts, tris, int(T), dropped, (H, W))
 
 
 def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=32,

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..environment import environment_lookup
-from ..meshes import scene_geometry
+from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
 from ..scene import SceneError
@@ -42,32 +42,6 @@ def check_materials(geom):
                          f"(ior {geom.ior.tolist()}); the occupancy bitmask cannot tell objects apart "
                          "(Chaudhari 2008, §4.1). Give all objects the same material, or use --method exact")
     return float(geom.ior[0]), geom.absorption[0]
-
-
-def eye_inside(geom, eye):
-    """True when the camera sits inside a closed refractive object (the method cannot start there)."""
-    v = geom.vertices
-    if len(v) == 0:
-        return False
-    eye = np.asarray(eye, dtype=np.float64)
-    for k in range(len(geom.ior)):
-        sel = geom.face_object == k
-        fv = v[geom.faces[sel]]
-        lo, hi = fv.reshape(-1, 3).min(0), fv.reshape(-1, 3).max(0)
-        if np.all(eye > lo) and np.all(eye < hi):
-            # parity of crossings along +x (exact enough for a refusal test)
-            a, b, c = fv[:, 0] - eye, fv[:, 1] - eye, fv[:, 2] - eye
-            # ray (t, 0, 0): triangle crosses the x axis where y = z = 0 in barycentric terms
-            def cr(p, q):
-                return p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1]
-            s1, s2, s3 = cr(a, b), cr(b, c), cr(c, a)
-            inside_tri = ((s1 > 0) & (s2 > 0) & (s3 > 0)) | ((s1 < 0) & (s2 < 0) & (s3 < 0))
-            den = s1 + s2 + s3
-            with np.errstate(invalid="ignore", divide="ignore"):
-                x = (s2 * a[:, 0] + s3 * b[:, 0] + s1 * c[:, 0]) / den
-            if np.count_nonzero(inside_tri & (x > 0)) % 2 == 1:
-                return True
-    return False
 
 
 def render_imagespace(scene, warm=True):
@@ -108,7 +82,7 @@ def render_imagespace(scene, warm=True):
     if eye_inside(geom, cam.eye):
         raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
                          "needs the viewer outside (its first layer is the front face). Move camera.eye "
-                         "outside, or use --method exact")
+                         "outside the objects")
     for k, nb in enumerate(geom.boundary_edges):
         if nb:
             plan.append({"stage": "geometry", "ran": True,
