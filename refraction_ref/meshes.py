@@ -188,6 +188,7 @@ class Geometry:
 def _boundary_edge_count(f):
     """Edges used by exactly one face (0 for a closed, i.e. watertight, mesh)."""
     e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    e = e[e[:, 0] != e[:, 1]]  # a repeated-vertex face's self-loop (a, a) is no edge
     key = e[:, 0].astype(np.int64) * (int(f.max()) + 1) + e[:, 1]
     key.sort()
     change = np.flatnonzero(np.diff(key)) + 1
@@ -200,7 +201,10 @@ def scene_geometry(scene):
     vs, fs, fo, iors, absn, bnd, deg = [], [], [], [], [], [], []
     off = 0
     for k, o in enumerate(scene.data["objects"]):
-        v, f = object_mesh(o, scene.base_dir, scene.callables.get(("deform", k)))
+        try:
+            v, f = object_mesh(o, scene.base_dir, scene.callables.get(("deform", k)))
+        except SceneError as e:
+            raise SceneError(f"objects[{k}].mesh: {e}") from None
         area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
         vs.append(v)
         fs.append(f + off)

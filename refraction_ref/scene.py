@@ -62,7 +62,7 @@ IMAGESPACE_DEFAULTS = {
     "depth": "bitmask",       # 'bitmask' | 'float' (A-buffer of exact fragment depths)
     "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
     "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
-    "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4)
+    "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4) | 'cross'
     "delta": 2,               # pixel step of the central differences (eq. 3.2; smoother than 1, Fig. 3.4)
     "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
     "tir": False,             # follow total internal reflection back to preceding layers
@@ -96,7 +96,7 @@ _CHOICES = {
     ("imagespace", "depth"): ("bitmask", "float"),
     ("imagespace", "slicing"): ("local", "global"),
     ("imagespace", "peeling"): ("separate", "lut"),
-    ("imagespace", "normals"): ("forward", "central", "mesh3x3"),
+    ("imagespace", "normals"): ("forward", "central", "mesh3x3", "cross"),
     ("exact", "normals"): ("smooth", "face"),
 }
 
@@ -238,7 +238,7 @@ def validate(data, base_dir="."):
         if np.any(a < 0):
             raise SceneError(f"scene: '{w}.material.absorption' is {m['absorption']}; "
                              "absorption coefficients must be >= 0")
-        if o["deform"] is not None and not callable(o["deform"]):
+        if o["deform"] is not None and not callable(o["deform"]) and o["deform"] != "<python callable>":
             o["deform"] = _merge(DEFAULT_DEFORM, o["deform"], f"{w}.deform")
             d = o["deform"]
             if d["type"] != "sine":

@@ -14,6 +14,12 @@ meaningful: the optics flip a normal to face the incident ray.
     neighbour is unprojected to its view-space point ``p`` with its own
     depth, and ``grad_x d = (d(i+delta) - d(i-delta)) / (p(i+delta)_x -
     p(i-delta)_x)`` (likewise in y).
+``cross`` (beyond the thesis)
+    The same four reads as ``central``, but the normal is the cross
+    product of the full 3D differences ``p(i+delta) - p(i-delta)`` and
+    ``p(j+delta) - p(j-delta)``: eq. 3.2 neglects that, in perspective, a
+    step along a pixel row also moves the point in y (and vice versa),
+    which is what limits its accuracy away from the image centre.
 ``mesh3x3`` (Fig. 3.4, right)
     The normal of the little mesh formed by the 3x3 neighbourhood's
     view-space points: the sum of the 8 triangle normals around the centre
@@ -35,7 +41,7 @@ from .peel import layer_depth_lut
 
 __all__ = ["NORMAL_METHODS", "normal_at", "layer_normals", "layer_depth", "no_lut"]
 
-NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2}
+NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3}
 
 
 @nb.njit(cache=True, inline="always")
@@ -77,7 +83,7 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
         On-the-fly peeling inputs (see :func:`layer_depth`).
     method : int
         0 forward (eq. 3.1), 1 central perspective-corrected (eq. 3.2),
-        2 3x3 mesh (Fig. 3.4).
+        2 3x3 mesh (Fig. 3.4), 3 cross product of central differences.
     delta : int
         Step of the central differences.
     W, H, sx, sy :
@@ -130,6 +136,27 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
                 gy = (du - dd) / (yu - yd)
         # surface z = -d(x, y): normal (dd/dx, dd/dy, 1)
         nx, ny, nz = gx, gy, 1.0
+    elif method == 3:
+        jr, jl, iu, idn = j + delta, j - delta, i - delta, i + delta
+        if not math.isfinite(layer_depth(ldi, n, i, jr, lut)):
+            jr = j
+        if not math.isfinite(layer_depth(ldi, n, i, jl, lut)):
+            jl = j
+        if not math.isfinite(layer_depth(ldi, n, iu, j, lut)):
+            iu = i
+        if not math.isfinite(layer_depth(ldi, n, idn, j, lut)):
+            idn = i
+        ax, ay, az = _point(ldi, n, i, jr, lut, W, H, sx, sy)
+        bx, by, bz = _point(ldi, n, i, jl, lut, W, H, sx, sy)
+        ux, uy, uz = ax - bx, ay - by, az - bz
+        ax, ay, az = _point(ldi, n, iu, j, lut, W, H, sx, sy)
+        bx, by, bz = _point(ldi, n, idn, j, lut, W, H, sx, sy)
+        vx, vy, vz = ax - bx, ay - by, az - bz
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        if nx == 0.0 and ny == 0.0 and nz == 0.0:
+            nz = 1.0
     else:
         cx, cy, cz = _point(ldi, n, i, j, lut, W, H, sx, sy)
         nx = 0.0
