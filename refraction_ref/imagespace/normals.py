@@ -97,6 +97,8 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
     ----------
     Chaudhari (2008), §3.5, eqs. 3.1 and 3.2, Fig. 3.4.
     """
+    i = np.int64(i)  # a prange index may arrive unsigned; neighbour offsets need signed ints
+    j = np.int64(j)
     dc = layer_depth(ldi, n, i, j, lut)
     if not math.isfinite(dc):
         return 0.0, 0.0, 1.0
