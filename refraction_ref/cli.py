@@ -25,15 +25,17 @@ def _cmd_render(a):
     scene = load_scene(a.scene, _parse_sets(a.set))
     res = render(scene, method=a.method, progress=not a.quiet)
     paths = res.save(a.out, overwrite=a.force)
-    st = res.arrays["status"]
     import numpy as np
 
-    hist = np.bincount(st.ravel().astype(np.int64), minlength=5)
     t = res.meta["timings_ms"]
     print(f"{a.method}: {scene.data['camera']['width']}x{scene.data['camera']['height']}, "
           f"{res.meta.get('triangles', 0)} triangles, {res.meta['total_ms']:.0f} ms in all")
     print("stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
-    print("status 0 missed / 1 exited / 2 limit / 3 TIR / 4 lost: " + " / ".join(str(int(x)) for x in hist))
+    if "status" in res.arrays:
+        hist = np.bincount(res.arrays["status"].ravel().astype(np.int64), minlength=5)
+        print("status 0 missed / 1 exited / 2 limit / 3 TIR / 4 lost: " + " / ".join(str(int(x)) for x in hist))
+    if "planes_used" in res.meta:
+        print(f"planes: {res.meta['planes_requested']} requested, {res.meta['planes_used']} used")
     for p in res.meta.get("plan", []):
         print(f"  [{'ran ' if p['ran'] else 'skip'}] {p['stage']}: {p['why']}")
     print("wrote " + ", ".join(paths))
@@ -71,7 +73,11 @@ def main(argv=None):
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene (default: the bundled glass bunny)")
     r.add_argument("scene", nargs="?", default=None, help="scene JSON (ORACLE.md); omit for the default scene")
-    r.add_argument("--method", default="imagespace", choices=["imagespace", "exact"])
+    from .render import METHODS
+
+    r.add_argument("--method", default="imagespace", choices=list(METHODS),
+                   help="imagespace (Chaudhari 2008), exact (Embree reference), levelmap (Tipprasert 2006), "
+                        "volumetric (Sun et al. 2008)")
     r.add_argument("--out", default="out/render", help="output prefix: PREFIX.npz and PREFIX.png")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set imagespace.iterations=10 (repeatable)")

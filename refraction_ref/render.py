@@ -12,7 +12,7 @@ from .scene import Scene, SceneError, load_scene
 
 __all__ = ["render", "METHODS"]
 
-METHODS = ("imagespace", "exact")
+METHODS = ("imagespace", "exact", "levelmap", "volumetric")
 
 
 def _version():
@@ -29,9 +29,13 @@ def render(scene=None, method="imagespace", overrides=None, progress=False):
     scene : Scene, dict, str or None
         A scene, anything :func:`~refraction_ref.scene.load_scene` accepts,
         or None for the bundled default scene.
-    method : {'imagespace', 'exact'}
+    method : {'imagespace', 'exact', 'levelmap', 'volumetric'}
         ``imagespace``: Chaudhari (2008); ``exact``: multi-interface Snell
-        tracing through the actual triangles with Embree.
+        tracing through the actual triangles with Embree (for a scene with a
+        ``water`` block: the exact water-caustics reference,
+        :mod:`refraction_ref.levelmap.exact_water`); ``levelmap``: water
+        caustics, Tipprasert (2006); ``volumetric``: photon tracing through an
+        index volume, Sun et al. (2008).
     overrides : dict, optional
         Dotted keys, e.g. ``{"imagespace.iterations": 10}``.
     progress : bool
@@ -53,6 +57,21 @@ def render(scene=None, method="imagespace", overrides=None, progress=False):
 
         arrays, info = render_imagespace(scene)
         params = scene.data["imagespace"]
+    elif method == "volumetric":
+        from .volumetric import render_volumetric  # Sun et al. 2008 volumetric relighting
+
+        arrays, info = render_volumetric(scene)
+        params = scene.data["volumetric"]
+    elif method == "levelmap":
+        from .levelmap.pipeline import render_levelmap  # Tipprasert 2006 water caustics
+
+        arrays, info = render_levelmap(scene)
+        params = {"levelmap": scene.data["levelmap"], "water": scene.data["water"]}
+    elif method == "exact" and scene.data.get("water") is not None:
+        from .levelmap.exact_water import render_water_exact  # exact water-caustics reference
+
+        arrays, info = render_water_exact(scene, progress=progress)
+        params = {"levelmap": scene.data["levelmap"], "water": scene.data["water"]}
     else:
         from .exact_render import render_exact
 
@@ -69,5 +88,5 @@ def render(scene=None, method="imagespace", overrides=None, progress=False):
     }
     meta.update(info)
     for k in ("exit_pos", "exit_dir"):
-        assert arrays[k].dtype == np.float64
+        assert k not in arrays or arrays[k].dtype == np.float64
     return Result(arrays, meta)

@@ -74,6 +74,11 @@ EXACT_DEFAULTS = {
     "max_bounces": 64,
 }
 
+#: Water block (merged only when a scene has one; "water": null means no water).
+WATER_DEFAULTS = {"size": [4.0, 4.0], "height": 0.0, "resolution": 128, "ior": 1.33, "absorption": 0.0,
+                  "waves": []}
+WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], "phase": 0.0}
+
 DEFAULTS = {
     "camera": DEFAULT_CAMERA,
     "objects": [dict(DEFAULT_OBJECT, fit=1.0, material={"ior": 1.2, "absorption": [0.0, 0.0, 0.0]})],
@@ -85,8 +90,16 @@ DEFAULTS = {
     "water": None,
     "volume": None,
     "imagespace": IMAGESPACE_DEFAULTS,
-    "volumetric": {},
-    "levelmap": {},
+    "volumetric": {           # Sun et al. 2008; see refraction_ref.volumetric.knobs
+        "resolution": 128, "photons": 1024, "ds_min": 1.0, "ds_max": 8.0, "eps": 0.005, "eps2": 0.02,
+        "integrator": "euler", "phase_g": 0.0, "scattering": 0.2, "absorption": 0.0,
+        "supersample": 4, "blur": 9, "padding": 6, "bounds": None, "max_steps": 0,
+        "min_radiance": 1e-3, "stop_fraction": 1e-3, "stiff": 0.25,
+    },
+    "levelmap": {             # Tipprasert 2006; see refraction_ref.levelmap.knobs
+        "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
+        "map_size": 512, "shadows": True, "ambient": 0.1, "exact_samples": 2048, "exact_seed": 0,
+    },
     "exact": EXACT_DEFAULTS,
 }
 
@@ -284,6 +297,12 @@ def validate(data, base_dir="."):
     if need > 16 * 2**30:
         raise SceneError(f"scene: {W}x{H} with {im['slices']} slices and {im['layers']} layers needs "
                          f"about {need / 2**30:.1f} GiB; lower the resolution")
+    from .volumetric.knobs import validate_volumetric  # volumetric knobs and the 'volume' block
+
+    validate_volumetric(data, base_dir)
+    from .levelmap.knobs import merge_water, validate_levelmap  # water block and level-map knobs
+
+    validate_levelmap(merge_water(data, WATER_DEFAULTS, WAVE_DEFAULTS))
     return data
 
 
@@ -358,6 +377,10 @@ def _resolve(raw, base_dir, callables):
     for (kind, k), fn in callables.items():
         if kind == "deform":
             data["objects"][k]["deform"] = "<python callable>"
+    if data.get("water") is not None:
+        from .levelmap.knobs import merge_water
+
+        merge_water(data, WATER_DEFAULTS, WAVE_DEFAULTS)
     return data
 
 

@@ -1,0 +1,106 @@
+"""Validation of the ``water`` and ``levelmap`` scene blocks (called by
+:func:`refraction_ref.scene.validate`; defaults live in ``scene.py``).
+
+Water fields: ``size`` [sx, sz] (> 0, centred on the origin in x and z),
+``height``, ``resolution`` (quads per side), ``ior`` (> 0; above the
+outside's for light to enter), ``absorption`` K (>= 0, per unit length),
+``waves``: a list of {``amplitude``, ``wavelength`` (> 0), ``direction``
+[x, z] (non-zero, normalised on use), ``phase``}.
+
+Level-map knobs: ``planes`` (1..4096), ``smart_slicing`` (bool),
+``depth_levels`` (1..65536), ``variant`` (``levelmap`` | ``volumetric`` |
+``per_ray``), ``map_size`` (texels per side, 1..8192), ``shadows`` (bool:
+receivers occlude each other), ``ambient`` (>= 0, eq. 4-19's ``I_a`` as a
+fraction of the albedo), ``exact_samples`` (water samples per side for the
+exact reference, 2..16384), ``exact_seed`` (jitter of those samples).
+"""
+
+from __future__ import annotations
+
+
+
+import numpy as np
+
+__all__ = ["merge_water", "validate_levelmap", "VARIANTS"]
+
+VARIANTS = ("levelmap", "volumetric", "per_ray")
+
+
+def merge_water(data, water_defaults, wave_defaults):
+    """Fill a present ``water`` block (and each wave) with the defaults; idempotent."""
+    from ..scene import SceneError, _merge
+
+    w = data.get("water")
+    if w is None:
+        return data
+    w = _merge(water_defaults, w, "water")
+    waves = w.get("waves")
+    if waves is None:
+        waves = []
+    if not isinstance(waves, list):
+        raise SceneError(f"scene: 'water.waves' must be a list of waves, got {type(waves).__name__}")
+    w["waves"] = [_merge(wave_defaults, x, f"water.waves[{k}]") for k, x in enumerate(waves)]
+    data["water"] = w
+    return data
+
+
+def validate_levelmap(data):
+    """Check the ``levelmap`` knobs, the ``water`` block and, for water scenes, the lights."""
+    from ..scene import SceneError, _num, _vec
+
+    p = data["levelmap"]
+    _num(p["planes"], "levelmap.planes", 1, 4096, integer=True)
+    _num(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
+    _num(p["map_size"], "levelmap.map_size", 1, 8192, integer=True)
+    _num(p["ambient"], "levelmap.ambient", 0.0)
+    _num(p["exact_samples"], "levelmap.exact_samples", 2, 16384, integer=True)
+    _num(p["exact_seed"], "levelmap.exact_seed", 0, integer=True)
+    for k in ("smart_slicing", "shadows"):
+        if not isinstance(p[k], bool):
+            raise SceneError(f"scene: levelmap.{k} must be true or false, got {p[k]!r}")
+    if p["variant"] not in VARIANTS:
+        raise SceneError(f"scene: 'levelmap.variant' is {p['variant']!r}; choose one of {', '.join(VARIANTS)}")
+    w = data.get("water")
+    if w is None:
+        return data
+    size = _vec(w["size"], 2, "water.size")
+    if np.any(size <= 0):
+        raise SceneError(f"scene: 'water.size' is {w['size']}; both extents must be > 0")
+    _num(w["height"], "water.height")
+    _num(w["resolution"], "water.resolution", 1, 4096, integer=True)
+    _num(w["ior"], "water.ior", 0.0, lo_open=True)
+    _num(w["absorption"], "water.absorption", 0.0)
+    amp = 0.0
+    for k, wave in enumerate(w["waves"]):
+        amp += abs(_num(wave["amplitude"], f"water.waves[{k}].amplitude"))
+        _num(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
+        d = _vec(wave["direction"], 2, f"water.waves[{k}].direction")
+        if not np.any(d != 0):
+            raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
+        _num(wave["phase"], f"water.waves[{k}].phase")
+    top = float(w["height"]) + amp
+    for k, lt in enumerate(data["lights"]):
+        if lt["type"] == "directional":
+            d = _vec(lt["direction"], 3, f"lights[{k}].direction")
+            if not np.linalg.norm(d) > 0:
+                raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
+            if d[1] >= 0:
+                raise SceneError(f"scene: 'lights[{k}].direction' is {lt['direction']}: the light comes from "
+                                 "below the horizon (or along it) and never enters the water from above; "
+                                 "give the direction a negative y component")
+        elif lt["type"] == "point":
+            if lt["position"] is None:
+                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give [x, y, z]")
+            pos = _vec(lt["position"], 3, f"lights[{k}].position")
+            if pos[1] <= top:
+                raise SceneError(f"scene: 'lights[{k}].position' y = {pos[1]} is not above the water "
+                                 f"(its crests reach y = {top}); raise the light above the water")
+        else:
+            raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; water caustics need "
+                             "'directional' or 'point' lights")
+        rad = _vec(lt["radiance"], 3, f"lights[{k}].radiance")
+        if np.any(rad < 0):
+            raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
+    return data
+
+

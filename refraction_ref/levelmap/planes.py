@@ -1,0 +1,213 @@
+"""Reference planes: a bounding box aligned with the refracted light (eqs. 4-1 to 4-3)
+sliced into equally spaced planes (eqs. 4-6 to 4-9).
+
+Frames used by every pass of the level-map method:
+
+* ``T0`` is the refracted direction of the light at a *flat* water surface
+  (the thesis's alignment assumption, §4.2.1): for a parallel light the light
+  direction refracted by eq. 2-8; for a point light the ray from the light to
+  the receiver's origin (its bounding-box centre), refracted where it meets
+  the water plane (Fig. 4-7).
+* The box axes are ``V = -T0`` and ``U = V x N``, ``W = U x V`` (eq. 4-1) with
+  ``N`` the world z axis (or x when z is nearly parallel to V). The thesis
+  picks ``N`` at random; a fixed choice keeps runs reproducible.
+* Box extents ``w, h, d`` along ``U, V, W`` (eq. 4-3) are measured about the
+  box centre, so ``w = 2 |P_x|`` holds with ``P_0`` at the centre.
+* Map coordinates of a world point ``p``: ``col = ((p - c).U / w + 1/2) Wc``,
+  ``row = ((p - c).W / d + 1/2) Hc`` (texel units, centres at ``+0.5``) and
+  the depth ``zeta = (p - c).T0`` along the light, from ``-h/2`` (the box face
+  nearest the light) to ``+h/2``.
+
+Slicing: the ``n`` planes sit at the centres of ``n`` equal slabs of the box,
+``zeta_i = -h/2 + s (i + 1/2)``, ``s = h / n``; in the thesis's coordinates
+(distance along ``V``) this is ``D_i = D_max - s (i - 1)`` (eqs. 4-7, 4-8) with
+``D_max = h/2 - s/2`` instead of ``h/2`` (eq. 4-9), so that the acceptance
+ranges ``|zeta - zeta_i| < eps = s/2`` (eq. 4-15) tile the box exactly and a
+single plane sits in the middle.
+
+References
+----------
+.. [1] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+   with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+   University, 2006, §4.2.1.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..optics import refract
+from ..scene import SceneError
+
+__all__ = ["Box", "refracted_axis", "reference_box", "slice_planes", "to_map", "dir_to_map", "frame_of"]
+
+
+class Box(NamedTuple):
+    """An oriented bounding box and its map resolution.
+
+    Attributes
+    ----------
+    center : (3,) ; U, V, W : (3,) unit axes ; T0 = -V
+    w, h, d : float, extents along U, V, W
+    size : (Hc, Wc) texels of the maps laid over the U x W face
+    """
+
+    center: np.ndarray
+    U: np.ndarray
+    V: np.ndarray
+    W: np.ndarray
+    w: float
+    h: float
+    d: float
+    size: tuple
+
+    @property
+    def T0(self):
+        return -self.V
+
+    @property
+    def texel_area(self):
+        """World area of one texel of the map plane (perpendicular to V)."""
+        return (self.w / self.size[1]) * (self.d / self.size[0])
+
+    @property
+    def texel_size(self):
+        return max(self.w / self.size[1], self.d / self.size[0])
+
+
+def refracted_axis(light, water, eta, target):
+    """``T0``: the light refracted at the flat water plane (§4.2.1, Figs. 4-5, 4-7).
+
+    Parameters
+    ----------
+    light : dict
+    water : dict
+    eta : float
+        ``outside_ior / water.ior``.
+    target : (3,) array_like
+        The receiver's origin (used for point lights only).
+
+    Raises
+    ------
+    SceneError
+        When the light cannot enter the water from above.
+    """
+    up = np.array([0.0, 1.0, 0.0])
+    if light["type"] == "directional":
+        L = np.asarray(light["direction"], dtype=np.float64)
+        L = L / np.linalg.norm(L)
+    else:
+        p = np.asarray(light["position"], dtype=np.float64)
+        L = np.asarray(target, dtype=np.float64) - p
+        n = np.linalg.norm(L)
+        if n == 0 or L[1] >= 0:
+            raise SceneError("levelmap: a point light must be above the receivers it lights "
+                             f"(light at {p.tolist()}, receiver origin {np.asarray(target).tolist()}); "
+                             "raise the light above the water")
+        L = L / n
+    if L[1] >= 0.0:
+        raise SceneError(f"levelmap: light direction {L.tolist()} does not point downward; light from "
+                         "below the horizon never enters the water. Give it a negative y component")
+    t, tir = refract(L, up, eta)
+    if tir or t[1] >= 0.0:
+        raise SceneError("levelmap: the light is totally reflected at the water surface "
+                         f"(outside_ior / water.ior = {eta}); the water needs an ior above the outside's")
+    return t / np.linalg.norm(t)
+
+
+def _axes(T0):
+    V = -np.asarray(T0, dtype=np.float64)
+    V = V / np.linalg.norm(V)
+    N = np.array([0.0, 0.0, 1.0]) if abs(V[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    U = np.cross(V, N)
+    U /= np.linalg.norm(U)
+    W = np.cross(U, V)
+    W /= np.linalg.norm(W)
+    return U, V, W
+
+
+def reference_box(vertices, T0, size):
+    """Bounding box of a receiver aligned with ``V = -T0`` (eqs. 4-1 to 4-3).
+
+    Parameters
+    ----------
+    vertices : (N, 3) array_like
+        The receiver's world-space vertices.
+    T0 : (3,) array_like
+        Refracted light direction (:func:`refracted_axis`).
+    size : int or (Hc, Wc)
+        Texels of the maps.
+
+    Returns
+    -------
+    Box
+        Degenerate extents (a flat receiver seen edge-on or face-on) are
+        widened to ``1e-6`` of the largest extent so every division is finite.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    U, V, W = _axes(T0)
+    R = np.stack([U, V, W])
+    loc = v @ R.T
+    lo, hi = loc.min(axis=0), loc.max(axis=0)
+    mid = (lo + hi) / 2.0
+    ext = hi - lo
+    floor = 1e-6 * max(float(ext.max()), 1e-12)
+    ext = np.maximum(ext, floor)
+    sz = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
+    return Box(mid @ R, U, V, W, float(ext[0]), float(ext[1]), float(ext[2]), sz)
+
+
+def slice_planes(box, n):
+    """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
+
+    Returns
+    -------
+    zeta : (n,) float64
+        Plane depths along ``T0`` from the box centre, nearest the light first.
+    s : float
+        Spacing ``h / n`` (eq. 4-8).
+    eps : float
+        Acceptance threshold ``s / 2`` (eq. 4-15).
+    """
+    n = int(n)
+    s = box.h / n
+    return -box.h / 2.0 + s * (np.arange(n) + 0.5), s, s / 2.0
+
+
+def to_map(box, p):
+    """World points (..., 3) to map coordinates (col, row, zeta), (..., 3)."""
+    q = np.asarray(p, dtype=np.float64) - box.center
+    Hc, Wc = box.size
+    col = (q @ box.U / box.w + 0.5) * Wc
+    row = (q @ box.W / box.d + 0.5) * Hc
+    zeta = -(q @ box.V)
+    return np.stack([col, row, zeta], axis=-1)
+
+
+def dir_to_map(box, t):
+    """World directions (..., 3) to map-space rates (dcol, drow, dzeta) per unit length."""
+    t = np.asarray(t, dtype=np.float64)
+    Hc, Wc = box.size
+    return np.stack([t @ box.U * (Wc / box.w), t @ box.W * (Hc / box.d), -(t @ box.V)], axis=-1)
+
+
+def from_map(box, col, row, zeta):
+    """Map coordinates back to world points (..., 3)."""
+    Hc, Wc = box.size
+    a = (np.asarray(col) / Wc - 0.5) * box.w
+    b = (np.asarray(row) / Hc - 0.5) * box.d
+    return (box.center + a[..., None] * box.U + b[..., None] * box.W
+            - np.asarray(zeta)[..., None] * box.V)
+
+
+def frame_of(box):
+    """``caustic_frame`` (4, 3): origin, u axis, v axis (full edges), normal (ORACLE.md).
+
+    The rectangle is the box face nearest the light; the normal is ``V``
+    (towards the light); texel (a, b) holds the first receiver surface seen
+    from ``origin + (b + .5)/Wc u + (a + .5)/Hc v`` looking along ``-V``.
+    """
+    origin = box.center - box.w / 2.0 * box.U - box.d / 2.0 * box.W + box.h / 2.0 * box.V
+    return np.stack([origin, box.w * box.U, box.d * box.W, box.V]).astype(np.float64)

@@ -1,0 +1,31 @@
+"""Volumetric relighting of refractive objects (Sun et al. 2008), one module per pass.
+
+=========================  ==============================================  ===========
+stage (``timings_ms``)     pass (module)                                   section
+=========================  ==============================================  ===========
+``voxelize``               solid voxelization, coverage -> IOR, blur        §4.1
+                           (:mod:`.voxelize`)
+``gradient``               central differences of n (:mod:`.gradient`)      §3, eq. 3
+``octree``                 min/max pyramid, leaf levels, max steps          §4.2, §5.3
+                           (:mod:`.octree`)
+``photons``                one photon per covered light texel               §4.3
+                           (:mod:`.photons`)
+``march``                  adaptive marching + deposition (:mod:`.march`)   §4.4, eqs 4-6
+``smooth``                 3x3x3 smoothing of the radiance (:mod:`.march`)  §4.4
+``view``                   curved viewing rays, HG phase (:mod:`.view`)     §4.5
+=========================  ==============================================  ===========
+
+:func:`render_volumetric` in :mod:`.pipeline` puts the passes together;
+:class:`refraction_ref.session.Session` caches them between renders.
+
+Importing this package is cheap: the passes are imported on first use.
+"""
+
+__all__ = ["render_volumetric"]
+
+
+def render_volumetric(scene, cache=None):
+    """See :func:`refraction_ref.volumetric.pipeline.render_volumetric`."""
+    from .pipeline import render_volumetric as _r
+
+    return _r(scene, cache)

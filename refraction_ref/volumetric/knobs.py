@@ -1,0 +1,161 @@
+"""Validation of the ``volumetric`` knobs and of the ``volume`` input block.
+
+The defaults live in :data:`refraction_ref.scene.DEFAULTS` ``["volumetric"]``
+(one source of truth); :func:`validate_volumetric` is called at the end of
+:func:`refraction_ref.scene.validate`, so a bad knob is refused when the
+scene is loaded, before any work starts.
+
+Knobs (scene block ``volumetric``)
+----------------------------------
+resolution : int
+    N, voxels per side of the cubic grid made by voxelization (default 128,
+    as in Sun et al. 2008, Table 2). Ignored for volumetric input, whose
+    arrays set the grid.
+photons : int
+    Photon texture side per light: up to ``photons**2`` photons, one per
+    covered texel (default 1024, §4.3).
+ds_min, ds_max : float
+    Minimum photon step and the step limit of "almost constant" octree
+    nodes (eps <= variation < eps2), in voxels (defaults 1 and 8, §4.4, §5.3).
+eps, eps2 : float
+    Octree tolerances epsilon and epsilon' (defaults 0.005 and 0.02, §5.3).
+integrator : {'euler', 'rk4'}
+    'euler' is the paper's forward difference (eqs. 4-5); 'rk4' the classic
+    fourth-order Runge-Kutta on the same system (eqs. 2-3), for photons and
+    viewing rays.
+phase_g : float
+    Henyey-Greenstein asymmetry in (-1, 1); 0 is isotropic (§4.5).
+scattering, absorption : float or [r, g, b]
+    Scattering coefficient sigma and absorption alpha of the medium that
+    fills the whole volume, per scene unit; extinction kappa = sigma + alpha
+    (+ each object's ``material.absorption`` weighted by its coverage).
+supersample : int
+    Supersampling per axis of boundary voxels (default 4, §4.1).
+blur : int
+    Gaussian window in voxels, odd, sigma = blur / 6 (default 9, §4.1);
+    0 or 1 keeps the sharp coverage.
+padding : int
+    Empty voxels kept around the objects on every side (default 6).
+bounds : None or [[x0, y0, z0], [x1, y1, z1]]
+    Explicit volume bounds for voxelization (None: a cube around the objects).
+max_steps : int
+    Per-photon step limit (0: automatic, 8 N / ds_min).
+min_radiance : float
+    A photon dies when its radiance falls below this fraction of its
+    initial radiance (default 1e-3, §4.4).
+stop_fraction : float
+    Marching stops when fewer than this fraction of photons are active
+    (default 1/1000, §4.4).
+stiff : float
+    Stiffness bound: a step never changes ``|v|`` by more than this
+    fraction of n, i.e. ``ds <= stiff * n / |grad n|`` (default 0.25). It
+    overrides ``ds_min`` at sharp index steps.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+__all__ = ["validate_volumetric", "INTEGRATORS", "VOLUME_KEYS"]
+
+INTEGRATORS = ("euler", "rk4")
+VOLUME_KEYS = ("ior", "extinction", "scattering", "bounds")
+
+
+def _rgb(x, where):
+    from ..scene import SceneError
+
+    a = np.asarray(x, dtype=np.float64) if not isinstance(x, str) else None
+    if a is None or a.shape not in ((), (3,)) or not np.all(np.isfinite(a)):
+        raise SceneError(f"scene: '{where}' must be a finite number or a list [r, g, b], got {x!r}")
+    if np.any(a < 0):
+        raise SceneError(f"scene: '{where}' is {x!r}; coefficients must be >= 0")
+    return np.broadcast_to(a, (3,)).copy()
+
+
+def _bounds(b, where):
+    from ..scene import SceneError
+
+    try:
+        a = np.asarray(b, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (2, 3) or not np.all(np.isfinite(a)):
+        raise SceneError(f"scene: '{where}' must be [[x0, y0, z0], [x1, y1, z1]] with finite numbers, got {b!r}")
+    if np.any(a[1] <= a[0]):
+        raise SceneError(f"scene: '{where}' is {b!r}; every upper bound must exceed the lower one")
+    return a
+
+
+def validate_volumetric(data, base_dir="."):
+    """Check ``data['volumetric']`` and ``data['volume']``; raise SceneError on the first problem.
+
+    The ``volume`` block is merged over ``{ior, extinction, scattering,
+    bounds}`` (all None) in place; ``.npy`` paths must exist here, their
+    contents are checked by :func:`refraction_ref.volumetric.pipeline.load_volume`
+    before any work starts.
+    """
+    from ..scene import SceneError, _merge, _num
+
+    v = data["volumetric"]
+    _num(v["resolution"], "volumetric.resolution", 8, 1024, integer=True)
+    _num(v["photons"], "volumetric.photons", 1, 8192, integer=True)
+    _num(v["ds_min"], "volumetric.ds_min", 0.0, 1e6, lo_open=True)
+    _num(v["ds_max"], "volumetric.ds_max", 0.0, 1e9, lo_open=True)
+    if v["ds_max"] < v["ds_min"]:
+        raise SceneError(f"scene: volumetric.ds_max ({v['ds_max']}) is below volumetric.ds_min "
+                         f"({v['ds_min']}); the step is clamped between them, so raise ds_max")
+    _num(v["eps"], "volumetric.eps", 0.0, lo_open=True)
+    _num(v["eps2"], "volumetric.eps2", 0.0, lo_open=True)
+    if v["eps2"] < v["eps"]:
+        raise SceneError(f"scene: volumetric.eps2 ({v['eps2']}) is below volumetric.eps ({v['eps']}); "
+                         "the secondary tolerance must be the larger one (§5.3)")
+    if v["integrator"] not in INTEGRATORS:
+        raise SceneError(f"scene: 'volumetric.integrator' is {v['integrator']!r}; choose one of "
+                         f"{', '.join(INTEGRATORS)}")
+    _num(v["phase_g"], "volumetric.phase_g", -0.999, 0.999)
+    _rgb(v["scattering"], "volumetric.scattering")
+    _rgb(v["absorption"], "volumetric.absorption")
+    _num(v["supersample"], "volumetric.supersample", 1, 16, integer=True)
+    _num(v["blur"], "volumetric.blur", 0, 63, integer=True)
+    if v["blur"] > 1 and v["blur"] % 2 == 0:
+        raise SceneError(f"scene: volumetric.blur is {v['blur']}; the Gaussian window must be odd (e.g. 9), "
+                         "or 0 for no blur")
+    _num(v["padding"], "volumetric.padding", 0, 1000, integer=True)
+    if 2 * v["padding"] + 2 > v["resolution"]:
+        raise SceneError(f"scene: volumetric.padding {v['padding']} leaves no voxels for the objects at "
+                         f"resolution {v['resolution']}; lower padding or raise resolution")
+    if v["bounds"] is not None:
+        _bounds(v["bounds"], "volumetric.bounds")
+    _num(v["max_steps"], "volumetric.max_steps", 0, 10**8, integer=True)
+    _num(v["min_radiance"], "volumetric.min_radiance", 0.0, 1.0)
+    _num(v["stop_fraction"], "volumetric.stop_fraction", 0.0, 1.0)
+    _num(v["stiff"], "volumetric.stiff", 0.0, 10.0, lo_open=True)
+    N = int(v["resolution"])
+    need = N ** 3 * 200
+    if data["volume"] is None and need > 12 * 2**30:
+        raise SceneError(f"scene: volumetric.resolution {N} needs about {need / 2**30:.1f} GiB; lower it")
+
+    vol = data["volume"]
+    if vol is None:
+        return data
+    if not isinstance(vol, dict):
+        raise SceneError("scene: 'volume' must be an object {ior, extinction, scattering, bounds} or null")
+    vol = _merge(dict.fromkeys(VOLUME_KEYS), vol, "volume")
+    data["volume"] = vol
+    if vol["ior"] is None:
+        raise SceneError("scene: 'volume.ior' is missing; give an (nx, ny, nz) array or a .npy path")
+    if vol["bounds"] is None:
+        raise SceneError("scene: 'volume.bounds' is missing; give [[x0, y0, z0], [x1, y1, z1]]")
+    _bounds(vol["bounds"], "volume.bounds")
+    for k in ("ior", "extinction", "scattering"):
+        x = vol[k]
+        if isinstance(x, (str, os.PathLike)):
+            p = os.fspath(x)
+            p = p if os.path.isabs(p) else os.path.join(base_dir, p)
+            if not os.path.isfile(p):
+                raise SceneError(f"scene: 'volume.{k}' names '{x}', which does not exist (looked for {p}); "
+                                 "give an existing .npy file or an array")
+    return data
