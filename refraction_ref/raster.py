@@ -10,6 +10,8 @@ operation. Every blend mode the three papers use is one call:
 ========== ============================================================
 ``min``    smallest fragment depth (``+inf`` where nothing is drawn)
 ``minmax`` both in one pass, as the thesis's R/G max-blend trick does
+``nearest`` the nearest depth and the index of its triangle (a visibility
+           buffer; used by the orthographic maps of the level-map method)
 ``max``    largest fragment depth (``-inf`` where nothing is drawn)
 ``count``  number of fragments (the depth complexity)
 ``or``     bitmask occupancy: slice bit set with logical OR
@@ -47,13 +49,14 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-__all__ = ["rasterize", "raster_setup", "RasterSetup", "clip_near", "OPS"]
+__all__ = ["rasterize", "raster_setup", "RasterSetup", "clip_near", "OPS", "ortho_setup", "rasterize_ortho"]
 
-OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6}
+OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
 
 SUBPIXEL = 256  # fixed-point steps per pixel (8 sub-pixel bits)
 BAND = 8  # rows per band (unit of parallel work)
 _MAX_COORD = float(1 << 22)  # guard band in pixels; beyond it a triangle is dropped
+_NO_SLAB = np.zeros(4)
 
 
 @nb.njit(cache=True)
@@ -202,8 +205,15 @@ def _bias(ax, ay, bx, by):
 
 
 @nb.njit(cache=True, parallel=True)
-def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
-                   fbuf, ibuf, bits, zlo, zhi, slices, layers):
+def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
+                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab):
+    """Rasterize binned triangles band by band with blend ``op`` (see ``OPS``).
+
+    Depth is interpolated perspective-correctly (1/d linear on screen) when
+    ``perspective``, linearly otherwise (orthographic maps). ``slab`` =
+    (z0, s, klo, khi) restricts op 'nearest' to fragments whose slab index
+    ``floor((d - z0) / s)`` lies in [klo, khi] (no restriction when s <= 0).
+    """
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         r0 = b * band
@@ -240,9 +250,14 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
             b1 = _bias(x2, y2, x0, y0)
             b2 = _bias(x0, y0, x1, y1)
             inv_area = 1.0 / area
-            i0d = 1.0 / d0
-            i1d = 1.0 / d1
-            i2d = 1.0 / d2
+            if perspective:
+                i0d = 1.0 / d0
+                i1d = 1.0 / d1
+                i2d = 1.0 / d2
+            else:
+                i0d = d0
+                i1d = d1
+                i2d = d2
             # edge functions at the first pixel centre, stepped incrementally
             a0 = y2 - y1
             a1 = y0 - y2
@@ -260,8 +275,10 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
                         w2 -= 256 * a2
                     if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                         continue
-                    inv_d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
-                    d = 1.0 / inv_d
+                    if perspective:
+                        d = 1.0 / ((w0 * i0d + w1 * i1d + w2 * i2d) * inv_area)
+                    else:
+                        d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
                     if op == 0:
                         if d < fbuf[i, j]:
                             fbuf[i, j] = d
@@ -286,6 +303,14 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op,
                             bits[i, j, w] = bits[i, j, w] | m
                         else:
                             bits[i, j, w] = np.uint32((np.uint64(bits[i, j, w]) + np.uint64(m)) & np.uint64(0xFFFFFFFF))
+                    elif op == 7:
+                        if slab[1] > 0.0:
+                            kf = np.floor((d - slab[0]) / slab[1])
+                            if kf < slab[2] or kf > slab[3]:
+                                continue
+                        if d < fbuf[i, j]:
+                            fbuf[i, j] = d
+                            ids[i, j] = t
                     elif op == 6:
                         if d < layers[i, j, 0]:
                             layers[i, j, 0] = d
@@ -398,6 +423,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     -------
     ndarray or tuple
         ``min``/``max``: (H, W) float64 depth; ``minmax``: a tuple of both;
+        ``nearest``: a tuple (depth, triangle index, -1 where empty);
         ``count``: (H, W) int32;
         ``or``/``add``: (H, W, S // 32) uint32; ``collect``: a tuple
         ``(depths (capacity, H, W) float64 with +inf padding, count (H, W) int32)``.
@@ -441,10 +467,16 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     else:
         ibuf = np.zeros((H, W), np.int32)
         layers = np.full((int(capacity), H, W), np.inf)
-    _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code,
-                   fbuf, ibuf, bits, lo, hi, int(slices), layers)
+    ids = np.zeros((1, 1), np.int64)
+    if code == 7:
+        fbuf = np.full((H, W), np.inf)
+        ids = np.full((H, W), -1, np.int64)
+    _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, True,
+                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB)
     if code in (0, 1):
         res = fbuf
+    elif code == 7:
+        res = (fbuf, ids)
     elif code == 2:
         res = ibuf
     elif code in (3, 4):
@@ -468,95 +500,16 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
 
 
 @nb.njit(cache=True, parallel=True)
-def _ortho_snap(tri, W, H, X, Y, Z, rows):
-    """Snap (col, row, depth) triangles to 1/256 texel; rows[t] = texel rows they may cover."""
-    for t in nb.prange(tri.shape[0]):
-        ok = True
-        for k in range(3):
-            c = tri[t, k, 0]
-            r = tri[t, k, 1]
-            z = tri[t, k, 2]
-            good = abs(c) < 4194304.0 and abs(r) < 4194304.0 and np.isfinite(z)
-            ok = ok and good
-            X[t, k] = np.int64(np.round(c * 256.0)) if good else 0
-            Y[t, k] = np.int64(np.round(r * 256.0)) if good else 0
-            Z[t, k] = z if good else 0.0
-        lo = min(Y[t, 0], min(Y[t, 1], Y[t, 2]))
-        hi = max(Y[t, 0], max(Y[t, 1], Y[t, 2]))
-        xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
-        xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
-        i0 = max(-((128 - lo) // 256), 0)
-        i1 = min((hi - 128) // 256, H - 1)
-        j0 = max(-((128 - xlo) // 256), 0)
-        j1 = min((xhi - 128) // 256, W - 1)
-        if not ok or j0 > j1:
-            i0, i1 = 1, 0
-        rows[t, 0] = i0
-        rows[t, 1] = i1
-
-
-@nb.njit(cache=True, parallel=True)
-def _ortho_kernel(X, Y, Z, rows, counts, tris, W, H, band, zorg, s, klo, khi, depth, ids):
-    """Nearest fragment per texel with ``klo <= floor((z - zorg) / s) <= khi``; depth is linear."""
-    nb_bands = counts.shape[0] - 1
-    for b in nb.prange(nb_bands):
-        r0 = b * band
-        r1 = min(r0 + band, H) - 1
-        for q in range(counts[b], counts[b + 1]):
-            t = tris[q]
-            x0 = X[t, 0]
-            y0 = Y[t, 0]
-            z0 = Z[t, 0]
-            x1 = X[t, 1]
-            y1 = Y[t, 1]
-            z1 = Z[t, 1]
-            x2 = X[t, 2]
-            y2 = Y[t, 2]
-            z2 = Z[t, 2]
-            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-            if area == 0:
-                continue
-            if area < 0:
-                x1, x2 = x2, x1
-                y1, y2 = y2, y1
-                z1, z2 = z2, z1
-                area = -area
-            i0 = max(rows[t, 0], r0)
-            i1 = min(rows[t, 1], r1)
-            xmin = min(x0, min(x1, x2))
-            xmax = max(x0, max(x1, x2))
-            j0 = max(-((128 - xmin) // 256), 0)
-            j1 = min((xmax - 128) // 256, W - 1)
-            if j0 > j1 or i0 > i1:
-                continue
-            b0 = _bias(x1, y1, x2, y2)
-            b1 = _bias(x2, y2, x0, y0)
-            b2 = _bias(x0, y0, x1, y1)
-            inv_area = 1.0 / area
-            a0 = y2 - y1
-            a1 = y0 - y2
-            a2 = y1 - y0
-            px0 = 256 * j0 + 128
-            for i in range(i0, i1 + 1):
-                py = 256 * i + 128
-                w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
-                w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
-                w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
-                for j in range(j0, j1 + 1):
-                    if j > j0:
-                        w0 -= 256 * a0
-                        w1 -= 256 * a1
-                        w2 -= 256 * a2
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                        continue
-                    z = (w0 * z0 + w1 * z1 + w2 * z2) * inv_area
-                    if s > 0.0:
-                        kf = np.floor((z - zorg) / s)
-                        if kf < klo or kf > khi:
-                            continue
-                    if z < depth[i, j]:
-                        depth[i, j] = z
-                        ids[i, j] = t
+def _snap_texels(vv, XV, YV, DV, okv):
+    """Snap (col, row, depth) vertices given in texel units to 1/256 texel."""
+    for k in nb.prange(vv.shape[0]):
+        c = vv[k, 0]
+        r = vv[k, 1]
+        z = vv[k, 2]
+        okv[k] = abs(c) < 4194304.0 and abs(r) < 4194304.0 and np.isfinite(z)
+        XV[k] = np.int64(np.round(c * 256.0)) if okv[k] else 0
+        YV[k] = np.int64(np.round(r * 256.0)) if okv[k] else 0
+        DV[k] = z if okv[k] else 0.0
 
 
 def ortho_setup(tri_tex, shape):
@@ -576,13 +529,19 @@ def ortho_setup(tri_tex, shape):
         Reusable by several :func:`rasterize_ortho` calls (e.g. one per slab).
     """
     H, W = int(shape[0]), int(shape[1])
-    tv = np.ascontiguousarray(tri_tex, dtype=np.float64).reshape(-1, 3, 3)
-    T = tv.shape[0]
+    vv = np.ascontiguousarray(tri_tex, dtype=np.float64).reshape(-1, 3)
+    T = len(vv) // 3
+    fc = np.arange(3 * T, dtype=np.int64).reshape(-1, 3)
+    XV = np.empty(len(vv), np.int64)
+    YV = np.empty(len(vv), np.int64)
+    DV = np.empty(len(vv), np.float64)
+    okv = np.empty(len(vv), np.bool_)
+    _snap_texels(vv, XV, YV, DV, okv)
     X = np.empty((T, 3), np.int64)
     Y = np.empty((T, 3), np.int64)
     Z = np.empty((T, 3), np.float64)
     rows = np.empty((T, 2), np.int64)
-    _ortho_snap(tv, W, H, X, Y, Z, rows)
+    _gather(fc, XV, YV, DV, okv, W, H, X, Y, Z, rows)
     counts, tris = _bin(rows, H, BAND)
     dropped = int(np.count_nonzero(rows[:, 0] > rows[:, 1]))
     return RasterSetup(X, Y, Z, rows, counts, tris, int(T), dropped, (H, W))
@@ -632,5 +591,8 @@ def rasterize_ortho(tri_tex, shape, slab=None):
         raise ValueError(f"rasterize_ortho: slab thickness must be > 0, got {s}")
     depth = np.full((H, W), np.inf)
     ids = np.full((H, W), -1, np.int64)
-    _ortho_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, z0, s, klo, khi, depth, ids)
+    d1 = np.zeros((1, 1))
+    _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["nearest"], False,
+                   depth, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
+                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64))
     return depth, ids
