@@ -14,6 +14,7 @@ from .camera import Camera
 from .render import METHODS, render
 from .result import Result, load_result
 from .scene import Scene, SceneError, default_scene, load_scene
+from .session import Session
 
 __all__ = ["Camera", "METHODS", "Result", "Scene", "SceneError", "default_scene", "load_result",
-           "load_scene", "render", "__version__"]
+           "load_scene", "render", "Session", "__version__"]

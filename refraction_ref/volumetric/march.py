@@ -1,0 +1,602 @@
+"""Adaptive photon marching with radiance deposition (§4.4, eqs. 4-6), and its smoothing.
+
+Every photon carries a position x, a "velocity" v = n dx/ds (|v| = n) and an
+RGB radiance L. One step:
+
+1. **Step size** (§4.4, §5.3): the distance along v to the boundary of the
+   octree leaf node containing x, clamped to ``[ds_min, smax]`` where smax
+   is the node's maximum step (unbounded in constant nodes, ``ds_max``
+   voxels where eps <= range < eps'). A *stiffness bound*
+   ``ds <= stiff * n / |grad n|`` then caps the step at sharp index steps
+   (it overrides ds_min), so one step never changes |v| by more than the
+   fraction ``stiff`` of n; and a step whose end point sees an index change
+   larger than ``stiff * n`` that the gradient at its start does not predict
+   (an index *jump*, e.g. an unblurred surface) is halved, up to 8 times.
+2. **Advance**: forward differences (eqs. 4-5), ``x += ds v / n``,
+   ``v += ds grad n``; or classic RK4 on the same system (eqs. 2-3).
+3. **Attenuate** (eq. 6): ``L *= exp(-kappa(x_i) |x_{i+1} - x_i|)``.
+4. **Deposit** into every voxel the segment crosses (a 3D DDA; Amanatides
+   and Woo 1987) the radiance interpolated along the segment and the
+   radiance-weighted unit direction, both weighted by the length of the
+   segment inside the voxel (in voxels).
+
+A photon dies when it leaves the volume (its exit point and direction are
+recorded), when its radiance falls below ``min_radiance`` of its start,
+when |v| collapses, or at ``max_steps``. The paper's stopping rule (stop
+iterating when fewer than ``stop_fraction`` of the photons are active) is
+applied exactly: photons still active at that iteration have their later
+deposits removed again (see below) and count as stopped.
+
+Determinism: deposits are accumulated as 64-bit fixed-point integers, in one
+buffer per worker, and the buffers are summed at the end. Integer addition
+is associative, so the result is bit-identical whatever the number of
+threads or the order in which photons are processed; and a deposit can be
+*exactly* undone by subtracting it, which is how the stopping rule is
+applied after tracing.
+
+References
+----------
+.. [1] X. Sun et al., "Interactive Relighting of Dynamic Refractive
+   Objects", ACM TOG 27(3), 2008, §4.4 (eqs. 4-6), §5.3.
+.. [2] J. Amanatides, A. Woo, "A Fast Voxel Traversal Algorithm for Ray
+   Tracing", Eurographics 1987.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = ["march_photons", "smooth_radiance", "trace_paths", "STATUS"]
+
+#: Photon status codes.
+STATUS = {"active": 0, "exited": 1, "stopped": 2, "absorbed": 3, "lost": 4}
+
+INTEG_EULER = 0
+INTEG_RK4 = 1
+
+
+@nb.njit(cache=True, inline="always")
+def sample_field(field, lo, ih, x, y, z):
+    """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume)."""
+    nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
+    u = (x - lo[0]) * ih[0] - 0.5
+    w = (y - lo[1]) * ih[1] - 0.5
+    t = (z - lo[2]) * ih[2] - 0.5
+    i = int(math.floor(u))
+    j = int(math.floor(w))
+    k = int(math.floor(t))
+    if i < 0:
+        i, fx = 0, 0.0
+    elif i > nx - 2:
+        i, fx = nx - 2, 1.0
+    else:
+        fx = u - i
+    if j < 0:
+        j, fy = 0, 0.0
+    elif j > ny - 2:
+        j, fy = ny - 2, 1.0
+    else:
+        fy = w - j
+    if k < 0:
+        k, fz = 0, 0.0
+    elif k > nz - 2:
+        k, fz = nz - 2, 1.0
+    else:
+        fz = t - k
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    for di in range(2):
+        wx = fx if di else 1.0 - fx
+        for dj in range(2):
+            wy = fy if dj else 1.0 - fy
+            for dk in range(2):
+                wgt = wx * wy * (fz if dk else 1.0 - fz)
+                a0 += wgt * field[i + di, j + dj, k + dk, 0]
+                a1 += wgt * field[i + di, j + dj, k + dk, 1]
+                a2 += wgt * field[i + di, j + dj, k + dk, 2]
+                a3 += wgt * field[i + di, j + dj, k + dk, 3]
+    return a0, a1, a2, a3
+
+
+@nb.njit(cache=True, inline="always")
+def advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds):
+    """One step of eqs. 4-5 (``integ`` 0) or of RK4 on eqs. 2-3 (``integ`` 1).
+
+    ``n, g*`` are the field at (x, y, z), already sampled by the caller.
+    """
+    if integ == 0:
+        s = ds / n
+        return x + s * vx, y + s * vy, z + s * vz, vx + ds * gx, vy + ds * gy, vz + ds * gz
+    h2 = 0.5 * ds
+    # k1
+    k1x, k1y, k1z = vx / n, vy / n, vz / n
+    l1x, l1y, l1z = gx, gy, gz
+    # k2
+    v2x, v2y, v2z = vx + h2 * l1x, vy + h2 * l1y, vz + h2 * l1z
+    n2, g2x, g2y, g2z = sample_field(field, lo, ih, x + h2 * k1x, y + h2 * k1y, z + h2 * k1z)
+    k2x, k2y, k2z = v2x / n2, v2y / n2, v2z / n2
+    # k3
+    v3x, v3y, v3z = vx + h2 * g2x, vy + h2 * g2y, vz + h2 * g2z
+    n3, g3x, g3y, g3z = sample_field(field, lo, ih, x + h2 * k2x, y + h2 * k2y, z + h2 * k2z)
+    k3x, k3y, k3z = v3x / n3, v3y / n3, v3z / n3
+    # k4
+    v4x, v4y, v4z = vx + ds * g3x, vy + ds * g3y, vz + ds * g3z
+    n4, g4x, g4y, g4z = sample_field(field, lo, ih, x + ds * k3x, y + ds * k3y, z + ds * k3z)
+    k4x, k4y, k4z = v4x / n4, v4y / n4, v4z / n4
+    c = ds / 6.0
+    return (x + c * (k1x + 2.0 * k2x + 2.0 * k3x + k4x),
+            y + c * (k1y + 2.0 * k2y + 2.0 * k3y + k4y),
+            z + c * (k1z + 2.0 * k2z + 2.0 * k3z + k4z),
+            vx + c * (gx + 2.0 * g2x + 2.0 * g3x + g4x),
+            vy + c * (gy + 2.0 * g2y + 2.0 * g3y + g4y),
+            vz + c * (gz + 2.0 * g2z + 2.0 * g3z + g4z))
+
+
+@nb.njit(cache=True, inline="always")
+def voxel_of(lo, ih, nx, ny, nz, x, y, z):
+    i = min(max(int(math.floor((x - lo[0]) * ih[0])), 0), nx - 1)
+    j = min(max(int(math.floor((y - lo[1]) * ih[1])), 0), ny - 1)
+    k = min(max(int(math.floor((z - lo[2]) * ih[2])), 0), nz - 1)
+    return i, j, k
+
+
+@nb.njit(cache=True, inline="always")
+def _axis_distance(xa, da, lo, h, ih, na, size):
+    if da == 0.0:
+        return np.inf
+    u = (xa - lo) * ih
+    b0 = (max(int(math.floor(u)), 0) // size) * size
+    if da > 0.0:
+        return (min(b0 + size, na) - u) * h / da
+    return (b0 - u) * h / da
+
+
+@nb.njit(cache=True, inline="always")
+def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
+    """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5)."""
+    size = 1 << lev
+    t = min(_axis_distance(x, dx, lo[0], h[0], ih[0], shape_n[0], size),
+            min(_axis_distance(y, dy, lo[1], h[1], ih[1], shape_n[1], size),
+                _axis_distance(z, dz, lo[2], h[2], ih[2], shape_n[2], size)))
+    return max(t, 0.0)
+
+
+@nb.njit(cache=True, inline="always")
+def segment_exit(lo, hi, x, y, z, x1, y1, z1):
+    """Fraction s in [0, 1] of the segment x -> x1 still inside the box (1 when x1 is inside)."""
+    s = 1.0
+    for a in range(3):
+        p0 = x if a == 0 else (y if a == 1 else z)
+        p1 = x1 if a == 0 else (y1 if a == 1 else z1)
+        d = p1 - p0
+        if p1 > hi[a] and d > 0.0:
+            s = min(s, (hi[a] - p0) / d)
+        elif p1 < lo[a] and d < 0.0:
+            s = min(s, (lo[a] - p0) / d)
+    return max(s, 0.0)
+
+
+@nb.njit(cache=True)
+def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0g, l0b, l1r, l1g, l1b,
+                    dx, dy, dz, sr, sd, sgn):
+    """Add radiance and radiance-weighted direction to every voxel of segment a -> b (3D DDA).
+
+    ``flat`` is a flat view of (buffers, nx, ny, nz, 6) int64 deposits,
+    written in buffer ``g``. The
+    radiance is interpolated linearly along the segment and weighted by the
+    length of the segment inside each voxel (in voxels); values are
+    converted to fixed point with scale ``sr`` (radiance) and ``sd``
+    (direction) by truncation, and added with sign ``sgn``.
+    """
+    u0 = (ax - lo[0]) * ih[0]
+    w0 = (ay - lo[1]) * ih[1]
+    t0 = (az - lo[2]) * ih[2]
+    du = (bx - lo[0]) * ih[0] - u0
+    dw = (by - lo[1]) * ih[1] - w0
+    dt = (bz - lo[2]) * ih[2] - t0
+    lv = math.sqrt(du * du + dw * dw + dt * dt)
+    if not lv > 0.0:
+        return
+    i = min(max(int(math.floor(u0)), 0), nx - 1)
+    j = min(max(int(math.floor(w0)), 0), ny - 1)
+    k = min(max(int(math.floor(t0)), 0), nz - 1)
+    si = 1 if du > 0 else -1
+    sj = 1 if dw > 0 else -1
+    sk = 1 if dt > 0 else -1
+    inf = np.inf
+    ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else inf
+    tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else inf
+    tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else inf
+    di = abs(1.0 / du) if du != 0.0 else inf
+    dj = abs(1.0 / dw) if dw != 0.0 else inf
+    dk = abs(1.0 / dt) if dt != 0.0 else inf
+    # value(t) = (a + b t) * (length in voxel), pre-scaled to fixed point
+    c = lv * sr * sgn
+    ar, br = l0r * c, (l1r - l0r) * c
+    ag, bg = l0g * c, (l1g - l0g) * c
+    ab, bb = l0b * c, (l1b - l0b) * c
+    e = sd / sr
+    ex, ey, ez = dx * e, dy * e, dz * e
+    sti = si * ny * nz * 6
+    stj = sj * nz * 6
+    stk = sk * 6
+    base = (((g * nx + i) * ny + j) * nz + k) * 6
+    t = 0.0
+    for _ in range(nx + ny + nz + 3):
+        tn = min(ti, min(tj, min(tk, 1.0)))
+        w = tn - t
+        if w > 0.0:
+            tm = 0.5 * (t + tn)
+            r = (ar + br * tm) * w
+            gg = (ag + bg * tm) * w
+            b = (ab + bb * tm) * w
+            sm = r + gg + b
+            flat[base] += np.int64(r)
+            flat[base + 1] += np.int64(gg)
+            flat[base + 2] += np.int64(b)
+            flat[base + 3] += np.int64(ex * sm)
+            flat[base + 4] += np.int64(ey * sm)
+            flat[base + 5] += np.int64(ez * sm)
+        if tn >= 1.0:
+            return
+        if ti <= tj and ti <= tk:
+            i += si
+            ti += di
+            base += sti
+            if i < 0 or i >= nx:
+                return
+        elif tj <= tk:
+            j += sj
+            tj += dj
+            base += stj
+            if j < 0 or j >= ny:
+                return
+        else:
+            k += sk
+            tk += dk
+            base += stk
+            if k < 0 or k >= nz:
+                return
+        t = tn
+
+
+@nb.njit(cache=True)
+def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
+               ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, flat, g, sr, sd,
+               exit_pos, exit_dir, record, path, path_n):
+    """Trace photon p to its end; returns (steps, status, max relative |v|-n drift)."""
+    nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
+    x, y, z = pos[p, 0], pos[p, 1], pos[p, 2]
+    n = sample_field(field, lo, ih, x, y, z)[0]
+    vx, vy, vz = n * dirs[p, 0], n * dirs[p, 1], n * dirs[p, 2]
+    lr, lg, lb = rad[p, 0], rad[p, 1], rad[p, 2]
+    lmax0 = max(lr, max(lg, lb))
+    thr = min_rad * lmax0
+    steps = 0
+    status = 0
+    drift = 0.0
+    nudge = 1e-4 * hmin
+    carried = False
+    cn, cgx, cgy, cgz = 0.0, 0.0, 0.0, 0.0
+    if record:
+        path[0, 0] = x
+        path[0, 1] = y
+        path[0, 2] = z
+        path_n[0] = 1
+    while True:
+        if steps >= max_steps:
+            status = 2
+            break
+        i, j, k = voxel_of(lo, ih, nx, ny, nz, x, y, z)
+        cap = smax[i, j, k]
+        const = cap == np.inf
+        if const:  # a constant octree node: straight line to its boundary, no field sampling
+            n = np.float64(field[i, j, k, 0])
+            gx, gy, gz = 0.0, 0.0, 0.0
+        elif carried:
+            n, gx, gy, gz = cn, cgx, cgy, cgz
+        else:
+            n, gx, gy, gz = sample_field(field, lo, ih, x, y, z)
+        carried = False
+        vn = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if not (vn > 1e-12 * n) or not (n > 0.0):
+            status = 4
+            break
+        dr = abs(vn - n) / n
+        if dr > drift:
+            drift = dr
+        ivn = 1.0 / vn
+        ux, uy, uz = vx * ivn, vy * ivn, vz * ivn
+        ds = node_distance(lo, h, ih, shape_n, level[i, j, k], x, y, z, ux, uy, uz) + nudge
+        ds = max(ds, ds_min)
+        if const:
+            x1, y1, z1, vx1, vy1, vz1 = x + ds * ux, y + ds * uy, z + ds * uz, vx, vy, vz
+        else:
+            ds = min(ds, cap * hmin)
+            gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+            if gn * ds > stiff * n:
+                ds = stiff * n / gn
+            # stiffness: a step across an index jump that the local gradient does not predict is halved
+            for _ in range(8):
+                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds)
+                cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
+                dn = cn - n
+                if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
+                    break
+                pred = gx * (x1 - x) + gy * (y1 - y) + gz * (z1 - z)
+                if abs(dn - pred) <= 0.5 * abs(dn):
+                    break
+                ds *= 0.5
+            carried = True
+        if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
+                and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
+            status = 4
+            break
+        s = segment_exit(lo, hi, x, y, z, x1, y1, z1)
+        ex, ey, ez = x + s * (x1 - x), y + s * (y1 - y), z + s * (z1 - z)
+        sx, sy, sz = ex - x, ey - y, ez - z
+        seg = math.sqrt(sx * sx + sy * sy + sz * sz)
+        kr, kg, kb = ext[i, j, k, 0], ext[i, j, k, 1], ext[i, j, k, 2]
+        if kr == kg and kg == kb:  # grey extinction (the common case): one exp
+            a = math.exp(-kr * seg) if kr != 0.0 else 1.0
+            nr, ng, nb_ = lr * a, lg * a, lb * a
+        else:
+            nr = lr * math.exp(-kr * seg)
+            ng = lg * math.exp(-kg * seg)
+            nb_ = lb * math.exp(-kb * seg)
+        if steps >= dep_from and seg > 0.0:
+            deposit_segment(flat, nx, ny, nz, g, lo, ih, x, y, z, ex, ey, ez, lr, lg, lb, nr, ng, nb_,
+                            sx / seg, sy / seg, sz / seg, sr, sd, sgn)
+        steps += 1
+        if record and path_n[0] < path.shape[0]:
+            path[path_n[0], 0] = ex
+            path[path_n[0], 1] = ey
+            path[path_n[0], 2] = ez
+            path_n[0] += 1
+        if s < 1.0:
+            status = 1
+            if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
+                vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, s * ds)[3:]
+            v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
+            exit_pos[p, 0] = ex
+            exit_pos[p, 1] = ey
+            exit_pos[p, 2] = ez
+            exit_dir[p, 0] = vx1 / v1
+            exit_dir[p, 1] = vy1 / v1
+            exit_dir[p, 2] = vz1 / v1
+            break
+        x, y, z, vx, vy, vz = x1, y1, z1, vx1, vy1, vz1
+        lr, lg, lb = nr, ng, nb_
+        if max(lr, max(lg, lb)) < thr or lmax0 <= 0.0:
+            status = 3
+            break
+    return steps, status, drift
+
+
+@nb.njit(cache=True, parallel=True)
+def _march_kernel(field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad, sel,
+                  ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, acc, sr, sd,
+                  out_steps, out_status, out_drift, exit_pos, exit_dir):
+    nbuf = acc.shape[0]
+    flat = acc.reshape(-1)
+    dummy_path = np.zeros((1, 3))
+    dummy_n = np.zeros(1, np.int64)
+    chunk = 256
+    nchunks = (sel.shape[0] + chunk - 1) // chunk
+    for g in nb.prange(nbuf):
+        for q in range(sel.shape[0]):
+            if (q // chunk) % nbuf != g:
+                continue
+            p = sel[q]
+            st, ss, dr = _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
+                                    ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, flat, g, sr, sd,
+                                    exit_pos, exit_dir, False, dummy_path, dummy_n)
+            out_steps[p] = st
+            out_status[p] = ss
+            out_drift[p] = dr
+
+
+@nb.njit(cache=True)
+def _spread3(v):
+    v = v & 0x1FFFFF
+    v = (v | (v << 32)) & 0x1F00000000FFFF
+    v = (v | (v << 16)) & 0x1F0000FF0000FF
+    v = (v | (v << 8)) & 0x100F00F00F00F00F
+    v = (v | (v << 4)) & 0x10C30C30C30C30C3
+    v = (v | (v << 2)) & 0x1249249249249249
+    return v
+
+
+@nb.njit(cache=True, parallel=True)
+def _morton_keys(pos, lo, ih, out):
+    for p in nb.prange(pos.shape[0]):
+        a = np.int64(max(0.0, (pos[p, 0] - lo[0]) * ih[0] * 2.0))
+        b = np.int64(max(0.0, (pos[p, 1] - lo[1]) * ih[1] * 2.0))
+        c = np.int64(max(0.0, (pos[p, 2] - lo[2]) * ih[2] * 2.0))
+        out[p] = _spread3(a) | (_spread3(b) << 1) | (_spread3(c) << 2)
+
+
+def locality_order(pos, bounds, shape):
+    """Photon processing order along a Morton curve of their start points (half-voxel cells).
+
+    Photons that start close together cross the same voxels, so processing
+    them together keeps the deposit buffers in cache. The order does not
+    change any result (integer deposits), only the speed.
+    """
+    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, shape)
+    keys = np.empty(len(pos), np.int64)
+    _morton_keys(np.ascontiguousarray(pos, dtype=np.float64), lo, ih, keys)
+    return np.argsort(keys, kind="stable")
+
+
+def _geometry(bounds, shape):
+    b = np.asarray(bounds, dtype=np.float64)
+    shape_n = np.asarray(shape[:3], dtype=np.int64)
+    h = (b[1] - b[0]) / shape_n
+    return b[0].copy(), b[1].copy(), h, 1.0 / h, shape_n, float(h.min())
+
+
+def _integ_code(integrator):
+    return {"euler": INTEG_EULER, "rk4": INTEG_RK4}[integrator]
+
+
+def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_min=1.0, stiff=0.25,
+                  integrator="euler", max_steps=0, min_radiance=1e-3, stop_fraction=1e-3, buffers=None):
+    """Trace photons through the volume and deposit their radiance (§4.4).
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    extinction : (nx, ny, nz, 3) float32
+        kappa per voxel (per scene unit).
+    level, smax : from :func:`~refraction_ref.volumetric.octree.build_octree`
+    bounds : (2, 3)
+    pos, dirs, rad : (P, 3) float64
+        Photons (:func:`~refraction_ref.volumetric.photons.generate_photons`).
+    ds_min : float
+        Minimum step in voxels (of the smallest voxel side).
+    stiff : float
+        Stiffness bound (module docstring).
+    integrator : {'euler', 'rk4'}
+    max_steps : int
+        Per-photon limit; 0 = ``8 * max(shape) / ds_min``.
+    min_radiance, stop_fraction : float
+        Termination thresholds (§4.4).
+    buffers : int, optional
+        Deposit buffers (default: the numba thread count, fewer if memory
+        is short). Does not change the result.
+
+    Returns
+    -------
+    sums : (nx, ny, nz, 6) float64
+        Deposited radiance (RGB) and radiance-weighted direction, unsmoothed.
+    photons : dict
+        ``exit_pos``, ``exit_dir`` (P, 3; NaN unless exited), ``status``
+        (P,) int8 (:data:`STATUS`), ``steps`` (P,) int32 (after the
+        stopping rule), ``total_steps``, ``truncated`` (photons cut by the
+        stopping rule), ``drift_max`` / ``drift_median`` / ``drift_p99`` (relative
+        ``||v| - n| / n``), ``max_steps``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-6.
+    """
+    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
+    P = len(pos)
+    nx, ny, nz = (int(s) for s in field.shape[:3])
+    if max_steps <= 0:
+        max_steps = int(math.ceil(8 * max(nx, ny, nz) / max(ds_min, 1e-3))) + 16
+    vox_bytes = nx * ny * nz * 48
+    if buffers is None:
+        buffers = max(1, min(nb.get_num_threads(), int(2 * 2**30 // max(vox_bytes, 1))))
+    acc = np.zeros((int(buffers), nx, ny, nz, 6), np.int64)
+    lmax = float(np.max(rad)) if P else 1.0
+    total = max(float(np.sum(np.max(rad, axis=1))) if P else 1.0, 1e-300)
+    sr = 2.0 ** 58 / (16.0 * total)  # 16 = generous bound on one photon's length per voxel
+    sd = sr / 3.0
+    steps = np.zeros(P, np.int32)
+    status = np.zeros(P, np.int8)
+    drift = np.zeros(P, np.float64)
+    exit_pos = np.full((P, 3), np.nan)
+    exit_dir = np.full((P, 3), np.nan)
+    integ = _integ_code(integrator)
+    args = (np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
+            np.ascontiguousarray(level), np.ascontiguousarray(smax), lo, hi, h, ih, shape_n, hmin,
+            np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(dirs, dtype=np.float64),
+            np.ascontiguousarray(rad, dtype=np.float64))
+    ds_w = float(ds_min) * hmin
+    if P:
+        _march_kernel(*args, locality_order(pos, bounds, field.shape), ds_w, float(stiff), integ, int(max_steps),
+                      float(min_radiance), 0, 1, acc, sr, sd, steps, status, drift, exit_pos, exit_dir)
+    # the paper's stopping rule: iterate until fewer than stop_fraction * P photons are active
+    truncated = 0
+    if P:
+        k = int(math.ceil(stop_fraction * P)) - 1
+        if k < P:
+            cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
+            late = np.flatnonzero(steps > cut)
+            if len(late):
+                s2 = np.zeros(P, np.int32)
+                st2 = np.zeros(P, np.int8)
+                d2 = np.zeros(P)
+                e2p = np.full((P, 3), np.nan)
+                e2d = np.full((P, 3), np.nan)
+                _march_kernel(*args, late.astype(np.int64), ds_w, float(stiff), integ, int(max_steps),
+                              float(min_radiance), cut, -1, acc, sr, sd, s2, st2, d2, e2p, e2d)
+                steps[late] = cut
+                status[late] = STATUS["stopped"]
+                exit_pos[late] = np.nan
+                exit_dir[late] = np.nan
+                truncated = int(len(late))
+    tot = acc.sum(axis=0)
+    sums = np.empty((nx, ny, nz, 6))
+    sums[..., :3] = tot[..., :3] / sr
+    sums[..., 3:] = tot[..., 3:] / sd
+    info = {
+        "exit_pos": exit_pos, "exit_dir": exit_dir, "status": status, "steps": steps,
+        "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
+        "drift_max": float(drift.max()) if P else 0.0,
+        "drift_median": float(np.median(drift)) if P else 0.0,
+        "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
+        "max_steps": int(max_steps), "buffers": int(buffers),
+    }
+    return sums, info
+
+
+def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0, stiff=0.25,
+                integrator="euler", max_steps=0, max_points=100000):
+    """The polylines followed by a few photons (for tests and figures); no deposition.
+
+    Returns
+    -------
+    list of (k, 3) float64
+        Start point and the end point of every step (clipped at the volume).
+    """
+    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
+    nx, ny, nz = (int(s) for s in field.shape[:3])
+    if max_steps <= 0:
+        max_steps = int(math.ceil(8 * max(nx, ny, nz) / max(ds_min, 1e-3))) + 16
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+    rad = np.ones_like(pos)
+    acc = np.zeros(6, np.int64)
+    ep = np.full(pos.shape, np.nan)
+    ed = np.full(pos.shape, np.nan)
+    out = []
+    for p in range(len(pos)):
+        path = np.empty((min(max_points, max_steps + 1), 3))
+        pn = np.zeros(1, np.int64)
+        _trace_one(p, np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
+                   np.ascontiguousarray(level), np.ascontiguousarray(smax), lo, hi, h, ih, shape_n, hmin,
+                   pos, dirs, rad, float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
+                   0.0, 1 << 62, 0, acc, 0, 1.0, 1.0, ep, ed, True, path, pn)
+        out.append(path[: pn[0]].copy())
+    return out
+
+
+def smooth_radiance(sums):
+    """3x3x3 approximate Gaussian ([1, 2, 1] / 4 per axis) of the deposits, then unit directions (§4.4).
+
+    Returns
+    -------
+    radiance : (nx, ny, nz, 3) float32
+    direction : (nx, ny, nz, 3) float32
+        Unit mean photon direction (zero where no photon passed).
+    """
+    from scipy import ndimage
+
+    w = np.array([0.25, 0.5, 0.25])
+    s = sums
+    for ax in range(3):
+        s = ndimage.correlate1d(s, w, axis=ax, mode="nearest")
+    rad = s[..., :3].astype(np.float32)
+    d = s[..., 3:]
+    nrm = np.linalg.norm(d, axis=-1, keepdims=True)
+    direction = np.divide(d, nrm, out=np.zeros_like(d), where=nrm > 0).astype(np.float32)
+    return rad, direction

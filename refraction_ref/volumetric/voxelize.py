@@ -1,0 +1,415 @@
+"""Solid voxelization of triangle meshes into an index-of-refraction volume (§4.1).
+
+The GPU method (Crane et al. 2007, §30.2.4; Fang and Chen 2000) renders the
+mesh into each slice with the near plane at the slice front, adding one for
+back faces and subtracting one for front faces: the value left at a voxel
+centre is the winding number of the mesh along the viewing axis. The CPU
+equivalent here rasterizes the mesh *orthographically* once per axis into a
+grid of columns (the same fixed-point edge functions and top-left rule as
+:mod:`refraction_ref.raster`, so a column through a shared edge or vertex
+sees exactly one crossing), keeps every column's signed crossing depths,
+and reads the winding number at any depth by a prefix sum. One column set
+at the output resolution gives the in/out value of every voxel centre; a
+second at ``supersample`` times the resolution gives the 4x4x4 sub-samples
+that are read *only* for voxels whose 3x3x3 neighbourhood disagrees, as
+the paper does. Coverage becomes index of refraction and a 9x9x9 Gaussian
+(sigma = window / 6) smooths it.
+
+Open meshes (the bunny's base, the teapot's seams) have no well-defined
+inside for a single ray direction. They are voted on instead: the winding
+number is read along +x, -x, +y, -y, +z and -z, and a sample is inside
+when at least four of the six rays say so (ray stabbing, Nooruddin and Turk
+2003). A closed mesh needs only the +z ray, as in the paper.
+
+References
+----------
+.. [1] X. Sun, K. Zhou, E. Stollnitz, J. Shi, B. Guo, "Interactive
+   Relighting of Dynamic Refractive Objects", ACM TOG 27(3), 2008, §4.1.
+.. [2] K. Crane, I. Llamas, S. Tariq, "Real-Time Simulation and Rendering of
+   3D Fluids", GPU Gems 3, ch. 30, 2007, §30.2.4.
+.. [3] F. S. Nooruddin, G. Turk, "Simplification and Repair of Polygonal
+   Models Using Volumetric Techniques", IEEE TVCG 9(2), 2003 (ray stabbing).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+from scipy import ndimage
+
+from ..raster import BAND, _bias, _bin
+
+__all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
+           "gaussian_blur", "repair_mesh", "voxelize_objects"]
+
+
+def auto_bounds(vertices, resolution, padding):
+    """A cube around ``vertices`` leaving ``padding`` empty voxels on every side.
+
+    Returns
+    -------
+    (2, 3) float64
+        Lower and upper corners; the voxel size is ``(hi - lo) / resolution``.
+    """
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    ext = float(np.max(hi - lo))
+    if ext <= 0:
+        ext = 1.0
+    h = ext / (resolution - 2 * padding - 1)  # one extra voxel of slack against rounding
+    half = 0.5 * resolution * h
+    c = 0.5 * (lo + hi)
+    return np.stack([c - half, c + half])
+
+
+@nb.njit(cache=True, parallel=True)
+def _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, band, fill, cnt, off, depth, sign):
+    """Count (fill=False) or store (fill=True) the crossings of every column, band-parallel."""
+    nbands = counts.shape[0] - 1
+    for b in nb.prange(nbands):
+        r0 = b * band
+        r1 = min(r0 + band, nrow) - 1
+        for q in range(counts[b], counts[b + 1]):
+            t = tris[q]
+            x0 = X[t, 0]
+            y0 = Y[t, 0]
+            d0 = Dz[t, 0]
+            x1 = X[t, 1]
+            y1 = Y[t, 1]
+            d1 = Dz[t, 1]
+            x2 = X[t, 2]
+            y2 = Y[t, 2]
+            d2 = Dz[t, 2]
+            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+            if area == 0:
+                continue
+            s = np.int8(-1)
+            if area < 0:
+                x1, x2 = x2, x1
+                y1, y2 = y2, y1
+                d1, d2 = d2, d1
+                area = -area
+                s = np.int8(1)
+            i0 = max(rows[t, 0], r0)
+            i1 = min(rows[t, 1], r1)
+            xmin = min(x0, min(x1, x2))
+            xmax = max(x0, max(x1, x2))
+            j0 = max(-((128 - xmin) // 256), 0)
+            j1 = min((xmax - 128) // 256, ncol - 1)
+            if j0 > j1 or i0 > i1:
+                continue
+            b0 = _bias(x1, y1, x2, y2)
+            b1 = _bias(x2, y2, x0, y0)
+            b2 = _bias(x0, y0, x1, y1)
+            inv = 1.0 / area
+            for i in range(i0, i1 + 1):
+                py = 256 * i + 128
+                for j in range(j0, j1 + 1):
+                    px = 256 * j + 128
+                    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+                    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
+                    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
+                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
+                        continue
+                    c = i * ncol + j
+                    if fill:
+                        k = off[c] + cnt[c]
+                        depth[k] = (w0 * d0 + w1 * d1 + w2 * d2) * inv
+                        sign[k] = s
+                    cnt[c] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _sort_columns(off, depth, sign, cum):
+    """Sort every column's crossings by depth (stable) and prefix-sum their signs."""
+    for c in nb.prange(off.shape[0] - 1):
+        a = off[c]
+        e = off[c + 1]
+        for k in range(a + 1, e):
+            d = depth[k]
+            s = sign[k]
+            m = k
+            while m > a and depth[m - 1] > d:
+                depth[m] = depth[m - 1]
+                sign[m] = sign[m - 1]
+                m -= 1
+            depth[m] = d
+            sign[m] = s
+        acc = 0
+        for k in range(a, e):
+            acc += sign[k]
+            cum[k] = acc
+
+
+def column_crossings(tri, axis, lo, h, shape):
+    """Rasterize triangles orthographically along ``axis`` into a grid of columns.
+
+    Parameters
+    ----------
+    tri : (T, 3, 3) float64
+        World-space triangles.
+    axis : {0, 1, 2}
+        Viewing axis r; the columns are indexed by the two other axes
+        (p, q) = (r + 1, r + 2) mod 3 (a right-handed cycle).
+    lo, h : (3,) float64
+        Grid origin and column spacing (column centres at ``lo + (j + 0.5) h``).
+    shape : (np, nq)
+        Number of columns along p and q.
+
+    Returns
+    -------
+    off : (nq * np + 1,) int64
+        CSR offsets of the columns (column c = row q * np + p).
+    depth : (K,) float64
+        Sorted crossing depths along ``axis`` (world units).
+    cum : (K,) int32
+        Winding number just past each crossing, counted from -infinity
+        (+1 entering through a face whose normal points against the ray).
+    """
+    p, q = (axis + 1) % 3, (axis + 2) % 3
+    ncol, nrow = int(shape[0]), int(shape[1])
+    X = np.round((tri[..., p] - lo[p]) / h[p] * 256.0)
+    Y = np.round((tri[..., q] - lo[q]) / h[q] * 256.0)
+    X = np.clip(X, -2.0**40, 2.0**40).astype(np.int64)
+    Y = np.clip(Y, -2.0**40, 2.0**40).astype(np.int64)
+    Dz = np.ascontiguousarray(tri[..., axis], dtype=np.float64)
+    ylo, yhi = Y.min(axis=1), Y.max(axis=1)
+    rows = np.empty((len(tri), 2), np.int64)
+    rows[:, 0] = np.maximum(-((128 - ylo) // 256), 0)
+    rows[:, 1] = np.minimum((yhi - 128) // 256, nrow - 1)
+    counts, tris = _bin(rows, nrow, BAND)
+    cnt = np.zeros(ncol * nrow, np.int64)
+    dummy_f = np.zeros(1)
+    dummy_s = np.zeros(1, np.int8)
+    _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, BAND, False, cnt, cnt, dummy_f, dummy_s)
+    off = np.zeros(ncol * nrow + 1, np.int64)
+    np.cumsum(cnt, out=off[1:])
+    depth = np.empty(off[-1])
+    sign = np.empty(off[-1], np.int8)
+    cnt[:] = 0
+    _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, BAND, True, cnt, off, depth, sign)
+    cum = np.empty(off[-1], np.int32)
+    _sort_columns(off, depth, sign, cum)
+    return off, depth, cum
+
+
+@nb.njit(cache=True, parallel=True)
+def _read_centres(off, depth, cum, ncol, nrow, z0, dz, nz, w_minus, w_total):
+    """Winding number at the depths z0 + (k + 0.5) dz of every column (from -inf), plus the column total."""
+    for i in nb.prange(nrow):
+        for j in range(ncol):
+            c = i * ncol + j
+            a = off[c]
+            e = off[c + 1]
+            m = a
+            w_total[j, i] = cum[e - 1] if e > a else 0
+            for k in range(nz):
+                z = z0 + (k + 0.5) * dz
+                while m < e and depth[m] < z:
+                    m += 1
+                w_minus[j, i, k] = cum[m - 1] if m > a else 0
+
+
+def winding_at_centres(tri, axis, lo, h, n):
+    """Winding numbers along +axis and -axis at every voxel centre.
+
+    Returns
+    -------
+    w_minus, w_plus : (nx, ny, nz) int32
+        Counted from -infinity and from +infinity along ``axis`` (equal for a
+        closed mesh).
+    """
+    p, q = (axis + 1) % 3, (axis + 2) % 3
+    off, depth, cum = column_crossings(tri, axis, lo, h, (n[p], n[q]))
+    wm = np.empty((n[p], n[q], n[axis]), np.int32)
+    wt = np.empty((n[p], n[q]), np.int32)
+    _read_centres(off, depth, cum, n[p], n[q], lo[axis], h[axis], n[axis], wm, wt)
+    wp = wm - wt[:, :, None]
+    # axes (p, q, r) -> (x, y, z)
+    order = np.argsort([p, q, axis])
+    return wm.transpose(order), wp.transpose(order)
+
+
+@nb.njit(cache=True, parallel=True)
+def _read_subsamples(off, depth, cum, ncol, S, vox, p, q, r, z0, dz, both, votes):
+    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis."""
+    for m in nb.prange(vox.shape[0]):
+        vp = vox[m, p]
+        vq = vox[m, q]
+        vr = vox[m, r]
+        for a in range(S):
+            for b in range(S):
+                c = (vq * S + b) * ncol + vp * S + a
+                lo = off[c]
+                e = off[c + 1]
+                tot = cum[e - 1] if e > lo else 0
+                k = lo
+                for cc in range(S):
+                    z = z0 + (vr * S + cc + 0.5) * dz
+                    while k < e and depth[k] < z:
+                        k += 1
+                    w = cum[k - 1] if k > lo else 0
+                    # sub-sample index in (x, y, z) order
+                    sx = a if p == 0 else (b if q == 0 else cc)
+                    sy = a if p == 1 else (b if q == 1 else cc)
+                    sz = a if p == 2 else (b if q == 2 else cc)
+                    s = (sx * S + sy) * S + sz
+                    if w != 0:
+                        votes[m, s] += 1
+                    if both and w - tot != 0:
+                        votes[m, s] += 1
+
+
+def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
+    """Fractional solid coverage of every voxel by one mesh (§4.1).
+
+    Parameters
+    ----------
+    vertices, faces : (V, 3) float64, (F, 3) int
+        The mesh in world space.
+    lo, h : (3,) float64
+        Grid origin and voxel size.
+    n : (3,) int
+        Grid shape.
+    supersample : int
+        Sub-samples per axis for voxels whose 3x3x3 neighbourhood disagrees.
+    closed : bool
+        True: one winding number along +z (the paper's slicing). False: the
+        six-ray vote for open meshes.
+
+    Returns
+    -------
+    coverage : (nx, ny, nz) float64 in [0, 1]
+    stats : dict
+        ``boundary_voxels`` (supersampled), ``rays`` per sample.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1; Nooruddin and Turk (2003) for the vote.
+    """
+    tri = np.ascontiguousarray(vertices[faces], dtype=np.float64)
+    n = tuple(int(x) for x in n)
+    lo = np.asarray(lo, dtype=np.float64)
+    h = np.asarray(h, dtype=np.float64)
+    axes = (2,) if closed else (0, 1, 2)
+    votes_c = np.zeros(n, np.int32)
+    for ax in axes:
+        wm, wp = winding_at_centres(tri, ax, lo, h, n)
+        votes_c += wm != 0
+        if not closed:
+            votes_c += wp != 0
+    need = 1 if closed else 4
+    inside = votes_c >= need
+    u8 = inside.view(np.uint8)
+    mixed = ndimage.maximum_filter(u8, size=3, mode="nearest") != ndimage.minimum_filter(u8, size=3, mode="nearest")
+    cov = inside.astype(np.float64)
+    S = int(supersample)
+    vox = np.argwhere(mixed).astype(np.int64)
+    if S > 1 and len(vox):
+        votes = np.zeros((len(vox), S ** 3), np.int8)
+        hs = h / S
+        for ax in axes:
+            p, q = (ax + 1) % 3, (ax + 2) % 3
+            off, depth, cum = column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S))
+            _read_subsamples(off, depth, cum, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
+        cov[mixed] = np.count_nonzero(votes >= need, axis=1) / float(S ** 3)
+    return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
+
+
+def repair_mesh(vertices, faces):
+    """Try to close an open mesh with trimesh (merge vertices, fill holes).
+
+    Returns
+    -------
+    vertices, faces, ok
+        The repaired mesh and True when it is now watertight; the input and
+        False otherwise.
+    """
+    import trimesh
+
+    m = trimesh.Trimesh(vertices, faces, process=True)
+    m.merge_vertices()
+    m.fill_holes()
+    if m.is_watertight:
+        return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64), True
+    return vertices, faces, False
+
+
+def gaussian_blur(a, window):
+    """Separable Gaussian of ``window`` taps per axis, sigma = window / 6, edges clamped (§4.1).
+
+    ``a`` may carry trailing channels (blurred independently). ``window`` <= 1
+    returns a copy.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    if window <= 1:
+        return a.copy()
+    r = window // 2
+    sigma = window / 6.0
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    w = np.exp(-0.5 * (x / sigma) ** 2)
+    w /= w.sum()
+    out = a
+    for ax in range(3):
+        out = ndimage.correlate1d(out, w, axis=ax, mode="nearest")
+    return out
+
+
+def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, bounds=None):
+    """Voxelize every object of a :class:`~refraction_ref.meshes.Geometry` (§4.1).
+
+    Parameters
+    ----------
+    geom : Geometry
+        Merged scene objects with per-object ior, absorption and boundary edges.
+    outside_ior : float
+        Index outside every object.
+    resolution, padding, supersample, blur : int
+        See :mod:`refraction_ref.volumetric.knobs`.
+    bounds : (2, 3) array_like, optional
+        Volume bounds (default :func:`auto_bounds`).
+
+    Returns
+    -------
+    ior : (N, N, N) float64
+        ``outside + sum_k coverage_k (ior_k - outside)``, then blurred.
+    absorption : (N, N, N, 3) float64
+        ``sum_k coverage_k absorption_k``, blurred the same way.
+    bounds : (2, 3) float64
+    notes : list of str
+        What was done to each object (closed, or open and voted), for the plan.
+    """
+    N = int(resolution)
+    b = auto_bounds(geom.vertices, N, padding) if bounds is None else np.asarray(bounds, dtype=np.float64)
+    n = (N, N, N)
+    h = (b[1] - b[0]) / N
+    ior = np.full(n, float(outside_ior))
+    absn = np.zeros(n + (3,))
+    notes = []
+    for k in range(len(geom.ior)):
+        sel = geom.face_object == k
+        v, f = geom.vertices, geom.faces[sel]
+        closed = int(geom.boundary_edges[k]) == 0
+        repaired = False
+        if not closed:
+            v, f, repaired = repair_mesh(v, f)
+            closed = repaired
+        cov, st = solid_coverage(v, f, b[0], h, n, supersample, closed)
+        ior += cov * (float(geom.ior[k]) - outside_ior)
+        if np.any(geom.absorption[k] > 0):
+            absn += cov[..., None] * geom.absorption[k]
+        occ = int(np.count_nonzero(cov > 0))
+        if repaired:
+            how = (f"open ({int(geom.boundary_edges[k])} boundary edges), closed by trimesh fill_holes; "
+                   "winding number along +z (slicing, §4.1)")
+        elif closed:
+            how = "closed: winding number along +z (slicing, §4.1)"
+        else:
+            how = (f"open ({int(geom.boundary_edges[k])} boundary edges; trimesh fill_holes cannot close it): "
+                   "inside by a 6-ray winding-number vote (+-x, +-y, +-z, at least 4 of 6)")
+        notes.append(f"object {k}: {len(f)} triangles, {how}; {occ} occupied voxels, "
+                     f"{st['boundary_voxels']} boundary voxels supersampled {supersample}^3")
+    if blur > 1:
+        ior = gaussian_blur(ior, blur)
+        if np.any(absn > 0):
+            absn = gaussian_blur(absn, blur)
+    return ior, absn, b, notes
