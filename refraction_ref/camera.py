@@ -96,20 +96,20 @@ class Camera:
 
     def world_to_view(self, p):
         """Transform world points (..., 3) into view space."""
-        p = np.asarray(p, dtype=np.float64)
-        return (p - np.asarray(self.eye)) @ self.basis.T
+        b = self.basis
+        return _affine(p, b.T, -np.asarray(self.eye, dtype=np.float64) @ b.T)
 
     def view_to_world(self, p):
-        """Transform view-space points (..., 3) into world space."""
-        return np.asarray(p, dtype=np.float64) @ self.basis + np.asarray(self.eye)
+        """Transform view-space points (..., 3) into world space (NaN stays NaN)."""
+        return _affine(p, self.basis, np.asarray(self.eye, dtype=np.float64))
 
     def dir_view_to_world(self, v):
         """Rotate view-space directions (..., 3) into world space."""
-        return np.asarray(v, dtype=np.float64) @ self.basis
+        return _affine(v, self.basis, np.zeros(3))
 
     def dir_world_to_view(self, v):
         """Rotate world-space directions (..., 3) into view space."""
-        return np.asarray(v, dtype=np.float64) @ self.basis.T
+        return _affine(v, self.basis.T, np.zeros(3))
 
     def projection_matrix(self):
         """The OpenGL perspective matrix M_p (view to clip space)."""
@@ -148,6 +148,23 @@ class Camera:
     def kernel_args(self):
         """Scalars the Numba kernels need: (W, H, sx, sy)."""
         return self.width, self.height, self.sx, self.sy
+
+
+@nb.njit(cache=True, parallel=True)
+def _affine_kernel(p, m, t, out):
+    for k in nb.prange(p.shape[0]):
+        x, y, z = p[k, 0], p[k, 1], p[k, 2]
+        for c in range(3):
+            out[k, c] = x * m[0, c] + y * m[1, c] + z * m[2, c] + t[c]
+
+
+def _affine(p, m, t):
+    """``p @ m + t`` for points (..., 3) in one pass."""
+    p = np.asarray(p, dtype=np.float64)
+    flat = np.ascontiguousarray(p).reshape(-1, 3)
+    out = np.empty_like(flat)
+    _affine_kernel(flat, np.ascontiguousarray(m, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64), out)
+    return out.reshape(p.shape)
 
 
 @nb.njit(cache=True, parallel=True)

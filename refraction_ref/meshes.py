@@ -52,6 +52,12 @@ def _read_mesh_file(path, mtime):
     return v, f
 
 
+@functools.lru_cache(maxsize=32)
+def _topology_of_file(path, mtime):
+    v, f = _read_mesh_file(path, mtime)
+    return _boundary_edge_count(f), _degenerate_count(v, f)
+
+
 @functools.lru_cache(maxsize=8)
 def _icosphere(subdivisions):
     import trimesh
@@ -185,6 +191,23 @@ class Geometry:
         return self.vertices[self.faces]
 
 
+def _degenerate_count(v, f):
+    """Zero-area faces."""
+    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    return int(np.count_nonzero(area <= 0))
+
+
+def mesh_topology(obj, base_dir, v, f):
+    """(boundary edges, zero-area faces) of an object's mesh, cached for mesh files."""
+    name = obj["mesh"]
+    if isinstance(name, str) and name not in ("sphere", "plane") and obj.get("deform") is None:
+        path = os.path.join(_DATA, f"{name}.ply") if name in BUILTIN_MESHES else (
+            name if os.path.isabs(name) else os.path.join(base_dir, name))
+        if os.path.isfile(path):
+            return _topology_of_file(os.path.abspath(path), os.path.getmtime(path))
+    return _boundary_edge_count(f), _degenerate_count(v, f)
+
+
 def _boundary_edge_count(f):
     """Edges used by exactly one face (0 for a closed, i.e. watertight, mesh)."""
     e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -205,15 +228,15 @@ def scene_geometry(scene):
             v, f = object_mesh(o, scene.base_dir, scene.callables.get(("deform", k)))
         except SceneError as e:
             raise SceneError(f"objects[{k}].mesh: {e}") from None
-        area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        nbnd, ndeg = mesh_topology(o, scene.base_dir, v, f)
         vs.append(v)
         fs.append(f + off)
         fo.append(np.full(len(f), k, np.int32))
         off += len(v)
         iors.append(float(o["material"]["ior"]))
         absn.append(np.asarray(o["material"]["absorption"], dtype=np.float64))
-        bnd.append(_boundary_edge_count(f))
-        deg.append(int(np.count_nonzero(area <= 0)))
+        bnd.append(nbnd)
+        deg.append(ndeg)
     if not vs:
         return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32),
                         np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -237,6 +260,9 @@ def eye_inside(geom, eye):
     p = np.cross(u, [0.0, 0.0, 1.0])
     p /= np.linalg.norm(p)
     q = np.cross(u, p)
+    lo_all, hi_all = v.min(0), v.max(0)
+    if np.any(eye <= lo_all) or np.any(eye >= hi_all):
+        return False  # outside every object's bounding box
     for k in range(len(geom.ior)):
         fv = v[geom.faces[geom.face_object == k]] - eye
         lo, hi = fv.reshape(-1, 3).min(0), fv.reshape(-1, 3).max(0)

@@ -136,7 +136,7 @@ def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
         else:
             XV[k] = 0
             YV[k] = 0
-        DV[k] = d
+        DV[k] = 1.0 / d if d > 0.0 else 0.0  # 1/d is what varies linearly on screen
 
 
 @nb.njit(cache=True, parallel=True)
@@ -250,14 +250,11 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
             b1 = _bias(x2, y2, x0, y0)
             b2 = _bias(x0, y0, x1, y1)
             inv_area = 1.0 / area
-            if perspective:
-                i0d = 1.0 / d0
-                i1d = 1.0 / d1
-                i2d = 1.0 / d2
-            else:
-                i0d = d0
-                i1d = d1
-                i2d = d2
+            # D holds 1/depth for perspective set-ups, depth for orthographic ones:
+            # either way the attribute interpolates linearly on screen
+            i0d = d0
+            i1d = d1
+            i2d = d2
             # edge functions at the first pixel centre, stepped incrementally
             a0 = y2 - y1
             a1 = y0 - y2
