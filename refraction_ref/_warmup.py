@@ -16,7 +16,7 @@ def imagespace():
     from .imagespace.pipeline import render_imagespace
     from .scene import load_scene
 
-    base = {"camera": {"width": 16, "height": 16},
+    base = {"camera": {"width": 16, "height": 16}, "imagespace": {"photons": 8, "caustic_map": 8},
             "objects": [{"mesh": "sphere", "fit": 1.0, "material": {"ior": 1.3, "absorption": [0.1, 0, 0]}}]}
     for over in ({}, {"imagespace.peeling": "lut"}, {"imagespace.depth": "float"},
                  {"imagespace.blend": "add", "imagespace.tir": True}):

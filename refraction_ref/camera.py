@@ -15,6 +15,13 @@ a view-space point ``(x, y, z)`` with ``d = -z`` is::
 with ``sy = tan(fov_y / 2)`` and ``sx = sy * W / H``; it is the texture
 coordinate mapping of Chaudhari (2008), §3.6, scaled to pixels.
 
+An *orthographic* camera (``projection='orthographic'``, the view of a
+directional light in caustics mapping) uses the same formulas with ``d``
+replaced by 1 and ``sy = ortho_height / 2``, ``sx = sy * W / H`` the half
+extents of the view window: every numba helper takes the flag ``ortho``
+(``Camera.ortho``), so one set of image-space passes serves both views.
+Depth stays the view-space distance ``-z`` along the view axis.
+
 References
 ----------
 .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
@@ -34,18 +41,24 @@ __all__ = ["Camera", "project_point", "unproject_pixel"]
 
 @dataclass(frozen=True)
 class Camera:
-    """A perspective pinhole camera.
+    """A pinhole (perspective) or orthographic camera.
 
     Parameters
     ----------
     eye, target, up : (3,) array_like
         Position, look-at point and up hint in world space.
     fov_y : float
-        Full vertical field of view in degrees.
+        Full vertical field of view in degrees (perspective).
     width, height : int
         Image size in pixels.
     near, far : float
         Clip distances along the view axis (depth).
+    projection : {'perspective', 'orthographic'}
+        The orthographic view is that of a directional light (caustics
+        mapping, Chaudhari 2008 §4.1): parallel rays along the view axis,
+        starting on the plane through ``eye``.
+    ortho_height : float
+        Full height of the orthographic view window in world units.
     """
 
     eye: tuple
@@ -56,6 +69,19 @@ class Camera:
     height: int
     near: float
     far: float
+    projection: str = "perspective"
+    ortho_height: float = 0.0
+
+    def __post_init__(self):
+        if self.projection not in ("perspective", "orthographic"):
+            raise ValueError(f"Camera: projection must be 'perspective' or 'orthographic', got {self.projection!r}")
+        if self.projection == "orthographic" and not self.ortho_height > 0:
+            raise ValueError(f"Camera: an orthographic camera needs ortho_height > 0, got {self.ortho_height}")
+
+    @property
+    def ortho(self):
+        """True for an orthographic camera (the ``ortho`` flag of the numba helpers)."""
+        return self.projection == "orthographic"
 
     @classmethod
     def from_dict(cls, c):
@@ -68,6 +94,8 @@ class Camera:
             height=int(c["height"]),
             near=float(c["near"]),
             far=float(c["far"]),
+            projection=str(c.get("projection", "perspective")),
+            ortho_height=float(c.get("ortho_height", 0.0)),
         )
 
     # -- frames ---------------------------------------------------------
@@ -84,11 +112,14 @@ class Camera:
 
     @property
     def sx(self):
-        return float(np.tan(np.radians(self.fov_y) / 2.0) * self.width / self.height)
+        """Horizontal half extent: of the image plane at unit depth, or of the orthographic window."""
+        return float(self.sy * self.width / self.height) if self.ortho else \
+            float(np.tan(np.radians(self.fov_y) / 2.0) * self.width / self.height)
 
     @property
     def sy(self):
-        return float(np.tan(np.radians(self.fov_y) / 2.0))
+        """Vertical half extent: ``tan(fov_y / 2)``, or half the orthographic window."""
+        return float(self.ortho_height / 2.0) if self.ortho else float(np.tan(np.radians(self.fov_y) / 2.0))
 
     @property
     def shape(self):
@@ -112,9 +143,16 @@ class Camera:
         return _affine(v, self.basis.T, np.zeros(3))
 
     def projection_matrix(self):
-        """The OpenGL perspective matrix M_p (view to clip space)."""
+        """The OpenGL projection matrix M_p (view to clip space), perspective or orthographic."""
         n, f = self.near, self.far
         m = np.zeros((4, 4))
+        if self.ortho:
+            m[0, 0] = 1.0 / self.sx
+            m[1, 1] = 1.0 / self.sy
+            m[2, 2] = -2.0 / (f - n)
+            m[2, 3] = -(f + n) / (f - n)
+            m[3, 3] = 1.0
+            return m
         m[0, 0] = 1.0 / self.sx
         m[1, 1] = 1.0 / self.sy
         m[2, 2] = -(f + n) / (f - n)
@@ -123,30 +161,40 @@ class Camera:
         return m
 
     def primary_rays_view(self):
-        """Unit view-space directions through every pixel centre, (H, W, 3)."""
+        """Unit view-space directions through every pixel centre, (H, W, 3) (all ``-z`` when orthographic)."""
         d = np.empty((self.height, self.width, 3))
-        _primary_dirs(self.width, self.height, self.sx, self.sy, np.eye(3), d)
+        _primary_dirs(self.width, self.height, self.sx, self.sy, np.eye(3), d, self.ortho)
         return d
 
     def primary_rays(self):
-        """World-space origins and unit directions of the primary rays, each (H, W, 3)."""
+        """World-space origins and unit directions of the primary rays, each (H, W, 3).
+
+        Perspective rays start at the eye; orthographic ones at the pixel
+        centres of the window on the plane through the eye.
+        """
         d = np.empty((self.height, self.width, 3))
-        _primary_dirs(self.width, self.height, self.sx, self.sy, self.basis, d)
+        _primary_dirs(self.width, self.height, self.sx, self.sy, self.basis, d, self.ortho)
         o = np.empty_like(d)
         o[...] = np.asarray(self.eye, dtype=np.float64)
+        if self.ortho:
+            x = ((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * self.sx
+            y = (1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * self.sy
+            b = self.basis
+            o += x[None, :, None] * b[0] + y[:, None, None] * b[1]
         return o, d
 
     def to_screen(self, p_view):
         """Project view-space points (..., 3) to (col, row, depth) in pixel units."""
         p = np.asarray(p_view, dtype=np.float64)
         d = -p[..., 2]
+        s = np.ones_like(d) if self.ortho else d
         with np.errstate(divide="ignore", invalid="ignore"):
-            col = (p[..., 0] / (d * self.sx) * 0.5 + 0.5) * self.width
-            row = (0.5 - p[..., 1] / (d * self.sy) * 0.5) * self.height
+            col = (p[..., 0] / (s * self.sx) * 0.5 + 0.5) * self.width
+            row = (0.5 - p[..., 1] / (s * self.sy) * 0.5) * self.height
         return col, row, d
 
     def kernel_args(self):
-        """Scalars the Numba kernels need: (W, H, sx, sy)."""
+        """Scalars the Numba kernels need: (W, H, sx, sy); pass ``ortho`` along with them."""
         return self.width, self.height, self.sx, self.sy
 
 
@@ -168,29 +216,45 @@ def _affine(p, m, t):
 
 
 @nb.njit(cache=True, parallel=True)
-def _primary_dirs(W, H, sx, sy, basis, out):
+def _primary_dirs(W, H, sx, sy, basis, out, ortho=False):
     """Unit directions through pixel centres, rotated by ``basis`` (rows: right, up, back)."""
     for i in nb.prange(H):
         y = (1.0 - (i + 0.5) / H * 2.0) * sy
         for j in range(W):
             x = ((j + 0.5) / W * 2.0 - 1.0) * sx
+            if ortho:
+                for k in range(3):
+                    out[i, j, k] = -basis[2, k]
+                continue
             s = 1.0 / np.sqrt(x * x + y * y + 1.0)
             for k in range(3):
                 out[i, j, k] = (x * basis[0, k] + y * basis[1, k] - basis[2, k]) * s
 
 
 @nb.njit(cache=True, inline="always")
-def project_point(x, y, z, W, H, sx, sy):
-    """Project a view-space point to (col, row, depth); Chaudhari (2008) §3.6."""
+def project_point(x, y, z, W, H, sx, sy, ortho=False):
+    """Project a view-space point to (col, row, depth); Chaudhari (2008) §3.6.
+
+    With ``ortho`` the division by the depth is dropped (orthographic view).
+    """
     d = -z
+    if ortho:
+        col = (x / sx * 0.5 + 0.5) * W
+        row = (0.5 - y / sy * 0.5) * H
+        return col, row, d
     col = (x / (d * sx) * 0.5 + 0.5) * W
     row = (0.5 - y / (d * sy) * 0.5) * H
     return col, row, d
 
 
 @nb.njit(cache=True, inline="always")
-def unproject_pixel(col, row, d, W, H, sx, sy):
-    """View-space point at depth ``d`` seen at screen position (col, row); §3.5."""
+def unproject_pixel(col, row, d, W, H, sx, sy, ortho=False):
+    """View-space point at depth ``d`` seen at screen position (col, row); §3.5.
+
+    With ``ortho`` the lateral position does not scale with the depth.
+    """
+    if ortho:
+        return (col / W * 2.0 - 1.0) * sx, (1.0 - row / H * 2.0) * sy, -d
     x = (col / W * 2.0 - 1.0) * sx * d
     y = (1.0 - row / H * 2.0) * sy * d
     return x, y, -d

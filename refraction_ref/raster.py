@@ -123,12 +123,16 @@ def clip_near(tri_view, near):
 
 
 @nb.njit(cache=True, parallel=True)
-def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
-    """Project view-space vertices to 1/256-pixel fixed point; flag those outside the guard band."""
+def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv, ortho=False):
+    """Project view-space vertices to 1/256-pixel fixed point; flag those outside the guard band.
+
+    ``ortho``: orthographic projection (no division by the depth).
+    """
     for k in nb.prange(vv.shape[0]):
         d = -vv[k, 2]
-        col = (vv[k, 0] / (d * sx) * 0.5 + 0.5) * W
-        row = (0.5 - vv[k, 1] / (d * sy) * 0.5) * H
+        s = 1.0 if ortho else d
+        col = (vv[k, 0] / (s * sx) * 0.5 + 0.5) * W
+        row = (0.5 - vv[k, 1] / (s * sy) * 0.5) * H
         okv[k] = abs(col) < 4194304.0 and abs(row) < 4194304.0 and d > 0.0
         if okv[k]:
             XV[k] = np.int64(np.round(col * 256.0))
@@ -136,7 +140,10 @@ def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv):
         else:
             XV[k] = 0
             YV[k] = 0
-        DV[k] = 1.0 / d if d > 0.0 else 0.0  # 1/d is what varies linearly on screen
+        if ortho:
+            DV[k] = d  # orthographic: the depth itself varies linearly on screen
+        else:
+            DV[k] = 1.0 / d if d > 0.0 else 0.0  # 1/d is what varies linearly on screen
 
 
 @nb.njit(cache=True, parallel=True)
@@ -377,7 +384,7 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
     YV = np.empty(len(vv), np.int64)
     DV = np.empty(len(vv), np.float64)
     okv = np.empty(len(vv), np.bool_)
-    _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv)
+    _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv, bool(getattr(camera, "ortho", False)))
     X = np.empty((T, 3), np.int64)
     Y = np.empty((T, 3), np.int64)
     D = np.empty((T, 3), np.float64)
@@ -398,7 +405,8 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         Triangle vertices in view space (see :class:`~refraction_ref.camera.Camera`),
         or the result of :func:`raster_setup` to skip the set-up.
     camera : Camera
-        Image size and projection.
+        Image size and projection (perspective, or orthographic: the
+        depth is then interpolated linearly on screen).
     op : {'min', 'max', 'count', 'or', 'add', 'collect'}
         Per-pixel blend (see the module docstring).
     zlo, zhi : (H, W) ndarray, optional
@@ -468,7 +476,8 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if code == 7:
         fbuf = np.full((H, W), np.inf)
         ids = np.full((H, W), -1, np.int64)
-    _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, True,
+    # depth is interpolated linearly on screen for an orthographic camera
+    _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, not getattr(camera, "ortho", False),
                    fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB)
     if code in (0, 1):
         res = fbuf

@@ -67,11 +67,18 @@ IMAGESPACE_DEFAULTS = {
     "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
     "tir": False,             # follow total internal reflection back to preceding layers
     "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)
+    # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
+    "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
+    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
+    "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
+    "caustic_map": 512,       # texels per side of each receiver's caustic map (exact reference too)
 }
 
 EXACT_DEFAULTS = {
     "normals": "smooth",      # 'smooth' interpolated vertex normals | 'face'
     "max_bounces": 64,
+    "photons": 1024,          # caustics reference: jittered photons per side of the light's window
+    "photon_seed": 0,         # seed of the jitter (the reference is deterministic)
 }
 
 #: Water block (merged only when a scene has one; "water": null means no water).
@@ -85,8 +92,7 @@ DEFAULTS = {
     "outside_ior": 1.0,
     "environment": DEFAULT_ENVIRONMENT,
     "lights": [DEFAULT_LIGHT],
-    "receivers": [dict(DEFAULT_RECEIVER, transform={"scale": 1.0, "rotate": [0.0, 0.0, 0.0],
-                                                   "translate": [0.0, -0.6, 0.0]})],
+    "receivers": [],          # none by default: caustics run when a scene has receivers and lights
     "water": None,
     "volume": None,
     "imagespace": IMAGESPACE_DEFAULTS,
@@ -111,6 +117,7 @@ _CHOICES = {
     ("imagespace", "peeling"): ("separate", "lut"),
     ("imagespace", "normals"): ("forward", "central", "mesh3x3", "cross"),
     ("exact", "normals"): ("smooth", "face"),
+    ("imagespace", "receiver_hit"): ("eyespace", "exact"),
 }
 
 
@@ -292,6 +299,32 @@ def validate(data, base_dir="."):
     if not isinstance(im["tir"], bool):
         raise SceneError(f"scene: imagespace.tir must be true or false, got {im['tir']!r}")
     _num(data["exact"]["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
+    _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
+    _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
+    if im["gather"] % 2 == 0:
+        raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
+                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
+    _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
+    _num(data["exact"]["photons"], "exact.photons", 1, 16384, integer=True)
+    _num(data["exact"]["photon_seed"], "exact.photon_seed", 0, integer=True)
+    for k, lt in enumerate(data["lights"] or [] if data.get("water") is None else []):  # water: levelmap checks
+        if lt["type"] not in ("directional", "point"):
+            raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; use 'directional' or 'point'")
+        if lt["type"] == "directional":
+            d = _vec(lt["direction"], 3, f"lights[{k}].direction")
+            if not np.linalg.norm(d) > 0:
+                raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
+        else:
+            if lt["position"] is None:
+                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give its position")
+            _vec(lt["position"], 3, f"lights[{k}].position")
+        rad = _vec(lt["radiance"], 3, f"lights[{k}].radiance")
+        if np.any(rad < 0):
+            raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
+    for k, r in enumerate(data["receivers"] or []):
+        alb = _vec(r["albedo"], 3, f"receivers[{k}].albedo")
+        if np.any(alb < 0):
+            raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
     W, H = c["width"], c["height"]
     need = W * H * (im["slices"] // 8 + 8 * (im["layers"] + 24))
     if need > 16 * 2**30:

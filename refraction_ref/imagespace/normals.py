@@ -62,13 +62,13 @@ def layer_depth(ldi, n, i, j, lut):
 
 
 @nb.njit(cache=True, inline="always")
-def _point(ldi, n, i, j, lut, W, H, sx, sy):
+def _point(ldi, n, i, j, lut, W, H, sx, sy, ortho=False):
     d = layer_depth(ldi, n, i, j, lut)
-    return unproject_pixel(j + 0.5, i + 0.5, d, W, H, sx, sy)
+    return unproject_pixel(j + 0.5, i + 0.5, d, W, H, sx, sy, ortho)
 
 
 @nb.njit(cache=True, inline="always")
-def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
+def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy, ortho=False):
     """Unit view-space normal of depth image ``layer`` at pixel (i, j).
 
     Parameters
@@ -88,6 +88,9 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
         Step of the central differences.
     W, H, sx, sy :
         Camera scalars (:meth:`Camera.kernel_args`).
+    ortho : bool
+        Orthographic view (a directional light's): neighbours unproject
+        without the perspective scaling, eq. 3.2 otherwise unchanged.
 
     Returns
     -------
@@ -119,8 +122,8 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
             jl, dl = j, dc
         gx = 0.0
         if jr != jl:
-            xr = unproject_pixel(jr + 0.5, i + 0.5, dr, W, H, sx, sy)[0]
-            xl = unproject_pixel(jl + 0.5, i + 0.5, dl, W, H, sx, sy)[0]
+            xr = unproject_pixel(jr + 0.5, i + 0.5, dr, W, H, sx, sy, ortho)[0]
+            xl = unproject_pixel(jl + 0.5, i + 0.5, dl, W, H, sx, sy, ortho)[0]
             if xr != xl:
                 gx = (dr - dl) / (xr - xl)
         iu, idn = i - delta, i + delta
@@ -132,8 +135,8 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
             idn, dd = i, dc
         gy = 0.0
         if iu != idn:
-            yu = unproject_pixel(j + 0.5, iu + 0.5, du, W, H, sx, sy)[1]
-            yd = unproject_pixel(j + 0.5, idn + 0.5, dd, W, H, sx, sy)[1]
+            yu = unproject_pixel(j + 0.5, iu + 0.5, du, W, H, sx, sy, ortho)[1]
+            yd = unproject_pixel(j + 0.5, idn + 0.5, dd, W, H, sx, sy, ortho)[1]
             if yu != yd:
                 gy = (du - dd) / (yu - yd)
         # surface z = -d(x, y): normal (dd/dx, dd/dy, 1)
@@ -148,11 +151,11 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
             iu = i
         if not math.isfinite(layer_depth(ldi, n, idn, j, lut)):
             idn = i
-        ax, ay, az = _point(ldi, n, i, jr, lut, W, H, sx, sy)
-        bx, by, bz = _point(ldi, n, i, jl, lut, W, H, sx, sy)
+        ax, ay, az = _point(ldi, n, i, jr, lut, W, H, sx, sy, ortho)
+        bx, by, bz = _point(ldi, n, i, jl, lut, W, H, sx, sy, ortho)
         ux, uy, uz = ax - bx, ay - by, az - bz
-        ax, ay, az = _point(ldi, n, iu, j, lut, W, H, sx, sy)
-        bx, by, bz = _point(ldi, n, idn, j, lut, W, H, sx, sy)
+        ax, ay, az = _point(ldi, n, iu, j, lut, W, H, sx, sy, ortho)
+        bx, by, bz = _point(ldi, n, idn, j, lut, W, H, sx, sy, ortho)
         vx, vy, vz = ax - bx, ay - by, az - bz
         nx = uy * vz - uz * vy
         ny = uz * vx - ux * vz
@@ -160,7 +163,7 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
         if nx == 0.0 and ny == 0.0 and nz == 0.0:
             nz = 1.0
     else:
-        cx, cy, cz = _point(ldi, n, i, j, lut, W, H, sx, sy)
+        cx, cy, cz = _point(ldi, n, i, j, lut, W, H, sx, sy, ortho)
         nx = 0.0
         ny = 0.0
         nz = 0.0
@@ -172,8 +175,8 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy):
             bi, bj = i + ri[(k + 1) % 8], j + rj[(k + 1) % 8]
             if not (math.isfinite(layer_depth(ldi, n, ai, aj, lut)) and math.isfinite(layer_depth(ldi, n, bi, bj, lut))):
                 continue
-            ax, ay, az = _point(ldi, n, ai, aj, lut, W, H, sx, sy)
-            bx, by, bz = _point(ldi, n, bi, bj, lut, W, H, sx, sy)
+            ax, ay, az = _point(ldi, n, ai, aj, lut, W, H, sx, sy, ortho)
+            bx, by, bz = _point(ldi, n, bi, bj, lut, W, H, sx, sy, ortho)
             ux, uy, uz = ax - cx, ay - cy, az - cz
             vx, vy, vz = bx - cx, by - cy, bz - cz
             nx += uy * vz - uz * vy
@@ -192,11 +195,11 @@ def no_lut(shape):
 
 
 @nb.njit(cache=True, parallel=True)
-def _normals_kernel(ldi, lut, method, delta, W, H, sx, sy, out):
+def _normals_kernel(ldi, lut, method, delta, W, H, sx, sy, out, ortho=False):
     for i in nb.prange(ldi.shape[1]):
         for j in range(ldi.shape[2]):
             if math.isfinite(ldi[0, i, j]):
-                a, b, c = normal_at(ldi, 0, i, j, lut, method, delta, W, H, sx, sy)
+                a, b, c = normal_at(ldi, 0, i, j, lut, method, delta, W, H, sx, sy, ortho)
                 out[i, j, 0] = a
                 out[i, j, 1] = b
                 out[i, j, 2] = c
@@ -213,5 +216,6 @@ def layer_normals(layer, camera, method="central", delta=1):
     layer = np.ascontiguousarray(layer, dtype=np.float64)
     out = np.full(layer.shape + (3,), np.nan)
     W, H, sx, sy = camera.kernel_args()
-    _normals_kernel(layer[None], no_lut(layer.shape), NORMAL_METHODS[method], int(delta), W, H, sx, sy, out)
+    _normals_kernel(layer[None], no_lut(layer.shape), NORMAL_METHODS[method], int(delta), W, H, sx, sy, out,
+                    bool(getattr(camera, "ortho", False)))
     return out

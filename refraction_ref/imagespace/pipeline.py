@@ -30,7 +30,7 @@ from .search_bounds import search_bounds
 from .trace import trace_layers
 from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
 
-__all__ = ["render_imagespace", "check_materials"]
+__all__ = ["render_imagespace", "check_materials", "layered_trace"]
 
 
 def check_materials(geom):
@@ -44,55 +44,36 @@ def check_materials(geom):
     return float(geom.ior[0]), geom.absorption[0]
 
 
-def render_imagespace(scene, warm=True):
-    """Render a scene with the image-space method.
+def layered_trace(geom, cam, p, ior, outside, timings, plan):
+    """Min/max, voxelization, peeling, reduction and trace in one view (§3.3-3.7).
+
+    The passes of chapter 3 for any view of the refractive objects: the
+    eye's (perspective), or a light's (perspective for a point light,
+    orthographic for a directional one: the photon pass of §4.1, which
+    traces one photon per texel with the very same kernels).
 
     Parameters
     ----------
-    scene : Scene
-        A validated scene (:func:`~refraction_ref.scene.load_scene`).
-    warm : bool
-        Compile (or load from the cache) every kernel on a tiny scene first,
-        so that ``timings_ms`` measure run time, not JIT time.
+    geom : Geometry
+    cam : Camera
+    p : dict
+        The ``imagespace`` knobs.
+    ior, outside : float
+    timings : dict
+        Filled with ``minmax``, ``voxelize``, ``peel``, ``reduce``, ``trace`` (ms).
+    plan : list
+        Appended with one entry per stage.
 
     Returns
     -------
-    arrays : dict
-        The ORACLE.md per-pixel keys plus ``depth_complexity``.
-    info : dict
-        ``timings_ms``, ``plan`` and method statistics for ``meta``.
-
-    References
-    ----------
-    Chaudhari (2008), chapter 3.
+    dict
+        ``trace`` (:func:`trace_layers` output, view space), ``total``
+        (H, W) layers per pixel, ``ldi``, ``zmin``, ``zmax`` (the min/max
+        pass: ``zmin`` doubles as a shadow map in a light's view),
+        ``pixels_over_layer_limit``.
     """
-    if warm:
-        from .. import _warmup
-
-        _warmup.imagespace()
-    p = scene.data["imagespace"]
-    cam = Camera.from_dict(scene.data["camera"])
     H, W = cam.shape
-    timings, plan = {}, []
     tic = time.perf_counter
-
-    geom = scene_geometry(scene)
-    ior, absorption = check_materials(geom)
-    outside = float(scene.data["outside_ior"])
-    if eye_inside(geom, cam.eye):
-        raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
-                         "needs the viewer outside (its first layer is the front face). Move camera.eye "
-                         "outside the objects")
-    for k, nb in enumerate(geom.boundary_edges):
-        if nb:
-            plan.append({"stage": "geometry", "ran": True,
-                         "why": f"object {k} is open ({int(nb)} boundary edges): pixels can see an odd number "
-                                "of layers, and inside/outside then follows layer parity"})
-    for k, nd in enumerate(geom.degenerate):
-        if nd:
-            plan.append({"stage": "geometry", "ran": True,
-                         "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
-
     t0 = tic()
     tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
     zmin, zmax = depth_bounds(tri_view, cam)
@@ -164,6 +145,63 @@ def render_imagespace(scene, warm=True):
                  "why": f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
                         + (", total internal reflection followed" if p["tir"] else "")})
 
+    return {"trace": tr, "total": total, "ldi": ldi, "zmin": zmin, "zmax": zmax,
+            "pixels_over_layer_limit": n_over}
+
+
+def render_imagespace(scene, warm=True):
+    """Render a scene with the image-space method.
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene (:func:`~refraction_ref.scene.load_scene`).
+    warm : bool
+        Compile (or load from the cache) every kernel on a tiny scene first,
+        so that ``timings_ms`` measure run time, not JIT time.
+
+    Returns
+    -------
+    arrays : dict
+        The ORACLE.md per-pixel keys plus ``depth_complexity``.
+    info : dict
+        ``timings_ms``, ``plan`` and method statistics for ``meta``.
+
+    References
+    ----------
+    Chaudhari (2008), chapter 3.
+    """
+    if warm:
+        from .. import _warmup
+
+        _warmup.imagespace()
+    p = scene.data["imagespace"]
+    cam = Camera.from_dict(scene.data["camera"])
+    H, W = cam.shape
+    timings, plan = {}, []
+    tic = time.perf_counter
+
+    geom = scene_geometry(scene)
+    ior, absorption = check_materials(geom)
+    outside = float(scene.data["outside_ior"])
+    if eye_inside(geom, cam.eye):
+        raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
+                         "needs the viewer outside (its first layer is the front face). Move camera.eye "
+                         "outside the objects")
+    for k, nb in enumerate(geom.boundary_edges):
+        if nb:
+            plan.append({"stage": "geometry", "ran": True,
+                         "why": f"object {k} is open ({int(nb)} boundary edges): pixels can see an odd number "
+                                "of layers, and inside/outside then follows layer parity"})
+    for k, nd in enumerate(geom.degenerate):
+        if nd:
+            plan.append({"stage": "geometry", "ran": True,
+                         "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
+
+    tv = layered_trace(geom, cam, p, ior, outside, timings, plan)
+    tr, total, ldi, n_over = tv["trace"], tv["total"], tv["ldi"], tv["pixels_over_layer_limit"]
+    L = int(p["layers"])
+
     t0 = tic()
     status = tr["status"]
     hit = status != 0
@@ -179,9 +217,17 @@ def render_imagespace(scene, warm=True):
     else:
         plan.append({"stage": "absorption", "ran": False, "why": "absorption is zero"})
     timings["shade"] = (tic() - t0) * 1e3
-    if scene.data["receivers"] or scene.data["lights"]:
-        plan.append({"stage": "caustics", "ran": False,
-                     "why": "receivers and lights are not used by the refraction pass"})
+    from ..caustics.pipeline import caustics_imagespace, has_caustics, skip_reason
+
+    caustics = None
+    if has_caustics(scene):
+        c_arrays, caustics = caustics_imagespace(scene, geom, cam, tv, ior, outside, absorption)
+        plan.append({"stage": "caustics", "ran": True,
+                     "why": f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1), "
+                            f"{p['receiver_hit']} receiver hits, {p['caustic_map']}^2 maps, gathering window "
+                            f"{p['gather']}; timings in meta['caustics']"})
+    else:
+        plan.append({"stage": "caustics", "ran": False, "why": skip_reason(scene)})
 
     origin, rdir = cam.primary_rays()
     arrays = {
@@ -196,6 +242,12 @@ def render_imagespace(scene, warm=True):
         "image": image,
         "depth_complexity": total.astype(np.int16),
     }
+    if caustics is not None:
+        arrays.update(c_arrays)
+        # with receivers, the rendered colour is the full scene (§4.1's final pass);
+        # the refraction-only view of the environment stays as image_refraction
+        arrays["image_refraction"] = arrays["image"]
+        arrays["image"] = arrays["image_caustics"]
     info = {
         "timings_ms": timings,
         "plan": plan,
@@ -204,4 +256,6 @@ def render_imagespace(scene, warm=True):
         "depth_complexity_max": int(total.max(initial=0)),
         "triangles": int(len(geom.faces)),
     }
+    if caustics is not None:
+        info["caustics"] = caustics
     return arrays, info

@@ -52,7 +52,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..camera import project_point
+from ..camera import project_point, unproject_pixel
 from ..optics import refract3
 from .normals import layer_depth, normal_at
 
@@ -62,20 +62,20 @@ _PARALLEL_EPS = 1e-9  # |dd/dt| below this: the ray is parallel to the image pla
 
 
 @nb.njit(cache=True, inline="always")
-def _texel(x, y, z, W, H, sx, sy):
+def _texel(x, y, z, W, H, sx, sy, ortho=False):
     """Texel (row, col) of a view-space point; (-1, -1) when off screen or behind the eye."""
     if -z <= 0.0:
         return -1, -1
-    col, row, d = project_point(x, y, z, W, H, sx, sy)
+    col, row, d = project_point(x, y, z, W, H, sx, sy, ortho)
     if not (col >= 0.0 and col < W and row >= 0.0 and row < H):
         return -1, -1
     return np.int64(row), np.int64(col)
 
 
 @nb.njit(cache=True, inline="always")
-def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy):
+def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho=False):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
-    ti, tj = _texel(x, y, z, W, H, sx, sy)
+    ti, tj = _texel(x, y, z, W, H, sx, sy, ortho)
     if ti < 0:
         return False
     ls = layer_depth(ldi, n, ti, tj, lut)
@@ -89,7 +89,7 @@ def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy):
 @nb.njit(cache=True, parallel=True)
 def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
                   ior, outside_ior, iterations, nmethod, delta, tir, max_events, layer_limit, lut,
-                  exit_pos, exit_dir, last_dir, interfaces, path_len, status):
+                  exit_pos, exit_dir, last_dir, interfaces, path_len, status, ortho=False):
     L = ldi.shape[0]
     for i0 in nb.prange(H):
         i = np.int64(i0)  # the prange index may be unsigned; texel indices are signed
@@ -108,9 +108,12 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
                 exit_dir[i, j, 1] = vy
                 exit_dir[i, j, 2] = vz
                 continue
-            s = d0 / (-vz)
-            # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
-            qx, qy, qz = vx * s, vy * s, vz * s
+            if ortho:  # parallel rays from the window plane z = 0
+                qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, W, H, sx, sy, True)
+            else:
+                s = d0 / (-vz)
+                # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
+                qx, qy, qz = vx * s, vy * s, vz * s
             px, py, pz = qx, qy, qz
             t = 0
             ti, tj = i, j
@@ -129,7 +132,7 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
                 g2 = t if forward else t - 1
                 n1 = ior if g % 2 == 0 else outside_ior
                 n2 = ior if g2 % 2 == 0 else outside_ior
-                nx, ny, nz = normal_at(ldi, t, ti, tj, lut, nmethod, delta, W, H, sx, sy)
+                nx, ny, nz = normal_at(ldi, t, ti, tj, lut, nmethod, delta, W, H, sx, sy, ortho)
                 wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
                 events += 1
                 last_tir = is_tir
@@ -180,23 +183,23 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
                 for _ in range(iterations):
                     m = 0.5 * (a + b)
                     if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
-                               forward, lut, W, H, sx, sy):
+                               forward, lut, W, H, sx, sy, ortho):
                         b = m
                         found = True
                     else:
                         a = m
                 if not found:
-                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy)
+                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy, ortho)
                 if not found:
                     st = 1 if outside else 4
                     break
                 m = 0.5 * (a + b)
                 qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
-                ti, tj = _texel(qx, qy, qz, W, H, sx, sy)
+                ti, tj = _texel(qx, qy, qz, W, H, sx, sy, ortho)
                 if ti < 0 or not math.isfinite(layer_depth(ldi, t, ti, tj, lut)):
                     # the midpoint fell where the layer is absent: use the bracket's far end
                     qx, qy, qz = px + b * (ex - px), py + b * (ey - py), pz + b * (ez - pz)
-                    ti, tj = _texel(qx, qy, qz, W, H, sx, sy)
+                    ti, tj = _texel(qx, qy, qz, W, H, sx, sy, ortho)
             status[i, j] = st
             interfaces[i, j] = nint
             path_len[i, j] = plen
@@ -232,6 +235,9 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     dirs_view : (H, W, 3) float64
         Unit primary ray directions in view space.
     camera : Camera
+        The view of the layers: the eye's, or a light's (perspective for a
+        point light, orthographic for a directional light: every ray then
+        starts on the window plane and travels along ``-z``).
     ior, outside_ior : float
         Object and surrounding indices.
     iterations : int
@@ -279,6 +285,6 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
                   float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
                   int(max_interfaces), int(L if layer_limit is None else layer_limit),
                   no_lut(None) if lut is None else lut,
-                  exit_pos, exit_dir, last_dir, interfaces, path_len, status)
+                  exit_pos, exit_dir, last_dir, interfaces, path_len, status, bool(camera.ortho))
     return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir,
             "interfaces": interfaces, "path_length": path_len, "status": status}

@@ -1,0 +1,340 @@
+"""Diffuse receivers: their caustic-map frames and where photons meet them (Chaudhari 2008, §4.1).
+
+Frames
+    Receiver ``r``'s caustic map lies on the face (nearest the light) of a
+    box around it aligned with the first light's direction at the
+    receiver, exactly as the level-map method's maps
+    (:func:`~refraction_ref.levelmap.planes.reference_box`,
+    :func:`~refraction_ref.levelmap.planes.frame_of`): ``caustic_frame_r``
+    is (origin, u, v, normal) and texel (a, b) holds the irradiance on the
+    first surface of the receiver seen from the light through
+    ``origin + (b + .5)/Wc u + (a + .5)/Hc v``. A floor lit from straight
+    above gets the floor rectangle itself.
+Eye-space intersection (``receiver_hit = 'eyespace'``)
+    The thesis follows Krüger et al. (2006): the exiting photon becomes a
+    line primitive in the camera's image, and the first fragment of the
+    line that falls behind the receivers' depth image is its hit. Here the
+    ray is clipped to the camera's frustum, sampled once per pixel along
+    its screen-space projection (perspective-correct), compared at each
+    sample with the depth image of the receivers (rasterized from the
+    camera with the shared rasterizer, nearest depth and triangle), and the
+    crossing is refined by linear interpolation of the depth gap between
+    the last sample in front and the first behind. A sample that lands
+    behind by more than the ray's depth step plus 1 % of the depth is taken
+    as passing behind an occluder, not a hit, and the march goes on.
+    Photons that leave the frustum, or never cross, are lost (the method's
+    known limitation: it only sees what the camera sees).
+Exact intersection (``receiver_hit = 'exact'``)
+    Embree on the receivers' triangles: the oracle's ground truth for this
+    step.
+
+References
+----------
+.. [1] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
+   Accurate Photon Tracing on GPUs", EGSR 2006.
+.. [2] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+   Objects", M.S. thesis, UMBC, 2008, §4.1.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from ..camera import project_point
+from ..levelmap.planes import frame_of, reference_box, to_map
+from ..meshes import object_mesh
+from ..raster import clip_near, rasterize
+
+__all__ = ["ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position"]
+
+
+class ReceiverSet(NamedTuple):
+    """Every receiver triangle, with each receiver's caustic-map box.
+
+    Attributes
+    ----------
+    tris : (T, 3, 3) float64 world vertices
+    owner : (T,) int64 receiver index
+    normals : (T, 3) float64 unit face normals
+    albedo : (R, 3) float64
+    boxes : list of Box, one per receiver
+    """
+
+    tris: np.ndarray
+    owner: np.ndarray
+    normals: np.ndarray
+    albedo: np.ndarray
+    boxes: list
+
+    def frame(self, r):
+        """``caustic_frame_r`` (4, 3): origin, u, v, normal (ORACLE.md)."""
+        return frame_of(self.boxes[r])
+
+
+def receiver_set(scene, light, size):
+    """Receiver triangles of a scene and their map boxes, aligned with ``light``.
+
+    Parameters
+    ----------
+    scene : Scene
+    light : dict
+        The first light: its direction at each receiver's centre orients the box.
+    size : int
+        Texels per side of each caustic map.
+    """
+    tris, owner, alb, boxes = [], [], [], []
+    for k, rc in enumerate(scene.data["receivers"] or []):
+        v, f = object_mesh(rc, scene.base_dir)
+        tris.append(v[f])
+        owner.append(np.full(len(f), k, np.int64))
+        alb.append(np.asarray(rc["albedo"], dtype=np.float64))
+        centre = (v.min(axis=0) + v.max(axis=0)) / 2.0
+        if light["type"] == "directional":
+            T0 = np.asarray(light["direction"], dtype=np.float64)
+        else:
+            T0 = centre - np.asarray(light["position"], dtype=np.float64)
+            if not np.linalg.norm(T0) > 0:
+                T0 = np.array([0.0, -1.0, 0.0])
+        boxes.append(reference_box(v, T0 / np.linalg.norm(T0), int(size)))
+    t = np.concatenate(tris)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+    return ReceiverSet(t, np.concatenate(owner), n, np.stack(alb), boxes)
+
+
+def map_position(rs, r, points):
+    """Continuous (col, row) of world points in receiver ``r``'s caustic map."""
+    q = to_map(rs.boxes[r], points)
+    return q[..., 0], q[..., 1]
+
+
+def eye_buffers(rs, cam):
+    """The receivers' depth image from the camera and the triangle seen at each pixel.
+
+    Returns
+    -------
+    depth : (H, W) float64
+        Nearest receiver depth, ``+inf`` where none.
+    tri : (H, W) int64
+        Index into ``rs.tris``, ``-1`` where none.
+    """
+    tv = cam.world_to_view(rs.tris)
+    d = -tv[..., 2]
+    cross = d.min(axis=1) < cam.near
+    if not cross.any():
+        return rasterize(tv, cam, "nearest", clip=False)
+    # clip the triangles crossing the near plane, remembering where each piece came from
+    parts, src = [], []
+    for t in range(len(tv)):
+        if not cross[t]:
+            parts.append(tv[t:t + 1])
+            src.append(np.array([t]))
+        else:
+            c = clip_near(tv[t:t + 1], cam.near)
+            parts.append(c)
+            src.append(np.full(len(c), t))
+    tv2 = np.concatenate(parts)
+    src = np.concatenate(src).astype(np.int64)
+    if len(tv2) == 0:  # every receiver behind the camera
+        return np.full(cam.shape, np.inf), np.full(cam.shape, -1, np.int64)
+    depth, ids = rasterize(tv2, cam, "nearest", clip=False)
+    return depth, np.where(ids >= 0, src[np.maximum(ids, 0)], -1)
+
+
+@nb.njit(cache=True, inline="always")
+def _clip_plane(a0, a1, t0, t1):
+    """Clip [t0, t1] to where the linear function a0 + a1 t <= 0."""
+    if a1 == 0.0:
+        if a0 > 0.0:
+            return 1.0, 0.0
+        return t0, t1
+    tc = -a0 / a1
+    if a1 > 0.0:
+        return t0, min(t1, tc)
+    return max(t0, tc), t1
+
+
+@nb.njit(cache=True, parallel=True)
+def _march_kernel(O, D, depth, W, H, sx, sy, ortho, near, far, rel_thick, max_samples, t_hit, pix):
+    for k0 in nb.prange(O.shape[0]):
+        k = np.int64(k0)
+        t_hit[k] = np.nan
+        pix[k, 0] = -1
+        pix[k, 1] = -1
+        ox, oy, oz = O[k, 0], O[k, 1], O[k, 2]
+        dx, dy, dz = D[k, 0], D[k, 1], D[k, 2]
+        if not (math.isfinite(ox) and math.isfinite(dx)):
+            continue
+        # clip the ray to the view frustum: each bound is linear in t
+        t0 = 0.0
+        t1 = 1e30
+        t0, t1 = _clip_plane(near + oz, dz, t0, t1)      # depth >= near
+        t0, t1 = _clip_plane(-oz - far, -dz, t0, t1)     # depth <= far
+        if ortho:
+            t0, t1 = _clip_plane(ox - sx, dx, t0, t1)
+            t0, t1 = _clip_plane(-ox - sx, -dx, t0, t1)
+            t0, t1 = _clip_plane(oy - sy, dy, t0, t1)
+            t0, t1 = _clip_plane(-oy - sy, -dy, t0, t1)
+        else:  # |x| <= sx d, |y| <= sy d with d = -z
+            t0, t1 = _clip_plane(ox + sx * oz, dx + sx * dz, t0, t1)
+            t0, t1 = _clip_plane(-ox + sx * oz, -dx + sx * dz, t0, t1)
+            t0, t1 = _clip_plane(oy + sy * oz, dy + sy * dz, t0, t1)
+            t0, t1 = _clip_plane(-oy + sy * oz, -dy + sy * dz, t0, t1)
+        if not (t1 > t0) or t1 >= 1e29:
+            continue
+        # screen-space end points: one sample per pixel along the projected line
+        c0, r0, dA = project_point(ox + t0 * dx, oy + t0 * dy, oz + t0 * dz, W, H, sx, sy, ortho)
+        c1, r1, dB = project_point(ox + t1 * dx, oy + t1 * dy, oz + t1 * dz, W, H, sx, sy, ortho)
+        n = np.int64(math.ceil(max(abs(c1 - c0), abs(r1 - r0)))) + 1
+        n = min(max(n, 2), max_samples)
+        prev_gap = -np.inf
+        prev_t = t0
+        prev_rd = dA
+        for m in range(n + 1):
+            u = m / n
+            if ortho or not (dA > 0.0 and dB > 0.0):
+                s = u
+            else:  # perspective-correct: 1/depth is linear in screen space
+                s = (u / dB) / ((1.0 - u) / dA + u / dB)
+            t = t0 + s * (t1 - t0)
+            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+            col, row, rd = project_point(px, py, pz, W, H, sx, sy, ortho)
+            i = min(max(np.int64(math.floor(row)), 0), H - 1)
+            j = min(max(np.int64(math.floor(col)), 0), W - 1)
+            sd = depth[i, j]
+            gap = rd - sd if math.isfinite(sd) else -np.inf
+            if gap >= 0.0 and prev_gap < 0.0:
+                if gap <= abs(rd - prev_rd) + rel_thick * sd:
+                    f = 1.0
+                    if math.isfinite(prev_gap):
+                        f = -prev_gap / (gap - prev_gap)
+                    t_hit[k] = prev_t + f * (t - prev_t)
+                    pix[k, 0] = i
+                    pix[k, 1] = j
+                    break
+            prev_gap = gap
+            prev_t = t
+            prev_rd = rd
+
+
+def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samples=1 << 16):
+    """Krüger-style screen-space march of rays against a depth image.
+
+    Parameters
+    ----------
+    origins_view, dirs_view : (N, 3) array_like
+        Rays in the camera's view space.
+    depth : (H, W) float64
+        The receivers' depth image (:func:`eye_buffers`).
+    cam : Camera
+    rel_thick : float
+        Surface thickness as a fraction of its depth (beyond it a sample
+        behind the surface is taken as passing behind it).
+    max_samples : int
+        Samples per ray at most.
+
+    Returns
+    -------
+    t : (N,) float64
+        Ray parameter of the hit, NaN where none.
+    pix : (N, 2) int64
+        Pixel (row, column) of the hit, ``-1`` where none.
+    """
+    O = np.ascontiguousarray(origins_view, dtype=np.float64).reshape(-1, 3)
+    D = np.ascontiguousarray(dirs_view, dtype=np.float64).reshape(-1, 3)
+    t = np.empty(len(O))
+    pix = np.empty((len(O), 2), np.int64)
+    if len(O):
+        W, H, sx, sy = cam.kernel_args()
+        _march_kernel(O, D, np.ascontiguousarray(depth, dtype=np.float64), W, H, sx, sy, bool(cam.ortho),
+                      float(cam.near), float(cam.far), float(rel_thick), int(max_samples), t, pix)
+    return t, pix
+
+
+_EMBREE = {}
+
+
+def _embree(tris):
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    key = (id(tris), tris.shape)
+    sc = _EMBREE.get(key)
+    if sc is not None and sc[0] is tris:
+        return sc[1]
+    scene = rtcs.EmbreeScene()
+    v = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
+    TriangleMesh(scene, v, np.arange(len(v), dtype=np.int32).reshape(-1, 3))
+    if len(_EMBREE) >= 4:  # a few scenes per render: receivers, objects
+        _EMBREE.pop(next(iter(_EMBREE)))
+    _EMBREE[key] = (tris, scene)
+    return scene
+
+
+def hit_exact(tris, origins, dirs):
+    """Nearest hit of world rays with triangles (Embree), t recomputed in float64.
+
+    Parameters
+    ----------
+    tris : (T, 3, 3) float64
+    origins, dirs : (N, 3) float64
+
+    Returns
+    -------
+    t : (N,) float64
+        Distance along the ray, NaN on a miss.
+    face : (N,) int64
+        Triangle index, ``-1`` on a miss.
+    """
+    o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+    n = len(o)
+    t = np.full(n, np.nan)
+    face = np.full(n, -1, np.int64)
+    if n == 0 or len(tris) == 0:
+        return t, face
+    scene = _embree(tris)
+    ok = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(d), axis=1)
+    idx = np.flatnonzero(ok)
+    for c0 in range(0, len(idx), 1 << 18):
+        ii = idx[c0:c0 + (1 << 18)]
+        res = scene.run(np.ascontiguousarray(o[ii], dtype=np.float32),
+                        np.ascontiguousarray(d[ii], dtype=np.float32), output=1)
+        prim = np.asarray(res["primID"], dtype=np.int64)
+        hit = prim >= 0
+        if not hit.any():
+            continue
+        hi = ii[hit]
+        f = prim[hit]
+        # float64 Möller-Trumbore on the triangle Embree found
+        v0, v1, v2 = tris[f, 0], tris[f, 1], tris[f, 2]
+        e1, e2 = v1 - v0, v2 - v0
+        dd = d[hi]
+        pv = np.cross(dd, e2)
+        det = np.einsum("ij,ij->i", e1, pv)
+        tv = o[hi] - v0
+        qv = np.cross(tv, e1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tt = np.einsum("ij,ij->i", e2, qv) / det
+        tf = np.asarray(res["tfar"], dtype=np.float64)[hit]
+        tt = np.where(np.isfinite(tt) & (tt > 0), tt, tf)
+        t[hi] = tt
+        face[hi] = f
+    return t, face
+
+
+def occluded(tris, origins, dirs, tmax=None):
+    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test, (N,) bool."""
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    if len(o) == 0 or len(tris) == 0:
+        return np.zeros(len(o), bool)
+    t, _ = hit_exact(tris, o, dirs)
+    hit = np.isfinite(t)
+    if tmax is not None:
+        hit &= t < np.asarray(tmax)
+    return hit
