@@ -49,7 +49,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-__all__ = ["rasterize", "raster_setup", "RasterSetup", "clip_near", "OPS", "ortho_setup", "rasterize_ortho"]
+__all__ = ["rasterize", "raster_setup", "RasterSetup", "Fragments", "clip_near", "OPS", "ortho_setup",
+           "rasterize_ortho"]
 
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
 
@@ -213,18 +214,24 @@ def _bias(ax, ay, bx, by):
 
 @nb.njit(cache=True, parallel=True)
 def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
-                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab):
+                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
+                   frag_off, frag_pix, frag_d, frag_n):
     """Rasterize binned triangles band by band with blend ``op`` (see ``OPS``).
 
     Depth is interpolated perspective-correctly (1/d linear on screen) when
     ``perspective``, linearly otherwise (orthographic maps). ``slab`` =
     (z0, s, klo, khi) restricts op 'nearest' to fragments whose slab index
     ``floor((d - z0) / s)`` lies in [klo, khi] (no restriction when s <= 0).
+    With op 'minmax' and ``frag_pix`` longer than 1, every fragment is also
+    recorded, band by band from ``frag_off[b]`` (``frag_n[b]`` of them), for
+    passes that blend the same fragments again.
     """
     nb_bands = counts.shape[0] - 1
+    keep = frag_pix.shape[0] > 1
     for b in nb.prange(nb_bands):
         r0 = b * band
         r1 = min(r0 + band, H) - 1
+        nf = frag_off[b] if keep else 0
         for q in range(counts[b], counts[b + 1]):
             t = tris[q]
             x0 = X[t, 0]
@@ -320,6 +327,10 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                             layers[i, j, 0] = d
                         if d > layers[i, j, 1]:
                             layers[i, j, 1] = d
+                        if keep:
+                            frag_pix[nf] = i * W + j
+                            frag_d[nf] = d
+                            nf += 1
                     else:
                         n = ibuf[i, j]
                         cap = layers.shape[0]
@@ -332,6 +343,8 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                         if k < cap:
                             layers[k, i, j] = d
                         ibuf[i, j] = n + 1
+        if keep:
+            frag_n[b] = nf - frag_off[b]
 
 
 class RasterSetup(NamedTuple):
@@ -351,6 +364,74 @@ class RasterSetup(NamedTuple):
     triangles: int
     dropped: int
     shape: tuple
+
+
+@nb.njit(cache=True)
+def _band_capacity(X, rows, counts, tris, W, band):
+    """Upper bound of the fragments of each band: the pixel centres in its triangles' boxes."""
+    nbands = counts.shape[0] - 1
+    off = np.zeros(nbands + 1, np.int64)
+    for b in range(nbands):
+        r0 = b * band
+        r1 = r0 + band - 1
+        c = 0
+        for q in range(counts[b], counts[b + 1]):
+            t = tris[q]
+            i0 = max(rows[t, 0], r0)
+            i1 = min(rows[t, 1], r1)
+            xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
+            xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
+            j0 = max(-((128 - xlo) // 256), 0)
+            j1 = min((xhi - 128) // 256, W - 1)
+            if i1 >= i0 and j1 >= j0:
+                c += (i1 - i0 + 1) * (j1 - j0 + 1)
+        off[b + 1] = off[b] + c
+    return off
+
+
+@nb.njit(cache=True, parallel=True)
+def _blend_fragments(frag_off, frag_n, frag_pix, frag_d, W, op, zlo, zhi, slices, bits):
+    """Blend recorded fragments into occupancy bitmasks (op 3 'or', 4 'add'), band by band."""
+    for b in nb.prange(frag_n.shape[0]):
+        for q in range(frag_off[b], frag_off[b] + frag_n[b]):
+            pix = frag_pix[q]
+            i = pix // W
+            j = pix - i * W
+            d = frag_d[q]
+            lo = zlo[i, j]
+            rng = zhi[i, j] - lo
+            s = 0
+            if rng > 0.0:
+                s = np.int64(np.floor((d - lo) / rng * (slices - 1) + 0.5))
+                if s < 0:
+                    s = 0
+                elif s > slices - 1:
+                    s = slices - 1
+            w = s >> 5
+            m = np.uint32(1) << np.uint32(s & 31)
+            if op == 3:
+                bits[i, j, w] = bits[i, j, w] | m
+            else:
+                bits[i, j, w] = np.uint32((np.uint64(bits[i, j, w]) + np.uint64(m)) & np.uint64(0xFFFFFFFF))
+
+
+class Fragments(NamedTuple):
+    """Every fragment of a pass, grouped by band of rows in rasterization order.
+
+    Recorded by :func:`rasterize` with ``op='minmax', keep_fragments=True``;
+    a later pass over the same triangles (the voxelization of Chaudhari
+    §3.3) then blends these fragments instead of rasterizing again - the
+    same fragments a GPU's second rasterization produces.
+    """
+
+    offsets: np.ndarray
+    counts: np.ndarray
+    pix: np.ndarray
+    depth: np.ndarray
+    shape: tuple
+
+
+_FRAGMENT_LIMIT = 64 * 2**20  # recorded fragments at most (~0.75 GiB); beyond, passes re-rasterize
 
 
 def raster_setup(tri_view, camera, clip=True, faces=None):
@@ -396,7 +477,7 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
 
 
 def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=32,
-              clip=True, return_stats=False):
+              clip=True, return_stats=False, keep_fragments=False):
     """Rasterize view-space triangles with one GPU-style blend operation.
 
     Parameters
@@ -423,6 +504,11 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     return_stats : bool
         Also return a dict with ``triangles``, ``dropped`` (beyond the guard
         band) and ``degenerate`` counts.
+    keep_fragments : bool
+        With ``op='minmax'``: also return the :class:`Fragments` (None when
+        there would be more than ``_FRAGMENT_LIMIT``). ``tri_view`` may be
+        such a record for ops ``or`` and ``add``, which then blend the
+        recorded fragments without rasterizing again (identical result).
 
     Returns
     -------
@@ -440,6 +526,21 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if op not in OPS:
         raise ValueError(f"rasterize: unknown op {op!r}; expected one of {sorted(OPS)}")
     W, H, sx, sy = camera.kernel_args()
+    if isinstance(tri_view, Fragments):
+        if op not in ("or", "add"):
+            raise ValueError(f"rasterize: recorded fragments serve ops 'or' and 'add', not {op!r}")
+        if tri_view.shape != (H, W):
+            raise ValueError(f"rasterize: the fragments were recorded for {tri_view.shape}, the camera is {(H, W)}")
+        if slices % 32 or slices < 32:
+            raise ValueError(f"rasterize: slices must be a positive multiple of 32, got {slices}")
+        if zlo is None or zhi is None:
+            raise ValueError("rasterize: op 'or'/'add' needs the per-pixel bounds zlo and zhi")
+        bits = np.zeros((H, W, slices // 32), np.uint32)
+        fr = tri_view
+        _blend_fragments(fr.offsets, fr.counts, fr.pix, fr.depth, W, OPS[op],
+                         np.ascontiguousarray(zlo, dtype=np.float64), np.ascontiguousarray(zhi, dtype=np.float64),
+                         int(slices), bits)
+        return bits
     rs = tri_view if isinstance(tri_view, RasterSetup) else raster_setup(tri_view, camera, clip)
     if rs.shape != (H, W):
         raise ValueError(f"rasterize: the set-up was made for {rs.shape}, the camera is {(H, W)}")
@@ -476,9 +577,23 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if code == 7:
         fbuf = np.full((H, W), np.inf)
         ids = np.full((H, W), -1, np.int64)
+    frag_off = np.zeros(1, np.int64)
+    frag_pix = np.zeros(1, np.int32)
+    frag_d = np.zeros(1)
+    frag_n = np.zeros(1, np.int64)
+    record = False
+    if keep_fragments and code == 6:
+        off = _band_capacity(X, rows, counts, tris, W, BAND)
+        if off[-1] <= _FRAGMENT_LIMIT:
+            record = True
+            frag_off = off
+            frag_pix = np.empty(max(int(off[-1]), 2), np.int32)
+            frag_d = np.empty(max(int(off[-1]), 2))
+            frag_n = np.zeros(len(off) - 1, np.int64)
     # depth is interpolated linearly on screen for an orthographic camera
     _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, not getattr(camera, "ortho", False),
-                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB)
+                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB,
+                   frag_off, frag_pix, frag_d, frag_n)
     if code in (0, 1):
         res = fbuf
     elif code == 7:
@@ -489,6 +604,8 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         res = bits
     elif code == 6:
         res = (layers[..., 0].copy(), layers[..., 1].copy())
+        if keep_fragments:
+            res = res + (Fragments(frag_off, frag_n, frag_pix, frag_d, (H, W)) if record else None,)
     else:
         res = (layers, ibuf)
     if return_stats:
@@ -600,5 +717,6 @@ def rasterize_ortho(tri_tex, shape, slab=None):
     d1 = np.zeros((1, 1))
     _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["nearest"], False,
                    depth, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
-                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64))
+                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64),
+                   np.zeros(1, np.int64), np.zeros(1, np.int32), np.zeros(1), np.zeros(1, np.int64))
     return depth, ids

@@ -16,7 +16,7 @@ from ..raster import rasterize
 __all__ = ["depth_bounds", "global_bounds"]
 
 
-def depth_bounds(tri_view, camera):
+def depth_bounds(tri_view, camera, keep_fragments=False):
     """Per-pixel local depth bounds.
 
     Parameters
@@ -31,12 +31,15 @@ def depth_bounds(tri_view, camera):
     zmin, zmax : (H, W) float64
         Nearest and farthest fragment depth; ``+inf`` / ``-inf`` where no
         fragment was drawn.
+    fragments : Fragments or None
+        Only with ``keep_fragments``: this pass's fragments, which the
+        voxelization pass blends again instead of re-rasterizing the mesh.
 
     References
     ----------
     Chaudhari (2008), §3.3, first rendering pass.
     """
-    return rasterize(tri_view, camera, "minmax", clip=True)
+    return rasterize(tri_view, camera, "minmax", clip=True, keep_fragments=keep_fragments)
 
 
 def global_bounds(zmin, zmax):

@@ -76,7 +76,8 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     tic = time.perf_counter
     t0 = tic()
     tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
-    zmin, zmax = depth_bounds(tri_view, cam)
+    mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
+    zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
     timings["minmax"] = (tic() - t0) * 1e3
     plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
     gmin, gmax = global_bounds(zmin, zmax)
@@ -87,7 +88,7 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     lut = None
     if p["depth"] == "bitmask":
         zlo, zhi = slice_bounds(zmin, zmax, p["slicing"])
-        bits = voxelize_bitmask(tri_view, cam, zlo, zhi, S, p["blend"])
+        bits = voxelize_bitmask(tri_view if frags is None else frags, cam, zlo, zhi, S, p["blend"])
         timings["voxelize"] = (tic() - t0) * 1e3
         plan.append({"stage": "voxelize", "ran": True,
                      "why": f"{S} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)"})

@@ -45,8 +45,10 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
 
     Parameters
     ----------
-    tri_view : (T, 3, 3) ndarray or RasterSetup
-        Triangles in view space (see :func:`~refraction_ref.raster.raster_setup`).
+    tri_view : (T, 3, 3) ndarray, RasterSetup or Fragments
+        Triangles in view space (see :func:`~refraction_ref.raster.raster_setup`),
+        or the fragments the min/max pass recorded (the same fragments, so
+        the same result, without rasterizing the mesh a second time).
     camera : Camera
     zlo, zhi : (H, W) ndarray
         Depth range of the slices at each pixel (see :func:`slice_bounds`).
