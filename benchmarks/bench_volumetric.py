@@ -40,23 +40,30 @@ def sphere_volume(N):
     return ior, b
 
 
-def bench_steps(N, M, reps):
+def bench_steps(N, M, reps, threads=None):
     ior, b = sphere_volume(N)
     field = gradient_field(ior, b)
     level, smax, _ = build_octree(ior)
     ext = np.full(ior.shape + (3,), 0.2, np.float32)
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0, -1, 0],
                                               "radiance": [1, 1, 1]}], b, ior.shape, M)
-    march_photons(field, ext, level, smax, b, pos[:1000], dirs[:1000], rad[:1000])  # warm-up
-    times, steps = [], 0
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        _, info = march_photons(field, ext, level, smax, b, pos, dirs, rad, ds_min=1.0)
-        times.append(time.perf_counter() - t0)
-        steps = info["total_steps"]
+    old = numba.get_num_threads()
+    if threads:
+        numba.set_num_threads(threads)
+    try:
+        march_photons(field, ext, level, smax, b, pos[:1000], dirs[:1000], rad[:1000])  # warm-up
+        times, steps = [], 0
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            _, info = march_photons(field, ext, level, smax, b, pos, dirs, rad, ds_min=1.0)
+            times.append(time.perf_counter() - t0)
+            steps = info["total_steps"]
+        nthreads = numba.get_num_threads()
+    finally:
+        numba.set_num_threads(old)
     t = statistics.median(times)
     return {"N": N, "photons": len(pos), "steps": steps, "seconds": t, "msteps_per_s": steps / t / 1e6,
-            "threads": numba.get_num_threads()}
+            "threads": nthreads, "all_seconds": times}
 
 
 def luneburg(N, R=0.8):
@@ -92,10 +99,15 @@ def bench_session(N, M, W, reps):
     scene = {"camera": {"width": W, "height": W}, "volumetric": {"resolution": N, "photons": M}}
     s = rr.Session(scene)
     s.render("volumetric")  # warm-up (JIT, caches)
-    s.clear()
-    t0 = time.perf_counter()
-    full = s.render("volumetric")
-    t_full = time.perf_counter() - t0
+    # the full pipeline, end to end (every stage runs: nothing cached), median of `reps` renders
+    fulls = []
+    for _ in range(reps):
+        s.clear()
+        t0 = time.perf_counter()
+        full = s.render("volumetric")
+        fulls.append(time.perf_counter() - t0)
+        assert [p["stage"] for p in full.meta["plan"] if p["ran"]] == list(rr.volumetric.pipeline.STAGES)
+    t_full = statistics.median(fulls)
     cams = []
     for k in range(reps):
         s.update({"camera.eye": [0.3 * np.sin(k + 1), 0.2, 2.6]})
@@ -105,7 +117,9 @@ def bench_session(N, M, W, reps):
         assert [p["stage"] for p in r.meta["plan"] if p["ran"]] == ["view"]
     t_cam = statistics.median(cams)
     return {"N": N, "photons_side": M, "image": W, "full_s": t_full, "camera_only_s": t_cam,
-            "ratio": t_cam / t_full, "full_timings_ms": full.meta["timings_ms"]}
+            "ratio": t_cam / t_full, "full_timings_ms": full.meta["timings_ms"],
+            "camera_timings_ms": r.meta["timings_ms"], "all_full_s": fulls, "all_camera_s": cams,
+            "threads": numba.get_num_threads()}
 
 
 def main(argv=None):
@@ -116,12 +130,16 @@ def main(argv=None):
     os.makedirs(OUT, exist_ok=True)
     res, lines = {}, []
 
+    res["load_before"] = os.getloadavg()
     r = bench_steps(N, M, reps)
     res["steps"] = r
     ok = r["msteps_per_s"] >= 10.0
     lines.append(f"{'PASS' if ok else 'MISS'} photon marching: {r['msteps_per_s']:.2f} M steps/s "
                  f"({r['steps']} steps, {r['photons']} photons, {N}^3 smoothed sphere, {r['threads']} threads, "
                  f"median {r['seconds']:.2f} s; target >= 10, paper 27.6)")
+    r1 = bench_steps(N, M, reps, threads=1)
+    res["steps_1thread"] = r1
+    lines.append(f"info photon marching on 1 thread: {r1['msteps_per_s']:.2f} M steps/s (median {r1['seconds']:.2f} s)")
 
     e = luneburg_miss(N, 64, "euler", 1.0)
     rk = [luneburg_miss(N, 64, "rk4", ds) for ds in (1.0, 2.0, 4.0, 8.0, 16.0)]
@@ -142,7 +160,12 @@ def main(argv=None):
     s = bench_session(N, M, W, reps)
     res["session"] = s
     lines.append(f"{'PASS' if s['ratio'] <= 0.1 else 'MISS'} camera-only re-render: {s['camera_only_s']:.3f} s vs "
-                 f"full pipeline {s['full_s']:.3f} s = {s['ratio']:.3f} (target <= 0.1; {W}x{W}, {N}^3, {M}^2 photons)")
+                 f"full pipeline {s['full_s']:.3f} s = {s['ratio']:.3f} (target <= 0.1; {W}x{W}, {N}^3, {M}^2 photons, "
+                 f"{s['threads']} threads; medians of {reps})")
+    res["load_after"] = os.getloadavg()
+    lines.append(f"info load average (1, 5, 15 min) before {res['load_before'][0]:.2f} {res['load_before'][1]:.2f} "
+                 f"{res['load_before'][2]:.2f}, after {res['load_after'][0]:.2f} {res['load_after'][1]:.2f} "
+                 f"{res['load_after'][2]:.2f} on {os.cpu_count()} CPUs")
     txt = "\n".join(lines)
     print(txt)
     tag = "_quick" if a.quick else ""

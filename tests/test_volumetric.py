@@ -309,3 +309,54 @@ def test_point_light_inside_volume_and_empty_scene_are_refused():
         rr.render(sc, method="volumetric")
     with pytest.raises(rr.SceneError, match="no objects and no 'volume'"):
         rr.render({"objects": [], "camera": {"width": 8, "height": 8}}, method="volumetric")
+
+
+# ------------------------------------------------------------------ speed-ups keep the results
+def test_reused_deposit_buffers_give_identical_results():
+    """The march keeps its deposit buffers for the next call (zeroed again): same sums, any order of calls."""
+    from refraction_ref.volumetric.march import release_workspace
+
+    ior = luneburg(32)
+    field, ext, level, smax, _ = _setup(ior)
+    ext[...] = 0.3
+    pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0.2, -1, 0.1],
+                                              "radiance": [1, 0.5, 0.25]}], BOUNDS, ior.shape, 24)
+    release_workspace()
+    a, ia = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)
+    b, ib = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)  # reused buffers
+    release_workspace()
+    c, _ = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)   # fresh buffers
+    assert ia["truncated"] > 0                      # the stopping rule removed late deposits again
+    assert np.array_equal(a, b) and np.array_equal(a, c)
+    assert a[..., :3].min() >= 0.0                  # removal is exact: nothing negative is left behind
+
+
+def test_view_box_entry_in_kernel_matches_slab_test():
+    """The viewing kernel's per-ray box entry equals photons.box_entry, edge cases included."""
+    from refraction_ref.volumetric.photons import box_entry
+    from refraction_ref.volumetric.view import box_entry_one
+
+    rng = np.random.default_rng(3)
+    o = rng.uniform(-3, 3, (4000, 3))
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[::7, 0] = 0.0                                  # rays parallel to a slab
+    d[::11, 1] = -0.0
+    o[::13, 0] = 1.0                                 # origins on a face
+    o[::17] = 0.0                                    # origins inside
+    t_ref, _ = box_entry(o, d, BOUNDS)
+    lo, hi = BOUNDS[0].copy(), BOUNDS[1].copy()
+    t = np.array([box_entry_one(lo, hi, *o[r], *d[r]) for r in range(len(o))])
+    assert np.array_equal(t, t_ref)
+
+
+def test_camera_only_rerender_matches_fresh_render():
+    """The source volume is packed once (smooth stage); a camera change re-renders exactly as from scratch."""
+    s = rr.Session(_small(scattering=[0.3, 0.2, 0.1], absorption=0.1, phase_g=0.3))
+    s.render("volumetric")
+    s.update({"camera.eye": [0.5, 0.3, 2.4]})
+    cam = s.render("volumetric")
+    assert _ran(cam) == ["view"]
+    fresh = rr.Session(s.scene).render("volumetric")
+    for k in ("image", "exit_pos", "exit_dir", "hit", "interfaces", "path_length", "status"):
+        assert np.array_equal(cam[k], fresh[k], equal_nan=True), k

@@ -28,7 +28,9 @@ applied exactly: photons still active at that iteration have their later
 deposits removed again (see below) and count as stopped.
 
 Determinism: deposits are accumulated as 64-bit fixed-point integers, in one
-buffer per worker, and the buffers are summed at the end. Integer addition
+buffer per worker, and the buffers are summed at the end (in parallel, by
+:func:`_merge_buffers`; the buffers are kept for the next march, as fresh
+pages cost more to map than zeroing mapped ones). Integer addition
 is associative, so the result is bit-identical whatever the number of
 threads or the order in which photons are processed; and a deposit can be
 *exactly* undone by subtracting it, which is how the stopping rule is
@@ -45,11 +47,12 @@ References
 from __future__ import annotations
 
 import math
+import threading
 
 import numba as nb
 import numpy as np
 
-__all__ = ["march_photons", "smooth_radiance", "trace_paths", "STATUS"]
+__all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS"]
 
 #: Photon status codes.
 STATUS = {"active": 0, "exited": 1, "stopped": 2, "absorbed": 3, "lost": 4}
@@ -59,33 +62,23 @@ INTEG_RK4 = 1
 
 
 @nb.njit(cache=True, inline="always")
+def _lerp_axis(u, na):
+    """Cell index and fraction of trilinear interpolation along one axis, clamped (NaN -> cell 0)."""
+    if not u >= 0.0:
+        return 0, 0.0
+    if u >= na - 1:
+        return na - 2, 1.0
+    c = int(u)  # truncation is floor for u >= 0
+    return c, u - c
+
+
+@nb.njit(cache=True, inline="always")
 def sample_field(field, lo, ih, x, y, z):
     """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume)."""
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
-    u = (x - lo[0]) * ih[0] - 0.5
-    w = (y - lo[1]) * ih[1] - 0.5
-    t = (z - lo[2]) * ih[2] - 0.5
-    i = int(math.floor(u))
-    j = int(math.floor(w))
-    k = int(math.floor(t))
-    if i < 0:
-        i, fx = 0, 0.0
-    elif i > nx - 2:
-        i, fx = nx - 2, 1.0
-    else:
-        fx = u - i
-    if j < 0:
-        j, fy = 0, 0.0
-    elif j > ny - 2:
-        j, fy = ny - 2, 1.0
-    else:
-        fy = w - j
-    if k < 0:
-        k, fz = 0, 0.0
-    elif k > nz - 2:
-        k, fz = nz - 2, 1.0
-    else:
-        fz = t - k
+    i, fx = _lerp_axis((x - lo[0]) * ih[0] - 0.5, nx)
+    j, fy = _lerp_axis((y - lo[1]) * ih[1] - 0.5, ny)
+    k, fz = _lerp_axis((z - lo[2]) * ih[2] - 0.5, nz)
     a0 = 0.0
     a1 = 0.0
     a2 = 0.0
@@ -138,31 +131,37 @@ def advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds):
 
 
 @nb.njit(cache=True, inline="always")
-def voxel_of(lo, ih, nx, ny, nz, x, y, z):
-    i = min(max(int(math.floor((x - lo[0]) * ih[0])), 0), nx - 1)
-    j = min(max(int(math.floor((y - lo[1]) * ih[1])), 0), ny - 1)
-    k = min(max(int(math.floor((z - lo[2]) * ih[2])), 0), nz - 1)
-    return i, j, k
+def cell(u, na):
+    """``min(max(floor(u), 0), na - 1)`` (truncation is floor for u >= 0; NaN -> 0)."""
+    if not u > 0.0:
+        return 0
+    c = int(u)
+    return c if c < na - 1 else na - 1
 
 
 @nb.njit(cache=True, inline="always")
-def _axis_distance(xa, da, lo, h, ih, na, size):
+def voxel_of(lo, ih, nx, ny, nz, x, y, z):
+    return cell((x - lo[0]) * ih[0], nx), cell((y - lo[1]) * ih[1], ny), cell((z - lo[2]) * ih[2], nz)
+
+
+@nb.njit(cache=True, inline="always")
+def _axis_distance(xa, da, lo, h, ih, na, lev):
     if da == 0.0:
         return np.inf
     u = (xa - lo) * ih
-    b0 = (max(int(math.floor(u)), 0) // size) * size
+    c = int(u) if u > 0.0 else 0
+    b0 = (c >> lev) << lev  # the node's first voxel (nodes of level lev cover 2^lev voxels)
     if da > 0.0:
-        return (min(b0 + size, na) - u) * h / da
+        return (min(b0 + (1 << lev), na) - u) * h / da
     return (b0 - u) * h / da
 
 
 @nb.njit(cache=True, inline="always")
 def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
     """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5)."""
-    size = 1 << lev
-    t = min(_axis_distance(x, dx, lo[0], h[0], ih[0], shape_n[0], size),
-            min(_axis_distance(y, dy, lo[1], h[1], ih[1], shape_n[1], size),
-                _axis_distance(z, dz, lo[2], h[2], ih[2], shape_n[2], size)))
+    t = min(_axis_distance(x, dx, lo[0], h[0], ih[0], shape_n[0], lev),
+            min(_axis_distance(y, dy, lo[1], h[1], ih[1], shape_n[1], lev),
+                _axis_distance(z, dz, lo[2], h[2], ih[2], shape_n[2], lev)))
     return max(t, 0.0)
 
 
@@ -182,14 +181,14 @@ def segment_exit(lo, hi, x, y, z, x1, y1, z1):
 
 
 @nb.njit(cache=True)
-def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0g, l0b, l1r, l1g, l1b,
+def deposit_segment(accr, nx, ny, nz, py, pz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0g, l0b, l1r, l1g, l1b,
                     dx, dy, dz, sr, sd, sgn):
     """Add radiance and radiance-weighted direction to every voxel of segment a -> b (3D DDA).
 
-    ``flat`` is a flat view of (buffers, nx, ny, nz, 6) int64 deposits,
-    written in buffer ``g``. The
-    radiance is interpolated linearly along the segment and weighted by the
-    length of the segment inside each voxel (in voxels); values are
+    ``accr`` is a (records, 6) view of the (buffers, nx, py, pz, 6) int64
+    deposits (py >= ny, pz >= nz: padded rows), written in buffer ``g``.
+    The radiance is interpolated linearly along the segment and weighted by
+    the length of the segment inside each voxel (in voxels); values are
     converted to fixed point with scale ``sr`` (radiance) and ``sd``
     (direction) by truncation, and added with sign ``sgn``.
     """
@@ -202,9 +201,9 @@ def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0
     lv = math.sqrt(du * du + dw * dw + dt * dt)
     if not lv > 0.0:
         return
-    i = min(max(int(math.floor(u0)), 0), nx - 1)
-    j = min(max(int(math.floor(w0)), 0), ny - 1)
-    k = min(max(int(math.floor(t0)), 0), nz - 1)
+    i = cell(u0, nx)
+    j = cell(w0, ny)
+    k = cell(t0, nz)
     si = 1 if du > 0 else -1
     sj = 1 if dw > 0 else -1
     sk = 1 if dt > 0 else -1
@@ -222,10 +221,10 @@ def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0
     ab, bb = l0b * c, (l1b - l0b) * c
     e = sd / sr
     ex, ey, ez = dx * e, dy * e, dz * e
-    sti = si * ny * nz * 6
-    stj = sj * nz * 6
-    stk = sk * 6
-    base = (((g * nx + i) * ny + j) * nz + k) * 6
+    sti = si * py * pz
+    stj = sj * pz
+    stk = sk
+    rec = ((g * nx + i) * py + j) * pz + k
     t = 0.0
     for _ in range(nx + ny + nz + 3):
         tn = min(ti, min(tj, min(tk, 1.0)))
@@ -236,30 +235,30 @@ def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0
             gg = (ag + bg * tm) * w
             b = (ab + bb * tm) * w
             sm = r + gg + b
-            flat[base] += np.int64(r)
-            flat[base + 1] += np.int64(gg)
-            flat[base + 2] += np.int64(b)
-            flat[base + 3] += np.int64(ex * sm)
-            flat[base + 4] += np.int64(ey * sm)
-            flat[base + 5] += np.int64(ez * sm)
+            accr[rec, 0] += np.int64(r)
+            accr[rec, 1] += np.int64(gg)
+            accr[rec, 2] += np.int64(b)
+            accr[rec, 3] += np.int64(ex * sm)
+            accr[rec, 4] += np.int64(ey * sm)
+            accr[rec, 5] += np.int64(ez * sm)
         if tn >= 1.0:
             return
         if ti <= tj and ti <= tk:
             i += si
             ti += di
-            base += sti
+            rec += sti
             if i < 0 or i >= nx:
                 return
         elif tj <= tk:
             j += sj
             tj += dj
-            base += stj
+            rec += stj
             if j < 0 or j >= ny:
                 return
         else:
             k += sk
             tk += dk
-            base += stk
+            rec += stk
             if k < 0 or k >= nz:
                 return
         t = tn
@@ -267,7 +266,7 @@ def deposit_segment(flat, nx, ny, nz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0
 
 @nb.njit(cache=True)
 def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
-               ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, flat, g, sr, sd,
+               ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, accr, g, py, pz, sr, sd,
                exit_pos, exit_dir, record, path, path_n):
     """Trace photon p to its end; returns (steps, status, max relative |v|-n drift)."""
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
@@ -350,7 +349,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
             ng = lg * math.exp(-kg * seg)
             nb_ = lb * math.exp(-kb * seg)
         if steps >= dep_from and seg > 0.0:
-            deposit_segment(flat, nx, ny, nz, g, lo, ih, x, y, z, ex, ey, ez, lr, lg, lb, nr, ng, nb_,
+            deposit_segment(accr, nx, ny, nz, py, pz, g, lo, ih, x, y, z, ex, ey, ez, lr, lg, lb, nr, ng, nb_,
                             sx / seg, sy / seg, sz / seg, sr, sd, sgn)
         steps += 1
         if record and path_n[0] < path.shape[0]:
@@ -383,7 +382,8 @@ def _march_kernel(field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
                   ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, acc, sr, sd,
                   out_steps, out_status, out_drift, exit_pos, exit_dir):
     nbuf = acc.shape[0]
-    flat = acc.reshape(-1)
+    accr = acc.reshape(-1, 6)
+    py, pz = acc.shape[2], acc.shape[3]
     dummy_path = np.zeros((1, 3))
     dummy_n = np.zeros(1, np.int64)
     chunk = 256
@@ -394,11 +394,26 @@ def _march_kernel(field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
                 continue
             p = sel[q]
             st, ss, dr = _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
-                                    ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, flat, g, sr, sd,
+                                    ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, accr, g, py, pz, sr, sd,
                                     exit_pos, exit_dir, False, dummy_path, dummy_n)
             out_steps[p] = st
             out_status[p] = ss
             out_drift[p] = dr
+
+
+@nb.njit(cache=True, parallel=True)
+def _merge_buffers(acc, sr, sd, out):
+    """``out = sum over buffers of acc``, scaled back from fixed point (exact integer sums, any order)."""
+    nbuf = acc.shape[0]
+    nx, ny, nz = out.shape[0], out.shape[1], out.shape[2]
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                for c in range(6):
+                    t = acc[0, i, j, k, c]
+                    for b in range(1, nbuf):
+                        t += acc[b, i, j, k, c]
+                    out[i, j, k, c] = np.float64(t) / (sr if c < 3 else sd)
 
 
 @nb.njit(cache=True)
@@ -432,6 +447,45 @@ def locality_order(pos, bounds, shape):
     keys = np.empty(len(pos), np.int64)
     _morton_keys(np.ascontiguousarray(pos, dtype=np.float64), lo, ih, keys)
     return np.argsort(keys, kind="stable")
+
+
+#: The deposit buffers of the last march, kept for the next one: fresh pages of a new
+#: 100 MB buffer cost more to map (first touch) than zeroing mapped ones.
+_WORKSPACE = []
+_WORKSPACE_LOCK = threading.Lock()
+_WORKSPACE_MAX_BYTES = 1 << 30
+
+
+@nb.njit(cache=True, parallel=True)
+def _zero(a):
+    f = a.reshape(-1)
+    n = f.shape[0]
+    step = 1 << 16
+    for b in nb.prange((n + step - 1) // step):
+        for q in range(b * step, min(n, (b + 1) * step)):
+            f[q] = 0
+
+
+def _take_workspace(shape):
+    """Zeroed int64 deposit buffers of the given shape, reusing the last march's when it fits."""
+    with _WORKSPACE_LOCK:
+        a = _WORKSPACE.pop() if _WORKSPACE else None
+    if a is not None and a.shape == tuple(shape):
+        _zero(a)
+        return a
+    return np.zeros(shape, np.int64)
+
+
+def _give_workspace(a):
+    if a.nbytes <= _WORKSPACE_MAX_BYTES:
+        with _WORKSPACE_LOCK:
+            _WORKSPACE[:] = [a]
+
+
+def release_workspace():
+    """Free the deposit buffers kept between marches."""
+    with _WORKSPACE_LOCK:
+        _WORKSPACE.clear()
 
 
 def _geometry(bounds, shape):
@@ -495,7 +549,9 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     vox_bytes = nx * ny * nz * 48
     if buffers is None:
         buffers = max(1, min(nb.get_num_threads(), int(2 * 2**30 // max(vox_bytes, 1))))
-    acc = np.zeros((int(buffers), nx, ny, nz, 6), np.int64)
+    # one voxel of padding on the two inner axes: the rows of a buffer are then not a power of two
+    # bytes apart, so a photon walking along y or x does not keep hitting the same cache sets
+    acc = _take_workspace((int(buffers), nx, ny + 1, nz + 1, 6))
     lmax = float(np.max(rad)) if P else 1.0
     total = max(float(np.sum(np.max(rad, axis=1))) if P else 1.0, 1e-300)
     sr = 2.0 ** 58 / (16.0 * total)  # 16 = generous bound on one photon's length per voxel
@@ -534,10 +590,9 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
                 exit_pos[late] = np.nan
                 exit_dir[late] = np.nan
                 truncated = int(len(late))
-    tot = acc.sum(axis=0)
     sums = np.empty((nx, ny, nz, 6))
-    sums[..., :3] = tot[..., :3] / sr
-    sums[..., 3:] = tot[..., 3:] / sd
+    _merge_buffers(acc, sr, sd, sums)
+    _give_workspace(acc)
     info = {
         "exit_pos": exit_pos, "exit_dir": exit_dir, "status": status, "steps": steps,
         "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
@@ -565,7 +620,7 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
     pos = np.ascontiguousarray(pos, dtype=np.float64)
     dirs = np.ascontiguousarray(dirs, dtype=np.float64)
     rad = np.ones_like(pos)
-    acc = np.zeros(6, np.int64)
+    acc = np.zeros((1, 6), np.int64)
     ep = np.full(pos.shape, np.nan)
     ed = np.full(pos.shape, np.nan)
     out = []
@@ -575,7 +630,7 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
         _trace_one(p, np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
                    np.ascontiguousarray(level), np.ascontiguousarray(smax), lo, hi, h, ih, shape_n, hmin,
                    pos, dirs, rad, float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
-                   0.0, 1 << 62, 0, acc, 0, 1.0, 1.0, ep, ed, True, path, pn)
+                   0.0, 1 << 62, 0, acc, 0, 1, 1, 1.0, 1.0, ep, ed, True, path, pn)
         out.append(path[: pn[0]].copy())
     return out
 

@@ -118,7 +118,8 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0):
     stats : dict
         ``constant_fraction`` (voxels in constant nodes), ``limited_fraction``
         (eps <= range < eps2), ``levels`` histogram, ``constant_index`` (the
-        whole volume is one constant node).
+        whole volume is one constant node), ``n_min`` / ``n_max`` (the range
+        of the index).
 
     References
     ----------
@@ -134,5 +135,6 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0):
         "limited_fraction": float(np.count_nonzero(~const & (level > 0))) / const.size,
         "levels": np.bincount(level.ravel().astype(np.int64), minlength=len(pyr)).tolist(),
         "constant_index": bool(float(top_mx.max() - top_mn.min()) < eps),
+        "n_min": float(top_mn.min()), "n_max": float(top_mx.max()),
     }
     return level, smax, stats

@@ -16,7 +16,9 @@ stage           inputs                                               section
 ``march``       gradient, octree, photons; ds_min, stiff,            §4.4, eqs. 4-6
                 integrator, max_steps, min_radiance, stop_fraction,
                 scattering, absorption
-``smooth``      march                                                §4.4
+``smooth``      march (and, for the viewing pass, the source volume  §4.4
+                sigma L, direction, kappa, which no camera change
+                alters)
 ``view``        gradient, octree, smooth; camera, environment,       §4.5
                 phase_g, integrator, scattering, absorption
 ==============  ===================================================  ===============
@@ -353,7 +355,12 @@ def render_volumetric(scene, cache=None, warm=True):
         elif d["volume"] is None and len(d["objects"]):
             msg += "; every object has a constant index: only the blurred boundary shells bend light"
         plan[-1]["why"] += " | " + msg
-    sigma, kappa = _media(vox, v)
+    media = {}
+
+    def _sigma_kappa():  # only the stages that run need them (not a camera-only re-render)
+        if not media:
+            media["sk"] = _media(vox, v)
+        return media["sk"]
 
     def _photons():
         if not d["lights"]:
@@ -367,7 +374,7 @@ def render_volumetric(scene, cache=None, warm=True):
     pos, dirs, rad = ph[0], ph[1], ph[2]
 
     def _march():
-        return march_photons(field, kappa, level, smax, bounds, pos, dirs, rad, ds_min=float(v["ds_min"]),
+        return march_photons(field, _sigma_kappa()[1], level, smax, bounds, pos, dirs, rad, ds_min=float(v["ds_min"]),
                              stiff=float(v["stiff"]), integrator=v["integrator"], max_steps=int(v["max_steps"]),
                              min_radiance=float(v["min_radiance"]), stop_fraction=float(v["stop_fraction"]))
 
@@ -376,17 +383,22 @@ def render_volumetric(scene, cache=None, warm=True):
         plan[-1]["why"] += (f" | {len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
                             f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
                             f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
-    rad_v, dir_v = step("smooth", lambda: smooth_radiance(sums))
+    def _smooth():
+        rad, dirn = smooth_radiance(sums)
+        # what a viewing ray reads per voxel (sigma L, direction, kappa): it does not depend on the
+        # camera, so it is packed once here rather than on every camera change
+        return rad, dirn, source_volume(rad, dirn, *_sigma_kappa())
+
+    rad_v, dir_v, src = step("smooth", _smooth)
 
     cam = Camera.from_dict(d["camera"])
     H, W = cam.shape
 
     def _view():
         origin, rdir = cam.primary_rays()
-        src = source_volume(rad_v, dir_v, sigma, kappa)
         vw = view_volume(field, src, smax, bounds, origin.reshape(-1, 3), rdir.reshape(-1, 3),
                          integrator=v["integrator"], phase_g=float(v["phase_g"]),
-                         outside_ior=float(d["outside_ior"]))
+                         outside_ior=float(d["outside_ior"]), n_range=(ost["n_min"], ost["n_max"]))
         env = environment_lookup(d["environment"], vw["last_dir"], scene.base_dir).astype(np.float64)
         img = vw["inscatter"] + vw["transmittance"] * env
         return {

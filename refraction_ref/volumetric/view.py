@@ -13,7 +13,11 @@ environment seen along its final direction is added, times the
 transmittance.
 
 Where the octree marks the index constant, the ray moves straight (the
-field is not sampled), exactly as photons do.
+field is not sampled), exactly as photons do; its direction is normalised
+once per straight run and such a step's length is ds exactly, so that
+``exp(-kappa ds)`` is computed once per run of equal kappa (grey
+extinction: one exp for the three channels). The ray's entry into the
+volume box is a slab test inside the kernel.
 
 Per-pixel ORACLE keys: ``exit_pos``/``exit_dir`` are where and in which
 direction the viewing ray leaves the *volume box*; ``hit`` means the ray
@@ -59,16 +63,56 @@ def source_volume(radiance, direction, scattering, extinction):
     return out
 
 
+@nb.njit(cache=True, inline="always")
+def _cell(lo, ih, na, xa):
+    """``min(max(floor((xa - lo) ih), 0), na - 1)`` without the floor (truncation is floor for u >= 0)."""
+    u = (xa - lo) * ih
+    if not u > 0.0:
+        return 0
+    c = int(u)
+    return c if c < na - 1 else na - 1
+
+
+@nb.njit(cache=True, inline="always")
+def _slab(o, d, lo, hi):
+    """One axis of the slab test, as :func:`~refraction_ref.volumetric.photons.box_entry` (NaN: a miss)."""
+    inv = 1.0 / d if d != 0.0 else math.copysign(np.inf, d)
+    t0 = (lo - o) * inv
+    t1 = (hi - o) * inv
+    if math.isnan(t0):
+        return -np.inf, np.inf
+    if math.isnan(t1):
+        return np.nan, np.nan
+    return min(t0, t1), max(t0, t1)
+
+
+@nb.njit(cache=True, inline="always")
+def box_entry_one(lo, hi, ox, oy, oz, dx, dy, dz):
+    """Entry parameter of one ray into the box (clamped at 0), ``inf`` when it misses."""
+    a0, b0 = _slab(ox, dx, lo[0], hi[0])
+    a1, b1 = _slab(oy, dy, lo[1], hi[1])
+    a2, b2 = _slab(oz, dz, lo[2], hi[2])
+    t_in = max(max(a0, max(a1, a2)), 0.0)
+    t_out = min(b0, min(b1, b2))
+    if math.isnan(a0) or math.isnan(a1) or math.isnan(a2) or not (t_out > t_in):
+        return np.inf
+    return t_in
+
+
 @nb.njit(cache=True, parallel=True)
-def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, t_in, integ, g, n_out, n_half, side,
+def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_out, n_half, side,
                  max_steps, color, trans, exit_pos, exit_dir, hit, interfaces, path_len, status):
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
+    lo0, lo1, lo2 = lo[0], lo[1], lo[2]
+    ih0, ih1, ih2 = ih[0], ih[1], ih[2]
+    iso = 1.0 / (4.0 * math.pi)
     for r in nb.prange(org.shape[0]):
-        if not (t_in[r] < np.inf):
+        t_in = box_entry_one(lo, hi, org[r, 0], org[r, 1], org[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2])
+        if not (t_in < np.inf):
             continue
-        x = org[r, 0] + t_in[r] * dirs[r, 0]
-        y = org[r, 1] + t_in[r] * dirs[r, 1]
-        z = org[r, 2] + t_in[r] * dirs[r, 2]
+        x = org[r, 0] + t_in * dirs[r, 0]
+        y = org[r, 1] + t_in * dirs[r, 1]
+        z = org[r, 2] + t_in * dirs[r, 2]
         n = sample_field(field, lo, ih, x, y, z)[0]
         vx, vy, vz = n * dirs[r, 0], n * dirs[r, 1], n * dirs[r, 2]
         cr = 0.0
@@ -83,52 +127,78 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, t_in, integ, 
         met = inside
         st = 2
         ds = hmin
+        # the unit direction v / |v| is reused while v does not change (straight steps in constant nodes)
+        ux, uy, uz = 0.0, 0.0, 0.0
+        u_ok = False
+        # exp(-kappa seg) is reused while kappa and seg do not change (grey, uniform media)
+        ek, eseg, ea = -1.0, -1.0, 1.0
         for _ in range(max_steps):
-            i, j, k = voxel_of(lo, ih, nx, ny, nz, x, y, z)
-            if smax[i, j, k] == np.inf:
+            i = _cell(lo0, ih0, nx, x)
+            j = _cell(lo1, ih1, ny, y)
+            k = _cell(lo2, ih2, nz, z)
+            const = smax[i, j, k] == np.inf
+            if const:
                 n = np.float64(field[i, j, k, 0])
                 gx, gy, gz = 0.0, 0.0, 0.0
-                const = True
             else:
                 n, gx, gy, gz = sample_field(field, lo, ih, x, y, z)
-                const = False
             now = side * (n - n_half) > 0.0
             if now != inside:
                 crossings += 1
                 inside = now
                 met = True
-            vn = math.sqrt(vx * vx + vy * vy + vz * vz)
-            if not (vn > 1e-12):
-                st = 4
-                break
-            ux, uy, uz = vx / vn, vy / vn, vz / vn
+            if not u_ok:
+                vn = math.sqrt(vx * vx + vy * vy + vz * vz)
+                if not (vn > 1e-12):
+                    st = 4
+                    break
+                ux, uy, uz = vx / vn, vy / vn, vz / vn
+                u_ok = True
             if const:
                 x1, y1, z1, vx1, vy1, vz1 = x + ds * ux, y + ds * uy, z + ds * uz, vx, vy, vz
+            elif integ == 0:  # eqs. 4-5, written out (a call passing arrays costs reference counting)
+                sn = ds / n
+                x1, y1, z1 = x + sn * vx, y + sn * vy, z + sn * vz
+                vx1, vy1, vz1 = vx + ds * gx, vy + ds * gy, vz + ds * gz
+                u_ok = False
             else:
                 x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds)
-            if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
-                    and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
-                st = 4
-                break
+                u_ok = False
+                if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
+                        and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
+                    st = 4
+                    break
             s = segment_exit(lo, hi, x, y, z, x1, y1, z1)
-            seg = s * math.sqrt((x1 - x) ** 2 + (y1 - y) ** 2 + (z1 - z) ** 2)
+            if const:  # a straight step: its length is ds (the chord would only add rounding noise)
+                seg = s * ds
+            else:
+                seg = s * math.sqrt((x1 - x) ** 2 + (y1 - y) ** 2 + (z1 - z) ** 2)
             # in-scattering of the voxel towards the camera (-u), attenuated so far
             sr, sg, sb = src[i, j, k, 0], src[i, j, k, 1], src[i, j, k, 2]
             if sr != 0.0 or sg != 0.0 or sb != 0.0:
                 if g != 0.0:
                     ph = hg_phase(-(src[i, j, k, 3] * ux + src[i, j, k, 4] * uy + src[i, j, k, 5] * uz), g)
                 else:
-                    ph = 1.0 / (4.0 * math.pi)
+                    ph = iso
                 cr += tr * sr * ph * seg
                 cg += tg * sg * ph * seg
                 cb += tb * sb * ph * seg
             kr, kg, kb = src[i, j, k, 6], src[i, j, k, 7], src[i, j, k, 8]
-            if kr != 0.0:
-                tr *= math.exp(-kr * seg)
-            if kg != 0.0:
-                tg *= math.exp(-kg * seg)
-            if kb != 0.0:
-                tb *= math.exp(-kb * seg)
+            if kr == kg and kg == kb:
+                if kr != 0.0:
+                    if kr != ek or seg != eseg:
+                        ek, eseg = kr, seg
+                        ea = math.exp(-kr * seg)
+                    tr *= ea
+                    tg *= ea
+                    tb *= ea
+            else:
+                if kr != 0.0:
+                    tr *= math.exp(-kr * seg)
+                if kg != 0.0:
+                    tg *= math.exp(-kg * seg)
+                if kb != 0.0:
+                    tb *= math.exp(-kb * seg)
             if inside:
                 plen += seg
             if s < 1.0:
@@ -157,7 +227,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, t_in, integ, 
 
 
 def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", phase_g=0.0,
-                outside_ior=1.0, max_steps=0):
+                outside_ior=1.0, max_steps=0, n_range=None):
     """Trace viewing rays through the volume (§4.5).
 
     Parameters
@@ -177,6 +247,9 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     outside_ior : float
     max_steps : int
         0 = ``4 * (nx + ny + nz)``.
+    n_range : (float, float), optional
+        Minimum and maximum of the index (e.g. the octree's ``n_min``,
+        ``n_max``), to save a pass over the volume.
 
     Returns
     -------
@@ -186,16 +259,15 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
         the ray missed the box), ``hit``, ``interfaces``, ``path_length``,
         ``status``.
     """
-    from .photons import box_entry
-
     lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     R = len(org)
-    t_in, _ = box_entry(org, d, np.stack([lo, hi]))
-    nvals = field[..., 0]
-    far = float(nvals.max()) if abs(float(nvals.max()) - outside_ior) >= abs(float(nvals.min()) - outside_ior) \
-        else float(nvals.min())
+    if n_range is None:
+        nmin, nmax = float(field[..., 0].min()), float(field[..., 0].max())
+    else:  # as float32, like the field
+        nmin, nmax = float(np.float32(n_range[0])), float(np.float32(n_range[1]))
+    far = nmax if abs(nmax - outside_ior) >= abs(nmin - outside_ior) else nmin
     side = 1.0 if far >= outside_ior else -1.0
     n_half = 0.5 * (outside_ior + far) if far != outside_ior else np.inf * side
     if max_steps <= 0:
@@ -209,7 +281,7 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     plen = np.zeros(R)
     status = np.zeros(R, np.int8)
     _view_kernel(np.ascontiguousarray(field), np.ascontiguousarray(src), np.ascontiguousarray(smax),
-                 lo, hi, h, ih, hmin, org, d, t_in, _integ_code(integrator), float(phase_g), float(outside_ior),
+                 lo, hi, h, ih, hmin, org, d, _integ_code(integrator), float(phase_g), float(outside_ior),
                  float(n_half), side, int(max_steps), color, trans, exit_pos, exit_dir, hit, inter, plen, status)
     # the direction the environment is seen along (NaN, i.e. black, where the ray did not get out)
     last_dir = exit_dir.copy()
