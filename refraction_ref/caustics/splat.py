@@ -13,7 +13,8 @@ Gather
     over a ``window`` x ``window`` square of texels (``window = 7`` in the
     thesis's citation), normalised to unit sum and applied separably, with
     mirror folding at the map's border so that it too keeps the total flux.
-    ``sigma = (window - 1) / 4`` (the window spans +-2 sigma).
+    ``sigma = (window - 1) / 6``: the window spans +-3 sigma, the usual
+    truncation of a Gaussian (99.7% of its weight).
 
 Determinism: photons are binned into bands of 8 map rows (in photon index
 order, as the rasterizer bins triangles) and each band is owned by one
@@ -134,12 +135,12 @@ def splat_bilinear(col, row, values, shape, out=None):
 
 
 def gaussian_weights(window):
-    """Normalised 1-D Gaussian taps of a ``window``-texel gathering kernel, ``sigma = (window - 1) / 4``."""
+    """Normalised 1-D Gaussian taps of a ``window``-texel gathering kernel, ``sigma = (window - 1) / 6``."""
     r = int(window) // 2
     if r == 0:
         return np.ones(1)
     x = np.arange(-r, r + 1, dtype=np.float64)
-    sigma = (int(window) - 1) / 4.0
+    sigma = (int(window) - 1) / 6.0
     w = np.exp(-0.5 * (x / sigma) ** 2)
     return w / w.sum()
 
