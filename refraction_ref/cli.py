@@ -53,7 +53,7 @@ def _cmd_compare(a):
         print(json.dumps(c, indent=1))
     else:
         print(format_comparison(c, a.a, a.b))
-    if a.plot:
+    if a.plot and "status" in A.arrays and "status" in B.arrays:
         from .compare import plot_comparison
 
         print("wrote " + plot_comparison(A.arrays, B.arrays, a.plot, "A", "B"))

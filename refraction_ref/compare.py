@@ -32,8 +32,23 @@ def compare_arrays(a, b, mask=None):
         ``pixels`` compared; ``exit_dir_deg`` median / p90 / p99 / max over
         pixels where both exited (``both_exited``); ``interfaces_agree``
         and ``status_agree`` (fractions); ``status_a`` / ``status_b``
-        histograms; ``image_rmse`` over all pixels; ``hit_agree``.
+        histograms; ``image_rmse`` over all pixels; ``hit_agree``;
+        ``caustic_rel_l1`` per shared ``caustic_map_r`` (relative L1, both
+        blurred by one texel). Runs without per-pixel keys (water caustics)
+        get only the caustic and image statistics.
     """
+    caustics = {}
+    for k in sorted(a):
+        if k.startswith("caustic_map_") and k in b:
+            from .levelmap.metrics import relative_l1
+
+            caustics[k] = relative_l1(a[k], b[k], blur=1.0)
+    if "status" not in a or "status" not in b:  # e.g. water caustics: no per-pixel refraction keys
+        out = {"caustic_rel_l1": caustics}
+        if "image" in a and "image" in b and np.shape(a["image"]) == np.shape(b["image"]):
+            out["image_rmse"] = float(np.sqrt(np.mean((np.asarray(a["image"], np.float64)
+                                                       - np.asarray(b["image"], np.float64)) ** 2)))
+        return out
     if a["status"].shape != b["status"].shape:
         raise ValueError(f"compare: image shapes differ {a['status'].shape} vs {b['status'].shape}; "
                          "render both runs with the same camera")
@@ -58,6 +73,8 @@ def compare_arrays(a, b, mask=None):
         "status_a": np.bincount(a["status"][mask].astype(np.int64), minlength=5).tolist(),
         "status_b": np.bincount(b["status"][mask].astype(np.int64), minlength=5).tolist(),
     }
+    if caustics:
+        out["caustic_rel_l1"] = caustics
     if "image" in a and "image" in b:
         out["image_rmse"] = float(np.sqrt(np.mean((np.asarray(a["image"], np.float64)
                                                    - np.asarray(b["image"], np.float64)) ** 2)))
@@ -65,6 +82,11 @@ def compare_arrays(a, b, mask=None):
 
 
 def format_comparison(c, name_a="A", name_b="B"):
+    extra = [f"{k}: relative L1 (both blurred one texel) {v:.4f}" for k, v in c.get("caustic_rel_l1", {}).items()]
+    if "exit_dir_deg" not in c:
+        if "image_rmse" in c:
+            extra.append(f"image RMSE: {c['image_rmse']:.4f}")
+        return "\n".join(extra) if extra else "nothing comparable: neither per-pixel nor caustic keys in common"
     e = c["exit_dir_deg"]
     lines = [
         f"compared {c['pixels']} pixels hit in {name_b}; both exited: {c['both_exited']}",
@@ -76,7 +98,7 @@ def format_comparison(c, name_a="A", name_b="B"):
     ]
     if "image_rmse" in c:
         lines.append(f"image RMSE: {c['image_rmse']:.4f}")
-    return "\n".join(lines)
+    return "\n".join(lines + extra)
 
 
 def plot_comparison(a, b, path, name_a="A", name_b="B"):
