@@ -50,7 +50,7 @@ import numba as nb
 import numpy as np
 
 __all__ = ["rasterize", "raster_setup", "RasterSetup", "Fragments", "clip_near", "OPS", "ortho_setup",
-           "rasterize_ortho"]
+           "rasterize_ortho", "ortho_fragments"]
 
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
 
@@ -215,7 +215,7 @@ def _bias(ax, ay, bx, by):
 @nb.njit(cache=True, parallel=True)
 def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                    fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
-                   frag_off, frag_pix, frag_d, frag_n):
+                   frag_off, frag_pix, frag_d, frag_n, frag_s):
     """Rasterize binned triangles band by band with blend ``op`` (see ``OPS``).
 
     Depth is interpolated perspective-correctly (1/d linear on screen) when
@@ -224,7 +224,8 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
     ``floor((d - z0) / s)`` lies in [klo, khi] (no restriction when s <= 0).
     With op 'minmax' and ``frag_pix`` longer than 1, every fragment is also
     recorded, band by band from ``frag_off[b]`` (``frag_n[b]`` of them), for
-    passes that blend the same fragments again.
+    passes that blend the same fragments again; ``frag_s`` gets the
+    triangle's screen orientation (-1 as given, +1 when it was flipped).
     """
     nb_bands = counts.shape[0] - 1
     keep = frag_pix.shape[0] > 1
@@ -246,11 +247,13 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
             area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
             if area == 0:
                 continue
+            facing = np.int8(-1)
             if area < 0:  # no culling: re-orient instead
                 x1, x2 = x2, x1
                 y1, y2 = y2, y1
                 d1, d2 = d2, d1
                 area = -area
+                facing = np.int8(1)
             i0 = max(rows[t, 0], r0)
             i1 = min(rows[t, 1], r1)
             xmin = min(x0, min(x1, x2))
@@ -330,6 +333,7 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                         if keep:
                             frag_pix[nf] = i * W + j
                             frag_d[nf] = d
+                            frag_s[nf] = facing
                             nf += 1
                     else:
                         n = ibuf[i, j]
@@ -429,9 +433,22 @@ class Fragments(NamedTuple):
     pix: np.ndarray
     depth: np.ndarray
     shape: tuple
+    facing: np.ndarray = None  # -1 / +1: the triangle's orientation on screen
 
 
-_FRAGMENT_LIMIT = 64 * 2**20  # recorded fragments at most (~0.75 GiB); beyond, passes re-rasterize
+_FRAGMENT_LIMIT = 64 * 2**20  # recorded fragments at most (~0.8 GiB); beyond, passes re-rasterize
+_NO_FRAGMENTS = (np.zeros(1, np.int64), np.zeros(1, np.int32), np.zeros(1), np.zeros(1, np.int64),
+                 np.zeros(1, np.int8))
+
+
+def _fragment_buffers(rs, W):
+    """Empty :class:`Fragments` sized by the band capacities of a set-up; None beyond the limit."""
+    off = _band_capacity(rs.X, rs.rows, rs.counts, rs.tris, W, BAND)
+    if off[-1] > _FRAGMENT_LIMIT:
+        return None
+    n = max(int(off[-1]), 2)
+    return Fragments(off, np.zeros(len(off) - 1, np.int64), np.empty(n, np.int32), np.empty(n),
+                     rs.shape, np.empty(n, np.int8))
 
 
 def raster_setup(tri_view, camera, clip=True, faces=None):
@@ -577,23 +594,11 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     if code == 7:
         fbuf = np.full((H, W), np.inf)
         ids = np.full((H, W), -1, np.int64)
-    frag_off = np.zeros(1, np.int64)
-    frag_pix = np.zeros(1, np.int32)
-    frag_d = np.zeros(1)
-    frag_n = np.zeros(1, np.int64)
-    record = False
-    if keep_fragments and code == 6:
-        off = _band_capacity(X, rows, counts, tris, W, BAND)
-        if off[-1] <= _FRAGMENT_LIMIT:
-            record = True
-            frag_off = off
-            frag_pix = np.empty(max(int(off[-1]), 2), np.int32)
-            frag_d = np.empty(max(int(off[-1]), 2))
-            frag_n = np.zeros(len(off) - 1, np.int64)
+    fr = _fragment_buffers(rs, W) if keep_fragments and code == 6 else None
+    frag_args = _NO_FRAGMENTS if fr is None else (fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
     # depth is interpolated linearly on screen for an orthographic camera
     _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, not getattr(camera, "ortho", False),
-                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB,
-                   frag_off, frag_pix, frag_d, frag_n)
+                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB, *frag_args)
     if code in (0, 1):
         res = fbuf
     elif code == 7:
@@ -605,7 +610,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     elif code == 6:
         res = (layers[..., 0].copy(), layers[..., 1].copy())
         if keep_fragments:
-            res = res + (Fragments(frag_off, frag_n, frag_pix, frag_d, (H, W)) if record else None,)
+            res = res + (fr,)
     else:
         res = (layers, ibuf)
     if return_stats:
@@ -717,6 +722,43 @@ def rasterize_ortho(tri_tex, shape, slab=None):
     d1 = np.zeros((1, 1))
     _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["nearest"], False,
                    depth, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
-                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64),
-                   np.zeros(1, np.int64), np.zeros(1, np.int32), np.zeros(1), np.zeros(1, np.int64))
+                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64), *_NO_FRAGMENTS)
     return depth, ids
+
+
+def ortho_fragments(tri_tex, shape):
+    """Every fragment of an orthographic rasterization, with its depth and facing.
+
+    Parameters
+    ----------
+    tri_tex : (T, 3, 3) array_like or RasterSetup
+        Triangles as ``(col, row, depth)`` in texel units (:func:`ortho_setup`).
+    shape : (H, W)
+
+    Returns
+    -------
+    Fragments
+        Grouped by band of rows, triangles in index order within a band;
+        ``facing`` is -1 for triangles counter-clockwise in (col, row) and
+        +1 for the others. Used by the solid voxelization of the volumetric
+        method to count surface crossings along each column.
+
+    Raises
+    ------
+    MemoryError
+        When the fragments would exceed the recording limit.
+    """
+    H, W = int(shape[0]), int(shape[1])
+    rs = tri_tex if isinstance(tri_tex, RasterSetup) else ortho_setup(tri_tex, (H, W))
+    fr = _fragment_buffers(rs, W)
+    if fr is None:
+        raise MemoryError(f"ortho_fragments: more than {_FRAGMENT_LIMIT} fragments; lower the resolution")
+    layers = np.empty((H, W, 2))
+    layers[..., 0] = np.inf
+    layers[..., 1] = -np.inf
+    d1 = np.zeros((1, 1))
+    _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["minmax"], False,
+                   d1, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
+                   layers, np.zeros((1, 1), np.int64), _NO_SLAB,
+                   fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
+    return fr

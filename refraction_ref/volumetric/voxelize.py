@@ -37,7 +37,7 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
-from ..raster import BAND, _bias, _bin
+from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
            "gaussian_blur", "repair_mesh", "voxelize_objects"]
@@ -62,60 +62,21 @@ def auto_bounds(vertices, resolution, padding):
 
 
 @nb.njit(cache=True, parallel=True)
-def _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, band, fill, cnt, off, depth, sign):
-    """Count (fill=False) or store (fill=True) the crossings of every column, band-parallel."""
-    nbands = counts.shape[0] - 1
-    for b in nb.prange(nbands):
-        r0 = b * band
-        r1 = min(r0 + band, nrow) - 1
-        for q in range(counts[b], counts[b + 1]):
-            t = tris[q]
-            x0 = X[t, 0]
-            y0 = Y[t, 0]
-            d0 = Dz[t, 0]
-            x1 = X[t, 1]
-            y1 = Y[t, 1]
-            d1 = Dz[t, 1]
-            x2 = X[t, 2]
-            y2 = Y[t, 2]
-            d2 = Dz[t, 2]
-            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-            if area == 0:
-                continue
-            s = np.int8(-1)
-            if area < 0:
-                x1, x2 = x2, x1
-                y1, y2 = y2, y1
-                d1, d2 = d2, d1
-                area = -area
-                s = np.int8(1)
-            i0 = max(rows[t, 0], r0)
-            i1 = min(rows[t, 1], r1)
-            xmin = min(x0, min(x1, x2))
-            xmax = max(x0, max(x1, x2))
-            j0 = max(-((128 - xmin) // 256), 0)
-            j1 = min((xmax - 128) // 256, ncol - 1)
-            if j0 > j1 or i0 > i1:
-                continue
-            b0 = _bias(x1, y1, x2, y2)
-            b1 = _bias(x2, y2, x0, y0)
-            b2 = _bias(x0, y0, x1, y1)
-            inv = 1.0 / area
-            for i in range(i0, i1 + 1):
-                py = 256 * i + 128
-                for j in range(j0, j1 + 1):
-                    px = 256 * j + 128
-                    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-                    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
-                    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                        continue
-                    c = i * ncol + j
-                    if fill:
-                        k = off[c] + cnt[c]
-                        depth[k] = (w0 * d0 + w1 * d1 + w2 * d2) * inv
-                        sign[k] = s
-                    cnt[c] += 1
+def _columns_pass(offsets, counts, pix, fdepth, facing, fill, cnt, off, depth, sign):
+    """Count (fill=False) or store (fill=True) the recorded fragments of every column.
+
+    Fragments arrive grouped by band of rows (each band owns its columns),
+    triangles in index order, so the order within a column does not depend
+    on the thread count.
+    """
+    for b in nb.prange(counts.shape[0]):
+        for q in range(offsets[b], offsets[b] + counts[b]):
+            c = pix[q]
+            if fill:
+                k = off[c] + cnt[c]
+                depth[k] = fdepth[q]
+                sign[k] = facing[q]
+            cnt[c] += 1
 
 
 @nb.njit(cache=True, parallel=True)
@@ -167,26 +128,21 @@ def column_crossings(tri, axis, lo, h, shape):
     """
     p, q = (axis + 1) % 3, (axis + 2) % 3
     ncol, nrow = int(shape[0]), int(shape[1])
-    X = np.round((tri[..., p] - lo[p]) / h[p] * 256.0)
-    Y = np.round((tri[..., q] - lo[q]) / h[q] * 256.0)
-    X = np.clip(X, -2.0**40, 2.0**40).astype(np.int64)
-    Y = np.clip(Y, -2.0**40, 2.0**40).astype(np.int64)
-    Dz = np.ascontiguousarray(tri[..., axis], dtype=np.float64)
-    ylo, yhi = Y.min(axis=1), Y.max(axis=1)
-    rows = np.empty((len(tri), 2), np.int64)
-    rows[:, 0] = np.maximum(-((128 - ylo) // 256), 0)
-    rows[:, 1] = np.minimum((yhi - 128) // 256, nrow - 1)
-    counts, tris = _bin(rows, nrow, BAND)
+    tri_tex = np.empty(tri.shape[:2] + (3,))
+    tri_tex[..., 0] = (tri[..., p] - lo[p]) / h[p]
+    tri_tex[..., 1] = (tri[..., q] - lo[q]) / h[q]
+    tri_tex[..., 2] = tri[..., axis]
+    fr = ortho_fragments(tri_tex, (nrow, ncol))  # the one rasterizer, orthographic along the axis
     cnt = np.zeros(ncol * nrow, np.int64)
     dummy_f = np.zeros(1)
     dummy_s = np.zeros(1, np.int8)
-    _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, BAND, False, cnt, cnt, dummy_f, dummy_s)
+    _columns_pass(fr.offsets, fr.counts, fr.pix, fr.depth, fr.facing, False, cnt, cnt, dummy_f, dummy_s)
     off = np.zeros(ncol * nrow + 1, np.int64)
     np.cumsum(cnt, out=off[1:])
     depth = np.empty(off[-1])
     sign = np.empty(off[-1], np.int8)
     cnt[:] = 0
-    _columns_pass(X, Y, Dz, rows, counts, tris, ncol, nrow, BAND, True, cnt, off, depth, sign)
+    _columns_pass(fr.offsets, fr.counts, fr.pix, fr.depth, fr.facing, True, cnt, off, depth, sign)
     cum = np.empty(off[-1], np.int32)
     _sort_columns(off, depth, sign, cum)
     return off, depth, cum
