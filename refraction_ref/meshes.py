@@ -153,7 +153,11 @@ def object_mesh(obj, base_dir=".", deform_fn=None):
             raise SceneError(f"mesh '{obj['mesh']}' has zero extent and cannot be fitted")
         v = (v - (lo + hi) / 2.0) * (float(obj["fit"]) / ext)
     t = obj["transform"]
-    v = (v * float(t["scale"])) @ rotation_matrix(t["rotate"]).T + np.asarray(t["translate"], dtype=np.float64)
+    # p' = R (s p) + t, written out per column: a BLAS matmul here would start OpenBLAS's
+    # worker threads, which then spin against Numba's threads on a small machine
+    R = rotation_matrix(t["rotate"]) * float(t["scale"])
+    tr = np.asarray(t["translate"], dtype=np.float64)
+    v = v[:, 0:1] * R[:, 0] + v[:, 1:2] * R[:, 1] + v[:, 2:3] * R[:, 2] + tr
     d = obj.get("deform")
     if deform_fn is not None:
         v = np.asarray(deform_fn(v.copy(), vertex_normals(v, f)), dtype=np.float64)
