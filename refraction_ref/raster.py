@@ -212,6 +212,29 @@ def _bias(ax, ay, bx, by):
     return -1
 
 
+@nb.njit(cache=True, inline="always")
+def _set_slice_bit(bits, i, j, d, lo, hi, slices, add):
+    """Set the bit of slice ``round((d - lo) / (hi - lo) * (S - 1))`` in pixel (i, j)'s mask.
+
+    Logical OR, or (``add``) a 32-bit add whose carry moves two fragments of
+    one slice into the next bit and is lost past bit 31 (Chaudhari §3.3).
+    """
+    rng = hi - lo
+    s = 0
+    if rng > 0.0:
+        s = np.int64(np.floor((d - lo) / rng * (slices - 1) + 0.5))
+        if s < 0:
+            s = 0
+        elif s > slices - 1:
+            s = slices - 1
+    w = s >> 5
+    m = np.uint32(1) << np.uint32(s & 31)
+    if add:
+        bits[i, j, w] = np.uint32((np.uint64(bits[i, j, w]) + np.uint64(m)) & np.uint64(0xFFFFFFFF))
+    else:
+        bits[i, j, w] = bits[i, j, w] | m
+
+
 @nb.njit(cache=True, parallel=True)
 def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                    fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
@@ -302,21 +325,7 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                     elif op == 2:
                         ibuf[i, j] += 1
                     elif op == 3 or op == 4:
-                        lo = zlo[i, j]
-                        rng = zhi[i, j] - lo
-                        s = 0
-                        if rng > 0.0:
-                            s = np.int64(np.floor((d - lo) / rng * (slices - 1) + 0.5))
-                            if s < 0:
-                                s = 0
-                            elif s > slices - 1:
-                                s = slices - 1
-                        w = s >> 5
-                        m = np.uint32(1) << np.uint32(s & 31)
-                        if op == 3:
-                            bits[i, j, w] = bits[i, j, w] | m
-                        else:
-                            bits[i, j, w] = np.uint32((np.uint64(bits[i, j, w]) + np.uint64(m)) & np.uint64(0xFFFFFFFF))
+                        _set_slice_bit(bits, i, j, d, zlo[i, j], zhi[i, j], slices, op == 4)
                     elif op == 7:
                         if slab[1] > 0.0:
                             kf = np.floor((d - slab[0]) / slab[1])
@@ -401,22 +410,7 @@ def _blend_fragments(frag_off, frag_n, frag_pix, frag_d, W, op, zlo, zhi, slices
             pix = frag_pix[q]
             i = pix // W
             j = pix - i * W
-            d = frag_d[q]
-            lo = zlo[i, j]
-            rng = zhi[i, j] - lo
-            s = 0
-            if rng > 0.0:
-                s = np.int64(np.floor((d - lo) / rng * (slices - 1) + 0.5))
-                if s < 0:
-                    s = 0
-                elif s > slices - 1:
-                    s = slices - 1
-            w = s >> 5
-            m = np.uint32(1) << np.uint32(s & 31)
-            if op == 3:
-                bits[i, j, w] = bits[i, j, w] | m
-            else:
-                bits[i, j, w] = np.uint32((np.uint64(bits[i, j, w]) + np.uint64(m)) & np.uint64(0xFFFFFFFF))
+            _set_slice_bit(bits, i, j, frag_d[q], zlo[i, j], zhi[i, j], slices, op == 4)
 
 
 class Fragments(NamedTuple):
