@@ -69,13 +69,11 @@ def render_exact(scene, progress=False):
         "image": image.reshape(H, W, 3).astype(np.float32),
     }
     info = {"timings_ms": timings, "plan": plan, "triangles": int(len(geom.faces))}
-    from .caustics.pipeline import caustics_exact, has_caustics, skip_reason
+    from .caustics.pipeline import caustics_exact, has_caustics, merge_caustics, skip_reason
 
     if has_caustics(scene):
         c_arrays, info["caustics"] = caustics_exact(scene, geom, cam, tr, origin, rdir, vn)
-        arrays.update(c_arrays)
-        arrays["image_refraction"] = arrays["image"]  # as the image-space method does
-        arrays["image"] = arrays["image_caustics"]
+        merge_caustics(arrays, c_arrays)
         noise = ", ".join(f"{v:.3g}" for v in info["caustics"]["reference_noise_rel_l1"])
         plan.append({"stage": "caustics", "ran": True,
                      "why": f"exact photon reference: {p['photons']}x{p['photons']} jittered photons per light "

@@ -53,6 +53,20 @@ def has_caustics(scene):
     return bool(scene.data["lights"]) and bool(scene.data["receivers"])
 
 
+def merge_caustics(arrays, c_arrays):
+    """Add the caustic outputs to a run's arrays; ``image`` becomes the full scene.
+
+    With receivers, the rendered colour is the final pass of §4.1 (receivers
+    lit directly and by the caustics, seen through the object); the
+    refraction-only view of the environment is kept as ``image_refraction``.
+    Both the image-space method and the exact reference call this.
+    """
+    arrays.update(c_arrays)
+    arrays["image_refraction"] = arrays["image"]
+    arrays["image"] = arrays["image_caustics"]
+    return arrays
+
+
 def skip_reason(scene):
     missing = [k for k in ("lights", "receivers") if not scene.data[k]]
     return f"the scene has no {' and no '.join(missing)}: no caustics to map"

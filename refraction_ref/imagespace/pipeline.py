@@ -218,7 +218,7 @@ def render_imagespace(scene, warm=True):
     else:
         plan.append({"stage": "absorption", "ran": False, "why": "absorption is zero"})
     timings["shade"] = (tic() - t0) * 1e3
-    from ..caustics.pipeline import caustics_imagespace, has_caustics, skip_reason
+    from ..caustics.pipeline import caustics_imagespace, has_caustics, merge_caustics, skip_reason
 
     caustics = None
     if has_caustics(scene):
@@ -244,11 +244,7 @@ def render_imagespace(scene, warm=True):
         "depth_complexity": total.astype(np.int16),
     }
     if caustics is not None:
-        arrays.update(c_arrays)
-        # with receivers, the rendered colour is the full scene (§4.1's final pass);
-        # the refraction-only view of the environment stays as image_refraction
-        arrays["image_refraction"] = arrays["image"]
-        arrays["image"] = arrays["image_caustics"]
+        merge_caustics(arrays, c_arrays)
     info = {
         "timings_ms": timings,
         "plan": plan,
