@@ -134,7 +134,7 @@ def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv, ortho=False):
         s = 1.0 if ortho else d
         col = (vv[k, 0] / (s * sx) * 0.5 + 0.5) * W
         row = (0.5 - vv[k, 1] / (s * sy) * 0.5) * H
-        okv[k] = abs(col) < 4194304.0 and abs(row) < 4194304.0 and d > 0.0
+        okv[k] = abs(col) < _MAX_COORD and abs(row) < _MAX_COORD and d > 0.0
         if okv[k]:
             XV[k] = np.int64(np.round(col * 256.0))
             YV[k] = np.int64(np.round(row * 256.0))
@@ -628,7 +628,7 @@ def _snap_texels(vv, XV, YV, DV, okv):
         c = vv[k, 0]
         r = vv[k, 1]
         z = vv[k, 2]
-        okv[k] = abs(c) < 4194304.0 and abs(r) < 4194304.0 and np.isfinite(z)
+        okv[k] = abs(c) < _MAX_COORD and abs(r) < _MAX_COORD and np.isfinite(z)
         XV[k] = np.int64(np.round(c * 256.0)) if okv[k] else 0
         YV[k] = np.int64(np.round(r * 256.0)) if okv[k] else 0
         DV[k] = z if okv[k] else 0.0

@@ -47,7 +47,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, _bias, _bin
+from ..raster import _MAX_COORD, BAND, _bias, _bin
 from .planes import dir_to_map, to_map
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane"]
@@ -131,7 +131,7 @@ def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, 
                 lam = 0.0
             c = O[t, k, 0] + lam * D[t, k, 0]
             r = O[t, k, 1] + lam * D[t, k, 1]
-            if not (abs(c) < 4194304.0 and abs(r) < 4194304.0):
+            if not (abs(c) < _MAX_COORD and abs(r) < _MAX_COORD):
                 ok = False
                 c = 0.0
                 r = 0.0

@@ -33,7 +33,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, _bias, _bin
+from ..raster import _MAX_COORD, BAND, _bias, _bin
 
 __all__ = ["search_hits", "per_ray_caustics"]
 
@@ -153,7 +153,7 @@ def _splat_own_depth(O, D, flux, inv_tv, tbar, tdz, cand, rows, cols, counts, tr
                         L[k] = lam
                         c = O[t, k, 0] + lam * D[t, k, 0]
                         r = O[t, k, 1] + lam * D[t, k, 1]
-                        if not (abs(c) < 4194304.0 and abs(r) < 4194304.0):
+                        if not (abs(c) < _MAX_COORD and abs(r) < _MAX_COORD):
                             ok = False
                             break
                         X[k] = np.int64(np.round(c * 256.0))
