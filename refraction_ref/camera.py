@@ -215,20 +215,25 @@ def _affine(p, m, t):
     return out.reshape(p.shape)
 
 
+@nb.njit(cache=True, inline="always")
+def primary_dir(i, j, W, H, sx, sy, ortho=False):
+    """Unit view-space direction of the primary ray through pixel (row i, col j)'s centre."""
+    if ortho:
+        return 0.0, 0.0, -1.0
+    y = (1.0 - (i + 0.5) / H * 2.0) * sy
+    x = ((j + 0.5) / W * 2.0 - 1.0) * sx
+    s = 1.0 / np.sqrt(x * x + y * y + 1.0)
+    return x * s, y * s, -s
+
+
 @nb.njit(cache=True, parallel=True)
 def _primary_dirs(W, H, sx, sy, basis, out, ortho=False):
     """Unit directions through pixel centres, rotated by ``basis`` (rows: right, up, back)."""
     for i in nb.prange(H):
-        y = (1.0 - (i + 0.5) / H * 2.0) * sy
         for j in range(W):
-            x = ((j + 0.5) / W * 2.0 - 1.0) * sx
-            if ortho:
-                for k in range(3):
-                    out[i, j, k] = -basis[2, k]
-                continue
-            s = 1.0 / np.sqrt(x * x + y * y + 1.0)
+            x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
             for k in range(3):
-                out[i, j, k] = (x * basis[0, k] + y * basis[1, k] - basis[2, k]) * s
+                out[i, j, k] = x * basis[0, k] + y * basis[1, k] + z * basis[2, k]
 
 
 @nb.njit(cache=True, inline="always")

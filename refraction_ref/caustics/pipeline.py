@@ -221,8 +221,8 @@ def caustics_imagespace(scene, geom, cam, eye, ior, outside, absorption):
         flux0 = texel_flux(lcam, cols, rows)
         ex = np.flatnonzero(st == 1)
         trans = beer_lambert(absorption, tr["path_length"].ravel()[ex], ior)
-        o = lcam.view_to_world(tr["exit_pos"].reshape(-1, 3)[ex])
-        d = lcam.dir_view_to_world(tr["exit_dir"].reshape(-1, 3)[ex])
+        o = tr["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
+        d = tr["exit_dir"].reshape(-1, 3)[ex]
         add("photon_trace", t0)
         t0 = tic()
         P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
@@ -303,12 +303,12 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
         ex = obj & (st == 1)
         trans = beer_lambert(absorption, tr["path_length"], ior)
         if ex.any():
-            o = cam.view_to_world(tr["exit_pos"][ex])
-            d = cam.dir_view_to_world(tr["exit_dir"][ex])
+            o = tr["exit_pos"][ex]  # world space (layered_trace)
+            d = tr["exit_dir"][ex]
             full[ex] = _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis)
         stuck = obj & (st != 1)
         if stuck.any():
-            full[stuck] = environment_lookup(env, cam.dir_view_to_world(tr["last_dir"][stuck]), scene.base_dir)
+            full[stuck] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
         full[obj] *= trans[obj]
         # the thesis's final pass: refraction at the front surface only
         nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))

@@ -43,8 +43,14 @@ def depth_bounds(tri_view, camera, keep_fragments=False):
 
 
 def global_bounds(zmin, zmax):
-    """Global object bounds (scalars) from the local ones; (inf, -inf) for an empty view."""
-    cov = np.isfinite(zmin)
-    if not cov.any():
+    """Global object bounds (scalars) from the local ones; (inf, -inf) for an empty view.
+
+    Uncovered pixels hold ``zmin = +inf`` and ``zmax = -inf``, so the plain
+    extremes are the bounds of the covered ones.
+    """
+    if zmin.size == 0:
         return np.inf, -np.inf
-    return float(zmin[cov].min()), float(zmax[cov].max())
+    lo, hi = float(np.min(zmin)), float(np.max(zmax))
+    if not np.isfinite(lo):
+        return np.inf, -np.inf
+    return lo, hi

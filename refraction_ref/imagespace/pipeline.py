@@ -67,7 +67,7 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     Returns
     -------
     dict
-        ``trace`` (:func:`trace_layers` output, view space), ``total``
+        ``trace`` (:func:`trace_layers` output, world space), ``total``
         (H, W) layers per pixel, ``ldi``, ``zmin``, ``zmax`` (the min/max
         pass: ``zmin`` doubles as a shadow map in a light's view),
         ``pixels_over_layer_limit``.
@@ -135,10 +135,9 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     timings["reduce"] = (tic() - t0) * 1e3
 
     t0 = tic()
-    dirs_view = cam.primary_rays_view()
     with np.errstate(invalid="ignore"):
         thr = np.where(np.isfinite(spacing), float(p["exit_threshold"]) * spacing, 0.0)
-    tr = trace_layers(ldi, total, zmax, thr, bhi, blo, dirs_view, cam, ior=ior, outside_ior=outside,
+    tr = trace_layers(ldi, total, zmax, thr, bhi, blo, None, cam, ior=ior, outside_ior=outside, world=True,
                       iterations=int(p["iterations"]), normals=p["normals"], delta=int(p["delta"]),
                       tir=bool(p["tir"]), max_interfaces=int(p["max_interfaces"]), layer_limit=L, lut=lut)
     timings["trace"] = (tic() - t0) * 1e3
@@ -206,11 +205,9 @@ def render_imagespace(scene, warm=True):
     t0 = tic()
     status = tr["status"]
     hit = status != 0
-    exit_dir = cam.dir_view_to_world(tr["exit_dir"])
-    last_dir = cam.dir_view_to_world(tr["last_dir"])
-    exit_pos = cam.view_to_world(tr["exit_pos"])
+    exit_dir, exit_pos = tr["exit_dir"], tr["exit_pos"]
     env = scene.data["environment"]
-    image = environment_lookup(env, last_dir, scene.base_dir)
+    image = environment_lookup(env, tr["last_dir"], scene.base_dir)
     if np.any(absorption > 0):
         trans = beer_lambert(absorption, tr["path_length"], ior)
         image = (image * trans).astype(np.float32)

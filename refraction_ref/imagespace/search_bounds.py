@@ -25,29 +25,47 @@ __all__ = ["search_bounds", "mip_level"]
 
 @nb.njit(cache=True, parallel=True)
 def _mip_reduce(ldi, f, zmax, zmin):
-    """Max and min over the f x f box-filtered MIP texels of every layer (absent texels skipped)."""
+    """Max and min over the f x f box-filtered MIP texels of every layer (absent texels skipped).
+
+    One row of MIP texels per task. The layers are packed front to back (a
+    texel absent from layer n is absent from every deeper one), so a MIP
+    texel's layers are visited only until all its texels are absent: the
+    work follows the fragments, not ``L x H x W``.
+    """
     L, H, W = ldi.shape
     hb = (H + f - 1) // f
     wb = (W + f - 1) // f
-    for n in nb.prange(L):
-        hi = -np.inf
-        lo = np.inf
-        for bi in range(hb):
-            for bj in range(wb):
+    rhi = np.full((hb, L), -np.inf)
+    rlo = np.full((hb, L), np.inf)
+    for bi0 in nb.prange(hb):
+        bi = np.int64(bi0)
+        i0 = bi * f
+        i1 = min(i0 + f, H)
+        for bj in range(wb):
+            j0 = bj * f
+            j1 = min(j0 + f, W)
+            for n in range(L):
                 s = 0.0
                 c = 0
-                for i in range(bi * f, min((bi + 1) * f, H)):
-                    for j in range(bj * f, min((bj + 1) * f, W)):
+                for i in range(i0, i1):
+                    for j in range(j0, j1):
                         v = ldi[n, i, j]
                         if v < np.inf:
                             s += v
                             c += 1
-                if c:
-                    m = s / c
-                    if m > hi:
-                        hi = m
-                    if m < lo:
-                        lo = m
+                if c == 0:
+                    break  # absent here, so from every deeper layer too
+                m = s / c
+                if m > rhi[bi, n]:
+                    rhi[bi, n] = m
+                if m < rlo[bi, n]:
+                    rlo[bi, n] = m
+    for n in range(L):
+        hi = -np.inf
+        lo = np.inf
+        for bi in range(hb):
+            hi = max(hi, rhi[bi, n])
+            lo = min(lo, rlo[bi, n])
         zmax[n] = hi
         zmin[n] = lo
 
@@ -77,8 +95,10 @@ def search_bounds(ldi, mode="mip", mip_size=256, margin=0.0):
 
     Parameters
     ----------
-    ldi : (L, H, W) float64
-        Layered depth images (``+inf`` where absent).
+    ldi : (L, H, W) float32 or float64
+        Layered depth images (``+inf`` where absent), packed front to back
+        as :func:`~refraction_ref.imagespace.peel.peel_layers` writes them:
+        a texel absent from layer n is absent from all deeper layers.
     mode : {'mip', 'global'}
     mip_size : int
         MIP level resolution (the thesis uses 256x256 for 512x512 images).

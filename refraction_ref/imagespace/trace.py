@@ -52,7 +52,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..camera import project_point, unproject_pixel
+from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
 from .normals import layer_depth, normal_at
 
@@ -86,27 +86,41 @@ def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho=False):
     return -z <= ls
 
 
+@nb.njit(cache=True, inline="always")
+def _store(out, i, j, x, y, z, frame, m, t, point):
+    """Write a view-space vector to out[i, j], rotated (and, for a point, moved) by the frame."""
+    if frame:
+        for c in range(3):
+            out[i, j, c] = x * m[0, c] + y * m[1, c] + z * m[2, c] + (t[c] if point else 0.0)
+    else:
+        out[i, j, 0] = x
+        out[i, j, 1] = y
+        out[i, j, 2] = z
+
+
 @nb.njit(cache=True, parallel=True)
-def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
+def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy,
                   ior, outside_ior, iterations, nmethod, delta, tir, max_events, layer_limit, lut,
-                  exit_pos, exit_dir, last_dir, interfaces, path_len, status, ortho=False):
+                  frame, rot, t0, exit_pos, exit_dir, last_dir, interfaces, path_len, status, ortho=False):
     L = ldi.shape[0]
     for i0 in nb.prange(H):
         i = np.int64(i0)  # the prange index may be unsigned; texel indices are signed
         for j0 in range(W):
             j = np.int64(j0)
-            vx = dirs[i, j, 0]
-            vy = dirs[i, j, 1]
-            vz = dirs[i, j, 2]
-            last_dir[i, j, 0] = vx
-            last_dir[i, j, 1] = vy
-            last_dir[i, j, 2] = vz
+            if own_dirs:
+                vx, vy, vz = primary_dir(i, j, W, H, sx, sy, ortho)
+            else:
+                vx = dirs[i, j, 0]
+                vy = dirs[i, j, 1]
+                vz = dirs[i, j, 2]
             d0 = layer_depth(ldi, 0, i, j, lut) if L > 0 else np.inf
             if not math.isfinite(d0):
                 status[i, j] = 0
-                exit_dir[i, j, 0] = vx
-                exit_dir[i, j, 1] = vy
-                exit_dir[i, j, 2] = vz
+                interfaces[i, j] = 0
+                path_len[i, j] = 0.0
+                _store(last_dir, i, j, vx, vy, vz, frame, rot, t0, False)
+                _store(exit_dir, i, j, vx, vy, vz, frame, rot, t0, False)
+                _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
                 continue
             if ortho:  # parallel rays from the window plane z = 0
                 qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, W, H, sx, sy, True)
@@ -203,21 +217,18 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, W, H, sx, sy,
             status[i, j] = st
             interfaces[i, j] = nint
             path_len[i, j] = plen
-            last_dir[i, j, 0] = vx
-            last_dir[i, j, 1] = vy
-            last_dir[i, j, 2] = vz
+            _store(last_dir, i, j, vx, vy, vz, frame, rot, t0, False)
             if st == 1:
-                exit_pos[i, j, 0] = px
-                exit_pos[i, j, 1] = py
-                exit_pos[i, j, 2] = pz
-                exit_dir[i, j, 0] = vx
-                exit_dir[i, j, 1] = vy
-                exit_dir[i, j, 2] = vz
+                _store(exit_pos, i, j, px, py, pz, frame, rot, t0, True)
+                _store(exit_dir, i, j, vx, vy, vz, frame, rot, t0, False)
+            else:
+                _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
+                _store(exit_dir, i, j, np.nan, np.nan, np.nan, False, rot, t0, False)
 
 
 def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
                  iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
-                 layer_limit=None, lut=None):
+                 layer_limit=None, lut=None, world=False):
     """Trace every pixel's ray through the layered depth images.
 
     Parameters
@@ -232,8 +243,9 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         Early-termination threshold in depth units.
     bounds_hi, bounds_lo : (L,) float64
         Forward and backward search bounds per layer (:func:`search_bounds`).
-    dirs_view : (H, W, 3) float64
-        Unit primary ray directions in view space.
+    dirs_view : (H, W, 3) float64 or None
+        Unit primary ray directions in view space; None for the camera's
+        own primary rays (computed per pixel in the kernel).
     camera : Camera
         The view of the layers: the eye's, or a light's (perspective for a
         point light, orthographic for a directional light: every ray then
@@ -242,7 +254,7 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         Object and surrounding indices.
     iterations : int
         Binary-search iterations per interface.
-    normals : {'forward', 'central', 'mesh3x3'}
+    normals : {'forward', 'central', 'mesh3x3', 'cross'}
     delta : int
     tir : bool
         Follow total internal reflection with backward searches.
@@ -253,13 +265,18 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         beyond it stops the ray with status 2.
     lut : tuple, optional
         On-the-fly peeling inputs (see :func:`~refraction_ref.imagespace.normals.layer_depth`).
+    world : bool
+        Return ``exit_pos``, ``exit_dir`` and ``last_dir`` in world space
+        (the camera's frame applied as they are written) instead of view space.
 
     Returns
     -------
     dict
-        View-space ``exit_pos``, ``exit_dir``, ``last_dir`` (H, W, 3),
+        ``exit_pos``, ``exit_dir`` (NaN unless status 1), ``last_dir``
+        (H, W, 3) in view space (world space with ``world``),
         ``interfaces`` (H, W) int16, ``path_length`` (H, W) float64,
-        ``status`` (H, W) int8.
+        ``status`` (H, W) int8. A missed pixel's ``exit_dir`` and
+        ``last_dir`` are its primary ray.
 
     References
     ----------
@@ -269,22 +286,33 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     """
     from .normals import NORMAL_METHODS, no_lut
 
+    if normals not in NORMAL_METHODS:
+        raise ValueError(f"trace_layers: unknown normals {normals!r}; choose one of {sorted(NORMAL_METHODS)}")
     H, W = total.shape
     L = ldi.shape[0]
-    exit_pos = np.full((H, W, 3), np.nan)
-    exit_dir = np.full((H, W, 3), np.nan)
+    exit_pos = np.empty((H, W, 3))
+    exit_dir = np.empty((H, W, 3))
     last_dir = np.empty((H, W, 3))
-    interfaces = np.zeros((H, W), np.int16)
-    path_len = np.zeros((H, W))
-    status = np.zeros((H, W), np.int8)
+    interfaces = np.empty((H, W), np.int16)
+    path_len = np.empty((H, W))
+    status = np.empty((H, W), np.int8)
     Wc, Hc, sx, sy = camera.kernel_args()
+    if (Hc, Wc) != (H, W):
+        raise ValueError(f"trace_layers: the layers are {(H, W)}, the camera is {(Hc, Wc)}")
+    own = dirs_view is None
+    dirs = np.zeros((1, 1, 3)) if own else np.ascontiguousarray(dirs_view, dtype=np.float64)
+    if world:
+        m = np.ascontiguousarray(camera.basis, dtype=np.float64)
+        t = np.ascontiguousarray(camera.eye, dtype=np.float64)
+    else:
+        m, t = np.eye(3), np.zeros(3)
     _trace_kernel(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
                   np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
                   np.ascontiguousarray(bounds_hi, dtype=np.float64), np.ascontiguousarray(bounds_lo, dtype=np.float64),
-                  np.ascontiguousarray(dirs_view, dtype=np.float64), Wc, Hc, sx, sy,
+                  dirs, own, Wc, Hc, sx, sy,
                   float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
                   int(max_interfaces), int(L if layer_limit is None else layer_limit),
-                  no_lut(None) if lut is None else lut,
+                  no_lut(None) if lut is None else lut, bool(world), m, t,
                   exit_pos, exit_dir, last_dir, interfaces, path_len, status, bool(camera.ortho))
     return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir,
             "interfaces": interfaces, "path_length": path_len, "status": status}
