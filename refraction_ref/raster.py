@@ -235,11 +235,11 @@ def _set_slice_bit(bits, i, j, d, lo, hi, slices, add):
         bits[i, j, w] = bits[i, j, w] | m
 
 
-@nb.njit(cache=True, parallel=True)
-def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
-                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
-                   frag_off, frag_pix, frag_d, frag_n, frag_s):
-    """Rasterize binned triangles band by band with blend ``op`` (see ``OPS``).
+@nb.njit(cache=True, inline="always")
+def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
+                 fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
+                 frag_off, frag_pix, frag_d, frag_n, frag_s):
+    """Rasterize the binned triangles of band ``b`` with blend ``op`` (see ``OPS``).
 
     Depth is interpolated perspective-correctly (1/d linear on screen) when
     ``perspective``, linearly otherwise (orthographic maps). ``slab`` =
@@ -250,114 +250,142 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
     passes that blend the same fragments again; ``frag_s`` gets the
     triangle's screen orientation (-1 as given, +1 when it was flipped).
     """
-    nb_bands = counts.shape[0] - 1
     keep = frag_pix.shape[0] > 1
-    for b in nb.prange(nb_bands):
-        r0 = b * band
-        r1 = min(r0 + band, H) - 1
-        nf = frag_off[b] if keep else 0
-        for q in range(counts[b], counts[b + 1]):
-            t = tris[q]
-            x0 = X[t, 0]
-            y0 = Y[t, 0]
-            d0 = D[t, 0]
-            x1 = X[t, 1]
-            y1 = Y[t, 1]
-            d1 = D[t, 1]
-            x2 = X[t, 2]
-            y2 = Y[t, 2]
-            d2 = D[t, 2]
-            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-            if area == 0:
-                continue
-            facing = np.int8(-1)
-            if area < 0:  # no culling: re-orient instead
-                x1, x2 = x2, x1
-                y1, y2 = y2, y1
-                d1, d2 = d2, d1
-                area = -area
-                facing = np.int8(1)
-            i0 = max(rows[t, 0], r0)
-            i1 = min(rows[t, 1], r1)
-            xmin = min(x0, min(x1, x2))
-            xmax = max(x0, max(x1, x2))
-            # columns whose centre 256 j + 128 lies in [xmin, xmax] (integer ceil / floor)
-            j0 = max(-((128 - xmin) // 256), 0)
-            j1 = min((xmax - 128) // 256, W - 1)
-            if j0 > j1 or i0 > i1:
-                continue
-            b0 = _bias(x1, y1, x2, y2)
-            b1 = _bias(x2, y2, x0, y0)
-            b2 = _bias(x0, y0, x1, y1)
-            inv_area = 1.0 / area
-            # D holds 1/depth for perspective set-ups, depth for orthographic ones:
-            # either way the attribute interpolates linearly on screen
-            i0d = d0
-            i1d = d1
-            i2d = d2
-            # edge functions at the first pixel centre, stepped incrementally
-            a0 = y2 - y1
-            a1 = y0 - y2
-            a2 = y1 - y0
-            px0 = 256 * j0 + 128
-            for i in range(i0, i1 + 1):
-                py = 256 * i + 128
-                w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
-                w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
-                w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
-                for j in range(j0, j1 + 1):
-                    if j > j0:
-                        w0 -= 256 * a0
-                        w1 -= 256 * a1
-                        w2 -= 256 * a2
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                        continue
-                    if perspective:
-                        d = 1.0 / ((w0 * i0d + w1 * i1d + w2 * i2d) * inv_area)
-                    else:
-                        d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
-                    if op == 0:
-                        if d < fbuf[i, j]:
-                            fbuf[i, j] = d
-                    elif op == 1:
-                        if d > fbuf[i, j]:
-                            fbuf[i, j] = d
-                    elif op == 2:
-                        ibuf[i, j] += 1
-                    elif op == 3 or op == 4:
-                        _set_slice_bit(bits, i, j, d, zlo[i, j], zhi[i, j], slices, op == 4)
-                    elif op == 7:
-                        if slab[1] > 0.0:
-                            kf = np.floor((d - slab[0]) / slab[1])
-                            if kf < slab[2] or kf > slab[3]:
-                                continue
-                        if d < fbuf[i, j]:
-                            fbuf[i, j] = d
-                            ids[i, j] = t
-                    elif op == 6:
-                        if d < layers[i, j, 0]:
-                            layers[i, j, 0] = d
-                        if d > layers[i, j, 1]:
-                            layers[i, j, 1] = d
-                        if keep:
-                            frag_pix[nf] = i * W + j
-                            frag_d[nf] = d
-                            frag_s[nf] = facing
-                            nf += 1
-                    else:
-                        n = ibuf[i, j]
-                        cap = layers.shape[0]
-                        k = min(n, cap)
-                        # insertion keeping the `cap` nearest depths sorted
-                        while k > 0 and layers[k - 1, i, j] > d:
-                            if k < cap:
-                                layers[k, i, j] = layers[k - 1, i, j]
-                            k -= 1
+    r0 = b * band
+    r1 = min(r0 + band, H) - 1
+    nf = frag_off[b] if keep else 0
+    for q in range(counts[b], counts[b + 1]):
+        t = tris[q]
+        x0 = X[t, 0]
+        y0 = Y[t, 0]
+        d0 = D[t, 0]
+        x1 = X[t, 1]
+        y1 = Y[t, 1]
+        d1 = D[t, 1]
+        x2 = X[t, 2]
+        y2 = Y[t, 2]
+        d2 = D[t, 2]
+        area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+        if area == 0:
+            continue
+        facing = np.int8(-1)
+        if area < 0:  # no culling: re-orient instead
+            x1, x2 = x2, x1
+            y1, y2 = y2, y1
+            d1, d2 = d2, d1
+            area = -area
+            facing = np.int8(1)
+        i0 = max(rows[t, 0], r0)
+        i1 = min(rows[t, 1], r1)
+        xmin = min(x0, min(x1, x2))
+        xmax = max(x0, max(x1, x2))
+        # columns whose centre 256 j + 128 lies in [xmin, xmax] (integer ceil / floor)
+        j0 = max(-((128 - xmin) // 256), 0)
+        j1 = min((xmax - 128) // 256, W - 1)
+        if j0 > j1 or i0 > i1:
+            continue
+        b0 = _bias(x1, y1, x2, y2)
+        b1 = _bias(x2, y2, x0, y0)
+        b2 = _bias(x0, y0, x1, y1)
+        inv_area = 1.0 / area
+        # D holds 1/depth for perspective set-ups, depth for orthographic ones:
+        # either way the attribute interpolates linearly on screen
+        i0d = d0
+        i1d = d1
+        i2d = d2
+        # edge functions at the first pixel centre, stepped incrementally
+        a0 = y2 - y1
+        a1 = y0 - y2
+        a2 = y1 - y0
+        px0 = 256 * j0 + 128
+        for i in range(i0, i1 + 1):
+            py = 256 * i + 128
+            w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
+            w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
+            w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
+            for j in range(j0, j1 + 1):
+                if j > j0:
+                    w0 -= 256 * a0
+                    w1 -= 256 * a1
+                    w2 -= 256 * a2
+                if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
+                    continue
+                if perspective:
+                    d = 1.0 / ((w0 * i0d + w1 * i1d + w2 * i2d) * inv_area)
+                else:
+                    d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
+                if op == 0:
+                    if d < fbuf[i, j]:
+                        fbuf[i, j] = d
+                elif op == 1:
+                    if d > fbuf[i, j]:
+                        fbuf[i, j] = d
+                elif op == 2:
+                    ibuf[i, j] += 1
+                elif op == 3 or op == 4:
+                    _set_slice_bit(bits, i, j, d, zlo[i, j], zhi[i, j], slices, op == 4)
+                elif op == 7:
+                    if slab[1] > 0.0:
+                        kf = np.floor((d - slab[0]) / slab[1])
+                        if kf < slab[2] or kf > slab[3]:
+                            continue
+                    if d < fbuf[i, j]:
+                        fbuf[i, j] = d
+                        ids[i, j] = t
+                elif op == 6:
+                    if d < layers[0, i, j]:
+                        layers[0, i, j] = d
+                    if d > layers[1, i, j]:
+                        layers[1, i, j] = d
+                    if keep:
+                        frag_pix[nf] = i * W + j
+                        frag_d[nf] = d
+                        frag_s[nf] = facing
+                        nf += 1
+                else:
+                    n = ibuf[i, j]
+                    cap = layers.shape[0]
+                    k = min(n, cap)
+                    # insertion keeping the `cap` nearest depths sorted
+                    while k > 0 and layers[k - 1, i, j] > d:
                         if k < cap:
-                            layers[k, i, j] = d
-                        ibuf[i, j] = n + 1
-        if keep:
-            frag_n[b] = nf - frag_off[b]
+                            layers[k, i, j] = layers[k - 1, i, j]
+                        k -= 1
+                    if k < cap:
+                        layers[k, i, j] = d
+                    ibuf[i, j] = n + 1
+    if keep:
+        frag_n[b] = nf - frag_off[b]
+
+
+@nb.njit(cache=True, parallel=True)
+def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
+                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
+                   frag_off, frag_pix, frag_d, frag_n, frag_s):
+    """All bands in parallel, any blend ``op`` (see :func:`_raster_band`)."""
+    for b in nb.prange(counts.shape[0] - 1):
+        _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
+                     fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
+                     frag_off, frag_pix, frag_d, frag_n, frag_s)
+
+
+@nb.njit(cache=True, parallel=True)
+def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
+                   frag_off, frag_pix, frag_d, frag_n, frag_s):
+    """All bands in parallel, op 'minmax' (the hot min/max pass of Chaudhari §3.3).
+
+    The same band traversal as :func:`_raster_kernel`, compiled with the
+    op fixed so that the other blend branches drop out of the inner loop.
+    """
+    f1 = np.zeros((1, 1))
+    i1 = np.zeros((1, 1), np.int32)
+    b1 = np.zeros((1, 1, 1), np.uint32)
+    t1 = np.zeros((1, 1), np.int64)
+    slab = np.zeros(4)
+    for b in nb.prange(counts.shape[0] - 1):
+        _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, 6, perspective,
+                     f1, i1, b1, f1, f1, 256, layers, t1, slab,
+                     frag_off, frag_pix, frag_d, frag_n, frag_s)
 
 
 class RasterSetup(NamedTuple):
@@ -578,9 +606,9 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         lo = np.ascontiguousarray(zlo, dtype=np.float64)
         hi = np.ascontiguousarray(zhi, dtype=np.float64)
     elif code == 6:
-        layers = np.empty((H, W, 2))
-        layers[..., 0] = np.inf
-        layers[..., 1] = -np.inf
+        layers = np.empty((2, H, W))
+        layers[0] = np.inf
+        layers[1] = -np.inf
     else:
         ibuf = np.zeros((H, W), np.int32)
         layers = np.full((int(capacity), H, W), np.inf)
@@ -591,8 +619,12 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     fr = _fragment_buffers(rs, W) if keep_fragments and code == 6 else None
     frag_args = _NO_FRAGMENTS if fr is None else (fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
     # depth is interpolated linearly on screen for an orthographic camera
-    _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, not getattr(camera, "ortho", False),
-                   fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB, *frag_args)
+    perspective = not getattr(camera, "ortho", False)
+    if code == 6:
+        _minmax_kernel(X, Y, D, rows, counts, tris, W, H, BAND, perspective, layers, *frag_args)
+    else:
+        _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, perspective,
+                       fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB, *frag_args)
     if code in (0, 1):
         res = fbuf
     elif code == 7:
@@ -602,7 +634,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
     elif code in (3, 4):
         res = bits
     elif code == 6:
-        res = (layers[..., 0].copy(), layers[..., 1].copy())
+        res = (layers[0], layers[1])
         if keep_fragments:
             res = res + (fr,)
     else:
@@ -747,12 +779,9 @@ def ortho_fragments(tri_tex, shape):
     fr = _fragment_buffers(rs, W)
     if fr is None:
         raise MemoryError(f"ortho_fragments: more than {_FRAGMENT_LIMIT} fragments; lower the resolution")
-    layers = np.empty((H, W, 2))
-    layers[..., 0] = np.inf
-    layers[..., 1] = -np.inf
-    d1 = np.zeros((1, 1))
-    _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["minmax"], False,
-                   d1, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
-                   layers, np.zeros((1, 1), np.int64), _NO_SLAB,
+    layers = np.empty((2, H, W))
+    layers[0] = np.inf
+    layers[1] = -np.inf
+    _minmax_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, False, layers,
                    fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
     return fr
