@@ -25,8 +25,10 @@ import functools
 import os
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
+from .camera import _affine
 from .scene import SceneError
 
 __all__ = ["BUILTIN_MESHES", "Geometry", "eye_inside", "load_mesh", "object_mesh", "scene_geometry",
@@ -142,22 +144,40 @@ def sine_displacement(v, normals, amplitude, wavelength, direction, phase):
     return v + s[:, None] * normals
 
 
+@nb.njit(cache=True)
+def _bounds_kernel(v, lo, hi):
+    for k in range(v.shape[0]):
+        for c in range(3):
+            x = v[k, c]
+            if x < lo[c]:
+                lo[c] = x
+            if x > hi[c]:
+                hi[c] = x
+
+
+def bounds(v):
+    """Axis-aligned bounds (lo, hi) of points (N, 3), N >= 1 (NaN coordinates are skipped)."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    _bounds_kernel(np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 3), lo, hi)
+    return lo, hi
+
+
 def object_mesh(obj, base_dir=".", deform_fn=None):
     """World-space vertices and faces of one scene object (or receiver) dict."""
     v, f = load_mesh(obj["mesh"], obj.get("size"), base_dir)
     v = np.array(v, dtype=np.float64)
     if obj.get("fit") is not None:
-        lo, hi = v.min(axis=0), v.max(axis=0)
+        lo, hi = bounds(v)
         ext = float(np.max(hi - lo))
         if ext <= 0:
             raise SceneError(f"mesh '{obj['mesh']}' has zero extent and cannot be fitted")
         v = (v - (lo + hi) / 2.0) * (float(obj["fit"]) / ext)
     t = obj["transform"]
-    # p' = R (s p) + t, written out per column: a BLAS matmul here would start OpenBLAS's
+    # p' = R (s p) + t, in a Numba kernel: a BLAS matmul here would start OpenBLAS's
     # worker threads, which then spin against Numba's threads on a small machine
     R = rotation_matrix(t["rotate"]) * float(t["scale"])
-    tr = np.asarray(t["translate"], dtype=np.float64)
-    v = v[:, 0:1] * R[:, 0] + v[:, 1:2] * R[:, 1] + v[:, 2:3] * R[:, 2] + tr
+    v = _affine(v, R.T, np.asarray(t["translate"], dtype=np.float64))
     d = obj.get("deform")
     if deform_fn is not None:
         v = np.asarray(deform_fn(v.copy(), vertex_normals(v, f)), dtype=np.float64)
@@ -264,7 +284,7 @@ def eye_inside(geom, eye):
     p = np.cross(u, [0.0, 0.0, 1.0])
     p /= np.linalg.norm(p)
     q = np.cross(u, p)
-    lo_all, hi_all = v.min(0), v.max(0)
+    lo_all, hi_all = bounds(v)
     if np.any(eye <= lo_all) or np.any(eye >= hi_all):
         return False  # outside every object's bounding box
     for k in range(len(geom.ior)):
