@@ -27,7 +27,7 @@ from ..scene import SceneError
 from .depth_bounds import depth_bounds, global_bounds
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
 from .search_bounds import search_bounds
-from .trace import trace_layers
+from .trace import exit_thresholds, trace_layers
 from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
 
 __all__ = ["render_imagespace", "check_materials", "layered_trace"]
@@ -105,7 +105,6 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
             lut = (True, bits, np.ascontiguousarray(zlo), np.ascontiguousarray(zhi), S, POPCOUNT8, SELECT8)
             plan.append({"stage": "peel", "ran": False,
                          "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"})
-        spacing = (zhi - zlo) / (S - 1)
         timings["peel"] = (tic() - t0) * 1e3
     else:
         ldi, total = collect_depths(tri_view, cam, L)
@@ -116,7 +115,7 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
         plan.append({"stage": "voxelize", "ran": True,
                      "why": "float depth: exact fragment depths kept per pixel (A-buffer), no bitmask"})
         plan.append({"stage": "peel", "ran": False, "why": "the A-buffer is already sorted into layers"})
-        spacing = (zmax - zmin) / (S - 1)
+        zlo, zhi = zmin, zmax  # the grid the early-termination threshold counts in
     n_over = int(np.count_nonzero(total > L))
 
     t0 = tic()
@@ -135,8 +134,7 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     timings["reduce"] = (tic() - t0) * 1e3
 
     t0 = tic()
-    with np.errstate(invalid="ignore"):
-        thr = np.where(np.isfinite(spacing), float(p["exit_threshold"]) * spacing, 0.0)
+    thr = exit_thresholds(zlo, zhi, S, p["exit_threshold"])
     tr = trace_layers(ldi, total, zmax, thr, bhi, blo, None, cam, ior=ior, outside_ior=outside, world=True,
                       iterations=int(p["iterations"]), normals=p["normals"], delta=int(p["delta"]),
                       tir=bool(p["tir"]), max_interfaces=int(p["max_interfaces"]), layer_limit=L, lut=lut)

@@ -56,7 +56,7 @@ from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
 from .normals import layer_depth, normal_at
 
-__all__ = ["trace_layers"]
+__all__ = ["trace_layers", "exit_thresholds"]
 
 _PARALLEL_EPS = 1e-9  # |dd/dt| below this: the ray is parallel to the image plane
 
@@ -224,6 +224,28 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
             else:
                 _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
                 _store(exit_dir, i, j, np.nan, np.nan, np.nan, False, rot, t0, False)
+
+
+@nb.njit(cache=True, parallel=True)
+def _threshold_kernel(zlo, zhi, scale, out):
+    for i in nb.prange(zlo.shape[0]):
+        for j in range(zlo.shape[1]):
+            t = (zhi[i, j] - zlo[i, j]) * scale
+            out[i, j] = t if math.isfinite(t) else 0.0
+
+
+def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
+    """Early-termination thresholds (H, W): ``exit_threshold`` slices of each pixel's grid.
+
+    A ray closer than this to the pixel's backmost depth stops there
+    (§3.7). One slice spans ``(zhi - zlo) / (S - 1)`` (§3.3); the threshold
+    is 0 where the pixel has no fragment.
+    """
+    zlo = np.ascontiguousarray(zlo, dtype=np.float64)
+    zhi = np.ascontiguousarray(zhi, dtype=np.float64)
+    out = np.empty(zlo.shape)
+    _threshold_kernel(zlo, zhi, float(exit_threshold) / (int(slices) - 1), out)
+    return out
 
 
 def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
