@@ -175,15 +175,24 @@ def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
 
 @nb.njit(cache=True)
 def _bin(rows, H, band):
-    """Bin triangles into bands of rows (CSR lists, triangles in index order)."""
+    """Bin triangles into bands of rows (CSR lists, triangles in index order).
+
+    ``band`` must be a power of two: a row's band is a shift, not an
+    integer division (which would dominate this loop).
+    """
+    sh = 0
+    while (1 << sh) < band:
+        sh += 1
+    if (1 << sh) != band:
+        raise ValueError("_bin: band must be a power of two")
     T = rows.shape[0]
-    nb_bands = (H + band - 1) // band
+    nb_bands = (H + band - 1) >> sh
     counts = np.zeros(nb_bands + 1, np.int64)
     for t in range(T):
         i0 = rows[t, 0]
         i1 = rows[t, 1]
-        if i0 <= i1:
-            for b in range(i0 // band, i1 // band + 1):
+        if i0 <= i1:  # then 0 <= i0 <= i1
+            for b in range(i0 >> sh, (i1 >> sh) + 1):
                 counts[b + 1] += 1
     for b in range(nb_bands):
         counts[b + 1] += counts[b]
@@ -193,7 +202,7 @@ def _bin(rows, H, band):
         i0 = rows[t, 0]
         i1 = rows[t, 1]
         if i0 <= i1:
-            for b in range(i0 // band, i1 // band + 1):
+            for b in range(i0 >> sh, (i1 >> sh) + 1):
                 tris[fill[b]] = t
                 fill[b] += 1
     return counts, tris
