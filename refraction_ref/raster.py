@@ -385,6 +385,8 @@ def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
 
     The same band traversal as :func:`_raster_kernel`, compiled with the
     op fixed so that the other blend branches drop out of the inner loop.
+    ``layers`` (2, H, W) need not be initialised: each band first clears
+    its own rows to (+inf, -inf).
     """
     f1 = np.zeros((1, 1))
     i1 = np.zeros((1, 1), np.int32)
@@ -392,6 +394,10 @@ def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
     t1 = np.zeros((1, 1), np.int64)
     slab = np.zeros(4)
     for b in nb.prange(counts.shape[0] - 1):
+        for i in range(b * band, min(b * band + band, H)):
+            for j in range(W):
+                layers[0, i, j] = np.inf
+                layers[1, i, j] = -np.inf
         _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, 6, perspective,
                      f1, i1, b1, f1, f1, 256, layers, t1, slab,
                      frag_off, frag_pix, frag_d, frag_n, frag_s)
@@ -615,9 +621,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         lo = np.ascontiguousarray(zlo, dtype=np.float64)
         hi = np.ascontiguousarray(zhi, dtype=np.float64)
     elif code == 6:
-        layers = np.empty((2, H, W))
-        layers[0] = np.inf
-        layers[1] = -np.inf
+        layers = np.empty((2, H, W))  # initialised band by band in the kernel
     else:
         ibuf = np.zeros((H, W), np.int32)
         layers = np.full((int(capacity), H, W), np.inf)
@@ -789,8 +793,6 @@ def ortho_fragments(tri_tex, shape):
     if fr is None:
         raise MemoryError(f"ortho_fragments: more than {_FRAGMENT_LIMIT} fragments; lower the resolution")
     layers = np.empty((2, H, W))
-    layers[0] = np.inf
-    layers[1] = -np.inf
     _minmax_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, False, layers,
                    fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
     return fr
