@@ -173,14 +173,9 @@ class Camera:
         centres of the window on the plane through the eye.
         """
         d = np.empty((self.height, self.width, 3))
-        _primary_dirs(self.width, self.height, self.sx, self.sy, self.basis, d, self.ortho)
         o = np.empty_like(d)
-        o[...] = np.asarray(self.eye, dtype=np.float64)
-        if self.ortho:
-            x = ((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * self.sx
-            y = (1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * self.sy
-            b = self.basis
-            o += x[None, :, None] * b[0] + y[:, None, None] * b[1]
+        _primary_rays(self.width, self.height, self.sx, self.sy, self.basis,
+                      np.asarray(self.eye, dtype=np.float64), o, d, self.ortho)
         return o, d
 
     def to_screen(self, p_view):
@@ -234,6 +229,24 @@ def _primary_dirs(W, H, sx, sy, basis, out, ortho=False):
             x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
             for k in range(3):
                 out[i, j, k] = x * basis[0, k] + y * basis[1, k] + z * basis[2, k]
+
+
+@nb.njit(cache=True, parallel=True)
+def _primary_rays(W, H, sx, sy, basis, eye, origin, out, ortho=False):
+    """World-space origins and directions through pixel centres (one pass of :func:`_primary_dirs`)."""
+    for i in nb.prange(H):
+        y = (1.0 - (i + 0.5) / H * 2.0) * sy
+        for j in range(W):
+            x, yv, z = primary_dir(i, j, W, H, sx, sy, ortho)
+            for k in range(3):
+                out[i, j, k] = x * basis[0, k] + yv * basis[1, k] + z * basis[2, k]
+            if ortho:
+                xw = ((j + 0.5) / W * 2.0 - 1.0) * sx
+                for k in range(3):
+                    origin[i, j, k] = eye[k] + xw * basis[0, k] + y * basis[1, k]
+            else:
+                for k in range(3):
+                    origin[i, j, k] = eye[k]
 
 
 @nb.njit(cache=True, inline="always")

@@ -166,7 +166,7 @@ def bounds(v):
 def object_mesh(obj, base_dir=".", deform_fn=None):
     """World-space vertices and faces of one scene object (or receiver) dict."""
     v, f = load_mesh(obj["mesh"], obj.get("size"), base_dir)
-    v = np.array(v, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)  # not modified in place: every step below makes a new array
     if obj.get("fit") is not None:
         lo, hi = bounds(v)
         ext = float(np.max(hi - lo))
@@ -264,7 +264,10 @@ def scene_geometry(scene):
     if not vs:
         return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32),
                         np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    return Geometry(np.concatenate(vs), np.concatenate(fs), np.concatenate(fo), np.asarray(iors),
+    def cat(a):
+        return a[0] if len(a) == 1 else np.concatenate(a)
+
+    return Geometry(cat(vs), cat(fs), cat(fo), np.asarray(iors),
                     np.stack(absn), np.asarray(bnd), np.asarray(deg))
 
 
