@@ -197,3 +197,31 @@ def test_beer_lambert():
     np.testing.assert_allclose(optics.beer_lambert(a, 3.0, 1.2),
                                optics.beer_lambert(a, 1.0, 1.2) * optics.beer_lambert(a, 2.0, 1.2), rtol=1e-14)
     assert np.all(np.diff(optics.beer_lambert([1, 1, 1], np.linspace(0, 5, 10))[:, 0]) < 0)
+
+
+def test_checker_environment_matches_the_latlong_formula():
+    """The checker kernel decides squares with a fast atan2 and falls back to libm near
+    square edges: its colours equal (floor(u tiles) + floor(v tiles / 2)) mod 2 of the
+    lat-long (u, v) computed with libm (Python's math), including directions exactly on
+    the edges and the poles, where the signs of zeros decide."""
+    import math
+
+    from refraction_ref.environment import environment_lookup
+
+    rng = np.random.default_rng(7)
+    colors = [[0.9, 0.8, 0.7], [0.1, 0.2, 0.3]]
+    for tiles in (1, 2, 7, 16, 1000):
+        d = rng.standard_normal((20_000, 3))
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        phi = np.linspace(-np.pi, np.pi, tiles + 1)  # meridians between squares
+        theta = np.linspace(0.0, np.pi, tiles + 1)   # parallels between squares
+        edges = np.concatenate([
+            np.stack([np.sin(phi), np.zeros_like(phi), -np.cos(phi)], 1),
+            np.stack([np.sin(theta), np.cos(theta), np.zeros_like(theta)], 1),
+            [[0, 1, 0], [0, -1, 0], [0, 0, -1], [0, 0, 1], [-0.0, 0, 1], [1, 0, 0], [-1, 0, 0]]])
+        d = np.concatenate([d, edges, -edges])
+        env = {"type": "checker", "tiles": tiles, "colors": colors, "intensity": 1.0}
+        got = environment_lookup(env, d)
+        c = [(math.floor((math.atan2(x, -z) / (2 * math.pi) + 0.5) * tiles)
+              + math.floor(math.acos(min(1.0, max(-1.0, y))) / math.pi * (tiles / 2.0))) % 2 for x, y, z in d]
+        np.testing.assert_array_equal(got, np.asarray(colors, np.float32)[c], err_msg=f"tiles {tiles}")
