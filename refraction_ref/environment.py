@@ -49,51 +49,9 @@ def _load_image(path):
     return img
 
 
-#: minimax coefficients of atan(t) on [0, 1] (odd polynomial, |error| < 1.7e-6 rad)
-_ATAN_C = (0.99997726, -0.33262347, 0.19354346, -0.11643287, 0.05265332, -0.01172120)
-#: |error| bound of :func:`_atan2_fast` in radians (measured 1.66e-6), used to decide
-#: when a checker square lies too close to call and the libm functions must decide
-_ATAN_ERR = 1.7e-6
-
-
-@nb.njit(cache=True, inline="always")
-def _atan2_fast(a, b):
-    """atan2(a, b) to within ``_ATAN_ERR`` radians, without a libm call (NaN for a = b = 0)."""
-    ax = abs(a)
-    bx = abs(b)
-    mx = max(ax, bx)
-    if mx == 0.0:
-        return np.nan  # the signs of the zeros decide: leave it to libm
-    t = min(ax, bx) / mx
-    s = t * t
-    r = t * (_ATAN_C[0] + s * (_ATAN_C[1] + s * (_ATAN_C[2] + s * (_ATAN_C[3] + s * (_ATAN_C[4]
-                                                                                    + s * _ATAN_C[5])))))
-    if ax > bx:
-        r = 0.5 * math.pi - r
-    if b < 0.0:
-        r = math.pi - r
-    return -r if a < 0.0 else r
-
-
-@nb.njit(cache=True, inline="always")
-def _square(f, margin):
-    """floor(f), or -1 when f is within ``margin`` of an integer (too close to call) or NaN."""
-    k = math.floor(f)
-    if f - k >= margin and k + 1.0 - f >= margin:
-        return np.int64(k)
-    return -1
-
-
 @nb.njit(cache=True, parallel=True)
 def _checker_kernel(d, tiles, colors, intensity, out):
-    # The square index is (floor(u tiles) + floor(v tiles / 2)) mod 2 with the
-    # lat-long (u, v) of the module docstring. A fast polynomial atan2 decides
-    # it; only directions within a few error bounds of a square's edge (about
-    # 0.01% of them) are decided again with libm's atan2 and acos, so the
-    # result is that of the exact formula.
     half = tiles / 2.0
-    mu = 8.0 * _ATAN_ERR / (2.0 * math.pi) * tiles
-    mv = 8.0 * _ATAN_ERR / math.pi * half + 1e-12
     for k in nb.prange(d.shape[0]):
         x, y, z = d[k, 0], d[k, 1], d[k, 2]
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
@@ -101,14 +59,9 @@ def _checker_kernel(d, tiles, colors, intensity, out):
             out[k, 1] = 0.0
             out[k, 2] = 0.0
             continue
-        yc = min(1.0, max(-1.0, y))
-        ku = _square((_atan2_fast(x, -z) / (2.0 * math.pi) + 0.5) * tiles, mu)
-        kv = _square(_atan2_fast(math.sqrt(max(0.0, 1.0 - yc * yc)), yc) / math.pi * half, mv)
-        if ku < 0:
-            ku = np.int64(math.floor((math.atan2(x, -z) / (2.0 * math.pi) + 0.5) * tiles))
-        if kv < 0:
-            kv = np.int64(math.floor(math.acos(yc) / math.pi * half))
-        c = (ku + kv) % 2
+        u = math.atan2(x, -z) / (2.0 * math.pi) + 0.5
+        v = math.acos(min(1.0, max(-1.0, y))) / math.pi
+        c = (np.int64(math.floor(u * tiles)) + np.int64(math.floor(v * half))) % 2
         for ch in range(3):
             out[k, ch] = colors[c, ch] * intensity
 

@@ -200,10 +200,9 @@ def test_beer_lambert():
 
 
 def test_checker_environment_matches_the_latlong_formula():
-    """The checker kernel decides squares with a fast atan2 and falls back to libm near
-    square edges: its colours equal (floor(u tiles) + floor(v tiles / 2)) mod 2 of the
+    """The checker kernel's colours are (floor(u tiles) + floor(v tiles / 2)) mod 2 of the
     lat-long (u, v) computed with libm (Python's math), including directions exactly on
-    the edges and the poles, where the signs of zeros decide."""
+    the square edges and the poles, where the signs of zeros decide."""
     import math
 
     from refraction_ref.environment import environment_lookup
