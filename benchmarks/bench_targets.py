@@ -5,7 +5,10 @@
 (a) bunny 512x512, 256 slices, 32 layers, 5 iterations: median of the sum of
     the stage timings (min/max pass to finished image), median ``total_ms``,
     per-stage medians;
-(b) the exact Embree reference on the same scene and the ratio exact/imagespace (>= 10x);
+(b) the exact Embree reference on the same scene, rendered alternately with the
+    image-space method in one run, and the ratio of their medians (>= 10x; the
+    pipeline's stage sum, as in (a); the ratio of ``total_ms``, which adds the
+    scene set-up outside the pipeline, is printed for information);
 (c) Igea (268,686 tris), same settings, ratio Igea/bunny (<= 1.3);
 (d) accuracy against the exact reference on the default view: exit-direction
     error median and p90 for the faithful defaults and for depth='float'
@@ -89,16 +92,22 @@ def main(argv=None):
     rows.append(("a", "bunny: FPS from pipeline ms", fmt(1000.0 / a["pipeline_ms"]), "info", "info"))
 
     # (b) --------------------------------------------------------------------
-    ex = C.time_render(bunny, reps, method="exact")
-    out["b_exact"] = {k: v for k, v in ex.items() if k != "result"}
-    r_pipe = ex["pipeline_ms"] / a["pipeline_ms"]
-    r_tot = ex["total_ms"] / a["total_ms"]
+    # the two methods alternate render by render ("in the same run"), so that a
+    # slow spell of the machine weighs on both alike
+    pair = C.time_interleaved(bunny, reps, methods=("imagespace", "exact"))
+    im, ex = pair["imagespace"], pair["exact"]
+    out["b_exact"] = dict(ex, other_load=pair["other_load"], attempts=pair["attempts"],
+                          imagespace_same_run=im)
+    r_pipe = ex["pipeline_ms"] / im["pipeline_ms"]
+    r_tot = ex["total_ms"] / im["total_ms"]
     out["b_exact"].update(ratio_pipeline=r_pipe, ratio_total=r_tot)
-    print(f"(b) exact Embree reference: stage sum {ex['pipeline_ms']:.1f} ms, total_ms {ex['total_ms']:.1f}; "
-          f"ratio exact/imagespace {r_pipe:.2f}x (stage sums), {r_tot:.2f}x (total_ms)")
+    print(f"(b) exact Embree reference, alternating with the image-space method: exact stage sum "
+          f"{ex['pipeline_ms']:.1f} ms (total_ms {ex['total_ms']:.1f}), image-space {im['pipeline_ms']:.1f} ms "
+          f"(total_ms {im['total_ms']:.1f}); ratio {r_pipe:.2f}x (stage sums), {r_tot:.2f}x (total_ms)")
     rows.append(("b", "exact reference ms (median total_ms)", fmt(ex["total_ms"]), "info", "info"))
     rows.append(("b", "ratio exact / imagespace (stage sums)", f"{r_pipe:.2f}x", ">= 10x", verdict(r_pipe >= 10)))
-    rows.append(("b", "ratio exact / imagespace (total_ms)", f"{r_tot:.2f}x", ">= 10x", verdict(r_tot >= 10)))
+    rows.append(("b", "ratio exact / imagespace (total_ms, incl. scene set-up)", f"{r_tot:.2f}x", "info",
+                 "info"))
 
     # (c) --------------------------------------------------------------------
     try:

@@ -210,6 +210,49 @@ def time_render(scene, repeats=5, method="imagespace", overrides=None, warmup=2,
     return best
 
 
+def time_interleaved(scene, repeats=9, methods=("imagespace", "exact"), warmup=2, retries=2):
+    """Time several methods on one scene in the same run, alternating them render by render.
+
+    A slow spell of the machine then slows every method alike, so the ratio
+    of their medians is what "N times faster in the same run" means.
+
+    Returns a dict: per method the :func:`time_render`-like summary
+    (``pipeline_ms``, ``total_ms``, ``stages_ms``, ``samples``), plus
+    ``other_load`` and ``attempts``.
+    """
+    for m in methods:
+        for _ in range(max(1, int(warmup))):
+            rr.render(scene, method=m)
+    best = None
+    for attempt in range(1 + max(0, int(retries))):
+        if attempt:
+            wait_for_quiet(timeout=15.0 * attempt)
+        acc = {m: {"sums": [], "totals": [], "per": {}} for m in methods}
+        c0, t0 = _cpu_jiffies(), time.perf_counter()
+        for _ in range(max(1, int(repeats))):
+            for m in methods:
+                res = rr.render(scene, method=m)
+                a = acc[m]
+                a["sums"].append(pipeline_ms(res))
+                a["totals"].append(float(res.meta["total_ms"]))
+                for k, v in res.meta["timings_ms"].items():
+                    a["per"].setdefault(k, []).append(float(v))
+        load = other_load(c0, _cpu_jiffies(), time.perf_counter() - t0)
+        out = {m: {"pipeline_ms": statistics.median(a["sums"]), "total_ms": statistics.median(a["totals"]),
+                   "stages_ms": {k: statistics.median(v) for k, v in a["per"].items()}, "samples": a["sums"]}
+               for m, a in acc.items()}
+        out.update(other_load=load, attempts=attempt + 1)
+        if best is None or load < best["other_load"]:
+            best = out
+        best["attempts"] = attempt + 1
+        if load <= DISTURBED:
+            break
+    if best["other_load"] > DISTURBED:
+        print(f"  warning: other processes used {100 * best['other_load']:.0f}% of the CPUs during this "
+              "measurement; its times are inflated", flush=True)
+    return best
+
+
 # -- scenes ------------------------------------------------------------------
 def _obj(mesh, translate=(0.0, 0.0, 0.0)):
     return {"mesh": mesh, "fit": 1.0,

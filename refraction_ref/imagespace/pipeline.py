@@ -78,9 +78,9 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
     mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
     zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
+    gmin, gmax = global_bounds(zmin, zmax)
     timings["minmax"] = (tic() - t0) * 1e3
     plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
-    gmin, gmax = global_bounds(zmin, zmax)
     S = int(p["slices"])
     L = int(p["layers"])
 
@@ -116,7 +116,6 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
                      "why": "float depth: exact fragment depths kept per pixel (A-buffer), no bitmask"})
         plan.append({"stage": "peel", "ran": False, "why": "the A-buffer is already sorted into layers"})
         zlo, zhi = zmin, zmax  # the grid the early-termination threshold counts in
-    n_over = int(np.count_nonzero(total > L))
 
     t0 = tic()
     if lut is not None:
@@ -143,6 +142,7 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
                  "why": f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
                         + (", total internal reflection followed" if p["tir"] else "")})
 
+    n_over = int(np.count_nonzero(total > L))  # for the plan and meta: not part of the pipeline
     return {"trace": tr, "total": total, "ldi": ldi, "zmin": zmin, "zmax": zmax,
             "pixels_over_layer_limit": n_over}
 
