@@ -49,6 +49,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from .schedule import coprime_stride, strided
+
 __all__ = ["rasterize", "raster_setup", "RasterSetup", "Fragments", "clip_near", "OPS", "ortho_setup",
            "rasterize_ortho", "ortho_fragments"]
 
@@ -372,7 +374,10 @@ def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                    fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
                    frag_off, frag_pix, frag_d, frag_n, frag_s):
     """All bands in parallel, any blend ``op`` (see :func:`_raster_band`)."""
-    for b in nb.prange(counts.shape[0] - 1):
+    nbands = counts.shape[0] - 1
+    step = coprime_stride(nbands)
+    for k in nb.prange(nbands):
+        b = strided(k, step, nbands)  # bands spread over the threads (see .schedule)
         _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                      fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
                      frag_off, frag_pix, frag_d, frag_n, frag_s)
@@ -393,7 +398,10 @@ def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
     b1 = np.zeros((1, 1, 1), np.uint32)
     t1 = np.zeros((1, 1), np.int64)
     slab = np.zeros(4)
-    for b in nb.prange(counts.shape[0] - 1):
+    nbands = counts.shape[0] - 1
+    step = coprime_stride(nbands)
+    for k in nb.prange(nbands):
+        b = strided(k, step, nbands)  # bands spread over the threads (see .schedule)
         for i in range(b * band, min(b * band + band, H)):
             for j in range(W):
                 layers[0, i, j] = np.inf
@@ -448,7 +456,10 @@ def _band_capacity(X, rows, counts, tris, W, band):
 @nb.njit(cache=True, parallel=True)
 def _blend_fragments(frag_off, frag_n, frag_pix, frag_d, W, op, zlo, zhi, slices, bits):
     """Blend recorded fragments into occupancy bitmasks (op 3 'or', 4 'add'), band by band."""
-    for b in nb.prange(frag_n.shape[0]):
+    nbands = frag_n.shape[0]
+    step = coprime_stride(nbands)
+    for k in nb.prange(nbands):
+        b = strided(k, step, nbands)
         for q in range(frag_off[b], frag_off[b] + frag_n[b]):
             pix = frag_pix[q]
             i = pix // W

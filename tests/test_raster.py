@@ -393,3 +393,24 @@ def test_recorded_fragments_voxelize_like_a_second_rasterization(blend):
     b = rasterize(rs, cam, blend, zlo=zmin, zhi=zmax, slices=128)
     np.testing.assert_array_equal(a, b)
     assert np.count_nonzero(a) > 0
+
+
+@given(st.integers(min_value=1, max_value=200_000))
+@settings(max_examples=200, deadline=None)
+def test_strided_order_visits_every_row_once(n):
+    """The prange work order (refraction_ref.schedule) is a permutation of 0..n-1."""
+    from refraction_ref.schedule import coprime_stride, strided
+
+    s = coprime_stride(n)
+    order = np.array([strided(k, s, n) for k in range(n)]) if n <= 5000 else (np.arange(n, dtype=np.int64) * s) % n
+    assert np.array_equal(np.sort(order), np.arange(n))
+
+
+def test_strided_order_for_multiples_of_the_small_primes():
+    from refraction_ref.schedule import coprime_stride
+
+    n = 7 * 11 * 13 * 17 * 19 * 23 * 29 * 31 * 37 * 41 * 43 * 47
+    assert coprime_stride(n) == 1
+    for n in (7, 77, 7 * 11 * 13, 512, 511):
+        s = coprime_stride(n)
+        assert np.array_equal(np.sort((np.arange(n) * s) % n), np.arange(n))

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..schedule import coprime_stride, strided
+
 __all__ = ["peel_layers", "depth_complexity", "layer_depth_lut", "POPCOUNT8", "SELECT8", "lowest_set_bit"]
 
 
@@ -60,7 +62,9 @@ def lowest_set_bit(w):
 @nb.njit(cache=True, parallel=True)
 def _popcount_kernel(bits, total):
     H, W, K = bits.shape
-    for i in nb.prange(H):
+    step = coprime_stride(H)
+    for r in nb.prange(H):
+        i = strided(r, step, H)  # rows spread over the threads (see ..schedule)
         for j in range(W):
             n = 0
             for w in range(K):
@@ -75,7 +79,9 @@ def _popcount_kernel(bits, total):
 def _peel_kernel(bits, zlo, zhi, slices, L, ldi):
     H, W, K = bits.shape
     inv = 1.0 / (slices - 1)
-    for i in nb.prange(H):
+    step = coprime_stride(H)
+    for r in nb.prange(H):
+        i = strided(r, step, H)  # rows spread over the threads (see ..schedule)
         for j in range(W):
             lo = zlo[i, j]
             rng = zhi[i, j] - lo

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..schedule import coprime_stride, strided
+
 __all__ = ["search_bounds", "mip_level"]
 
 
@@ -37,8 +39,9 @@ def _mip_reduce(ldi, f, zmax, zmin):
     wb = (W + f - 1) // f
     rhi = np.full((hb, L), -np.inf)
     rlo = np.full((hb, L), np.inf)
-    for bi0 in nb.prange(hb):
-        bi = np.int64(bi0)
+    step = coprime_stride(hb)
+    for r in nb.prange(hb):
+        bi = strided(r, step, hb)  # MIP rows spread over the threads (see ..schedule)
         i0 = bi * f
         i1 = min(i0 + f, H)
         for bj in range(wb):

@@ -54,6 +54,7 @@ import numpy as np
 
 from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
+from ..schedule import coprime_stride, strided
 from .normals import layer_depth, normal_at
 
 __all__ = ["trace_layers", "exit_thresholds"]
@@ -103,8 +104,9 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                   ior, outside_ior, iterations, nmethod, delta, tir, max_events, layer_limit, lut,
                   frame, rot, t0, exit_pos, exit_dir, last_dir, interfaces, path_len, status, ortho=False):
     L = ldi.shape[0]
-    for i0 in nb.prange(H):
-        i = np.int64(i0)  # the prange index may be unsigned; texel indices are signed
+    step = coprime_stride(H)
+    for r in nb.prange(H):
+        i = strided(r, step, H)  # rows spread over the threads (see ..schedule)
         for j0 in range(W):
             j = np.int64(j0)
             if own_dirs:
