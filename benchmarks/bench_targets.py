@@ -38,6 +38,11 @@ STARTUP_CODE = ("import refraction_ref as rr; "
                 "rr.render(rr.load_scene({'camera': {'width': 64, 'height': 64}}))")
 
 
+#: warm-up renders before timing: the first renders of a process also pay for
+#: memory the allocator and the (virtual) machine have not handed out before
+WARMUP = 4
+
+
 def fmt(x, nd=1):
     return "n/a" if x is None else f"{x:.{nd}f}"
 
@@ -61,7 +66,8 @@ def startup_seconds():
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--repeats", type=int, default=9, help="timed renders per measurement (after 2 warm-ups; >= 5)")
+    ap.add_argument("--repeats", type=int, default=15,
+                    help="timed renders per measurement (after WARMUP warm-ups; >= 5)")
     ap.add_argument("--pipeline-target-ms", type=float, default=None,
                     help="optional PASS/MISS bound for (a) the bunny pipeline time; without it (a) is informational")
     ap.add_argument("--startup-target-s", type=float, default=10.0,
@@ -72,12 +78,12 @@ def main(argv=None):
     out = {"machine": C.machine_line(), "git": C.git_rev(), "repeats": reps}
     rows = []  # (id, what, measured, target, verdict)
     print(f"# refraction_ref targets  ({out['machine']}; git {out['git']})")
-    print(f"timings: median over {reps} renders after two warm-ups; pipeline = sum of meta['timings_ms']\n")
+    print(f"timings: median over {reps} renders after {WARMUP} warm-ups; pipeline = sum of meta['timings_ms']\n")
 
     settings = dict(layers=32, slices=256, iterations=5)
     # (a) --------------------------------------------------------------------
     bunny = C.bunny_scene(512, **settings)
-    a = C.time_render(bunny, reps)
+    a = C.time_render(bunny, reps, warmup=WARMUP)
     out["a_bunny"] = {k: v for k, v in a.items() if k != "result"}
     out["a_bunny"]["triangles"] = C.triangles(bunny)
     stages = "  ".join(f"{k} {a['stages_ms'].get(k, 0.0):.1f}" for k in C.STAGES)
@@ -94,7 +100,7 @@ def main(argv=None):
     # (b) --------------------------------------------------------------------
     # the two methods alternate render by render ("in the same run"), so that a
     # slow spell of the machine weighs on both alike
-    pair = C.time_interleaved(bunny, reps, methods=("imagespace", "exact"))
+    pair = C.time_interleaved(bunny, reps, methods=("imagespace", "exact"), warmup=WARMUP)
     im, ex = pair["imagespace"], pair["exact"]
     out["b_exact"] = dict(ex, other_load=pair["other_load"], attempts=pair["attempts"],
                           imagespace_same_run=im)
@@ -112,7 +118,7 @@ def main(argv=None):
     # (c) --------------------------------------------------------------------
     try:
         igea = C.igea_scene(512, **settings)
-        g = C.time_render(igea, reps)
+        g = C.time_render(igea, reps, warmup=WARMUP)
         out["c_igea"] = {k: v for k, v in g.items() if k != "result"}
         out["c_igea"]["triangles"] = C.triangles(igea)
         ratio = g["pipeline_ms"] / a["pipeline_ms"]
