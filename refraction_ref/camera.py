@@ -255,13 +255,16 @@ def project_point(x, y, z, W, H, sx, sy, ortho=False):
 
     With ``ortho`` the division by the depth is dropped (orthographic view).
     """
+    # written with the factors W / (2 sx) etc. apart, so that a loop over
+    # pixels computes them once: one division per point, not two
     d = -z
     if ortho:
-        col = (x / sx * 0.5 + 0.5) * W
-        row = (0.5 - y / sy * 0.5) * H
+        col = x * (0.5 * W / sx) + 0.5 * W
+        row = 0.5 * H - y * (0.5 * H / sy)
         return col, row, d
-    col = (x / (d * sx) * 0.5 + 0.5) * W
-    row = (0.5 - y / (d * sy) * 0.5) * H
+    inv = 1.0 / d
+    col = x * inv * (0.5 * W / sx) + 0.5 * W
+    row = 0.5 * H - y * inv * (0.5 * H / sy)
     return col, row, d
 
 
@@ -272,7 +275,7 @@ def unproject_pixel(col, row, d, W, H, sx, sy, ortho=False):
     With ``ortho`` the lateral position does not scale with the depth.
     """
     if ortho:
-        return (col / W * 2.0 - 1.0) * sx, (1.0 - row / H * 2.0) * sy, -d
-    x = (col / W * 2.0 - 1.0) * sx * d
-    y = (1.0 - row / H * 2.0) * sy * d
+        return (col * (2.0 / W) - 1.0) * sx, (1.0 - row * (2.0 / H)) * sy, -d
+    x = (col * (2.0 / W) - 1.0) * sx * d
+    y = (1.0 - row * (2.0 / H)) * sy * d
     return x, y, -d
