@@ -180,66 +180,43 @@ def time_render(scene, repeats=5, method="imagespace", overrides=None, warmup=2,
     processes used meanwhile), ``attempts`` and ``result`` (the last run, for
     accuracy).
     """
-    for _ in range(max(1, int(warmup))):  # warm-up (JIT cache, allocations, BVH)
-        rr.render(scene, method=method, overrides=overrides)
-    best = None
-    for attempt in range(1 + max(0, int(retries))):
-        if attempt:
-            wait_for_quiet(timeout=15.0 * attempt)
-        sums, totals, per = [], [], {}
-        res = None
-        c0, t0 = _cpu_jiffies(), time.perf_counter()
-        for _ in range(max(1, int(repeats))):
-            res = rr.render(scene, method=method, overrides=overrides)
-            sums.append(pipeline_ms(res))
-            totals.append(float(res.meta["total_ms"]))
-            for k, v in res.meta["timings_ms"].items():
-                per.setdefault(k, []).append(float(v))
-        load = other_load(c0, _cpu_jiffies(), time.perf_counter() - t0)
-        out = {"pipeline_ms": statistics.median(sums), "total_ms": statistics.median(totals),
-               "stages_ms": {k: statistics.median(v) for k, v in per.items()},
-               "samples": sums, "other_load": load, "attempts": attempt + 1, "result": res}
-        if best is None or load < best["other_load"]:
-            best = dict(out, attempts=attempt + 1)
-        best["attempts"] = attempt + 1
-        if load <= DISTURBED:
-            break
-    if best["other_load"] > DISTURBED:
-        print(f"  warning: other processes used {100 * best['other_load']:.0f}% of the CPUs during this "
-              "measurement; its time is inflated", flush=True)
-    return best
+    t = time_interleaved(scene, repeats, (method,), warmup, retries, overrides)
+    return dict(t[method], other_load=t["other_load"], attempts=t["attempts"])
 
 
-def time_interleaved(scene, repeats=9, methods=("imagespace", "exact"), warmup=2, retries=2):
+def time_interleaved(scene, repeats=9, methods=("imagespace", "exact"), warmup=2, retries=2, overrides=None):
     """Time several methods on one scene in the same run, alternating them render by render.
 
     A slow spell of the machine then slows every method alike, so the ratio
-    of their medians is what "N times faster in the same run" means.
+    of their medians is what "N times faster in the same run" means. Warm-up
+    and retries as in :func:`time_render`.
 
-    Returns a dict: per method the :func:`time_render`-like summary
-    (``pipeline_ms``, ``total_ms``, ``stages_ms``, ``samples``), plus
-    ``other_load`` and ``attempts``.
+    Returns a dict: per method the :func:`time_render` summary
+    (``pipeline_ms``, ``total_ms``, ``stages_ms``, ``samples``, ``result``),
+    plus ``other_load`` and ``attempts``.
     """
-    for m in methods:
+    for m in methods:  # warm-up (JIT cache, allocations, BVH)
         for _ in range(max(1, int(warmup))):
-            rr.render(scene, method=m)
+            rr.render(scene, method=m, overrides=overrides)
     best = None
     for attempt in range(1 + max(0, int(retries))):
         if attempt:
             wait_for_quiet(timeout=15.0 * attempt)
-        acc = {m: {"sums": [], "totals": [], "per": {}} for m in methods}
+        acc = {m: {"sums": [], "totals": [], "per": {}, "result": None} for m in methods}
         c0, t0 = _cpu_jiffies(), time.perf_counter()
         for _ in range(max(1, int(repeats))):
             for m in methods:
-                res = rr.render(scene, method=m)
+                res = rr.render(scene, method=m, overrides=overrides)
                 a = acc[m]
+                a["result"] = res
                 a["sums"].append(pipeline_ms(res))
                 a["totals"].append(float(res.meta["total_ms"]))
                 for k, v in res.meta["timings_ms"].items():
                     a["per"].setdefault(k, []).append(float(v))
         load = other_load(c0, _cpu_jiffies(), time.perf_counter() - t0)
         out = {m: {"pipeline_ms": statistics.median(a["sums"]), "total_ms": statistics.median(a["totals"]),
-                   "stages_ms": {k: statistics.median(v) for k, v in a["per"].items()}, "samples": a["sums"]}
+                   "stages_ms": {k: statistics.median(v) for k, v in a["per"].items()}, "samples": a["sums"],
+                   "result": a["result"]}
                for m, a in acc.items()}
         out.update(other_load=load, attempts=attempt + 1)
         if best is None or load < best["other_load"]:
