@@ -175,12 +175,14 @@ def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
         rows[t, 1] = i1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _bin(rows, H, band):
     """Bin triangles into bands of rows (CSR lists, triangles in index order).
 
     ``band`` must be a power of two: a row's band is a shift, not an
-    integer division (which would dominate this loop).
+    integer division (which would dominate this loop). A parallel counting
+    sort over a fixed number of chunks of triangles: the lists come out in
+    triangle order whatever the thread count.
     """
     sh = 0
     while (1 << sh) < band:
@@ -189,24 +191,34 @@ def _bin(rows, H, band):
         raise ValueError("_bin: band must be a power of two")
     T = rows.shape[0]
     nb_bands = (H + band - 1) >> sh
+    C = max(1, min(64, T // 4096))
+    cnt = np.zeros((C, nb_bands), np.int64)
+    for c in nb.prange(C):
+        for t in range(c * T // C, (c + 1) * T // C):
+            i0 = rows[t, 0]
+            i1 = rows[t, 1]
+            if i0 <= i1:  # then 0 <= i0 <= i1
+                for b in range(i0 >> sh, (i1 >> sh) + 1):
+                    cnt[c, b] += 1
+    # band b's list: chunk 0's triangles, then chunk 1's, ... (each in index order)
     counts = np.zeros(nb_bands + 1, np.int64)
-    for t in range(T):
-        i0 = rows[t, 0]
-        i1 = rows[t, 1]
-        if i0 <= i1:  # then 0 <= i0 <= i1
-            for b in range(i0 >> sh, (i1 >> sh) + 1):
-                counts[b + 1] += 1
+    start = np.empty((C, nb_bands), np.int64)
+    pos = 0
     for b in range(nb_bands):
-        counts[b + 1] += counts[b]
-    fill = counts[:-1].copy()
-    tris = np.empty(counts[nb_bands], np.int64)
-    for t in range(T):
-        i0 = rows[t, 0]
-        i1 = rows[t, 1]
-        if i0 <= i1:
-            for b in range(i0 >> sh, (i1 >> sh) + 1):
-                tris[fill[b]] = t
-                fill[b] += 1
+        counts[b] = pos
+        for c in range(C):
+            start[c, b] = pos
+            pos += cnt[c, b]
+    counts[nb_bands] = pos
+    tris = np.empty(pos, np.int64)
+    for c in nb.prange(C):
+        for t in range(c * T // C, (c + 1) * T // C):
+            i0 = rows[t, 0]
+            i1 = rows[t, 1]
+            if i0 <= i1:
+                for b in range(i0 >> sh, (i1 >> sh) + 1):
+                    tris[start[c, b]] = t
+                    start[c, b] += 1
     return counts, tris
 
 
@@ -430,12 +442,12 @@ class RasterSetup(NamedTuple):
     shape: tuple
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _band_capacity(X, rows, counts, tris, W, band):
     """Upper bound of the fragments of each band: the pixel centres in its triangles' boxes."""
     nbands = counts.shape[0] - 1
     off = np.zeros(nbands + 1, np.int64)
-    for b in range(nbands):
+    for b in nb.prange(nbands):
         r0 = b * band
         r1 = r0 + band - 1
         c = 0
@@ -449,7 +461,9 @@ def _band_capacity(X, rows, counts, tris, W, band):
             j1 = min((xhi - 128) // 256, W - 1)
             if i1 >= i0 and j1 >= j0:
                 c += (i1 - i0 + 1) * (j1 - j0 + 1)
-        off[b + 1] = off[b] + c
+        off[b + 1] = c
+    for b in range(nbands):  # running sum: the bands' first slots
+        off[b + 1] += off[b]
     return off
 
 
