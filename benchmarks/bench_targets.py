@@ -38,9 +38,7 @@ STARTUP_CODE = ("import refraction_ref as rr; "
                 "rr.render(rr.load_scene({'camera': {'width': 64, 'height': 64}}))")
 
 
-#: warm-up renders before timing: the first renders of a process also pay for
-#: memory the allocator and the (virtual) machine have not handed out before
-WARMUP = 4
+WARMUP = C.WARMUP  # warm-up renders before timing
 
 
 def fmt(x, nd=1):

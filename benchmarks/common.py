@@ -163,11 +163,16 @@ def wait_for_quiet(threshold=0.10, timeout=30.0):
     return dt
 
 
-def time_render(scene, repeats=5, method="imagespace", overrides=None, warmup=2, retries=2):
+#: warm-up renders before timing: on this virtual machine the first renders of
+#: a process (and of a new scene) also pay for memory not handed out before
+WARMUP = 4
+
+
+def time_render(scene, repeats=5, method="imagespace", overrides=None, warmup=WARMUP, retries=2):
     """Render ``repeats`` times after ``warmup`` warm-up renders.
 
-    Two warm-ups by default: on this machine the first timed render after a
-    single warm-up is often an outlier (allocation of the large buffers).
+    ``WARMUP`` (4) warm-ups by default: on this machine the first renders
+    are outliers (the first touch of the large buffers' memory).
     The machine has two vCPUs, so another busy process (a test run, a
     compile) inflates a measurement severalfold: when other processes used
     more than ``DISTURBED`` of the CPUs during the timed renders, the
@@ -184,7 +189,7 @@ def time_render(scene, repeats=5, method="imagespace", overrides=None, warmup=2,
     return dict(t[method], other_load=t["other_load"], attempts=t["attempts"])
 
 
-def time_interleaved(scene, repeats=9, methods=("imagespace", "exact"), warmup=2, retries=2, overrides=None):
+def time_interleaved(scene, repeats=9, methods=("imagespace", "exact"), warmup=WARMUP, retries=2, overrides=None):
     """Time several methods on one scene in the same run, alternating them render by render.
 
     A slow spell of the machine then slows every method alike, so the ratio
