@@ -414,3 +414,23 @@ def test_strided_order_for_multiples_of_the_small_primes():
     for n in (7, 77, 7 * 11 * 13, 512, 511):
         s = coprime_stride(n)
         assert np.array_equal(np.sort((np.arange(n) * s) % n), np.arange(n))
+
+
+@pytest.mark.parametrize("T", [0, 5, 5000, 300_000])
+def test_bin_lists_triangles_per_band_in_index_order(T):
+    """The parallel counting sort gives every band the triangles whose rows meet it,
+    in triangle order (what a serial pass gives), and empty triangles nowhere."""
+    from refraction_ref.raster import _bin
+
+    rng = np.random.default_rng(T)
+    H, band = 100, 8
+    i0 = rng.integers(0, H, T)
+    rows = np.stack([i0, np.minimum(i0 + rng.integers(-3, 20, T), H - 1)], 1).astype(np.int64)
+    counts, tris = _bin(rows, H, band)
+    nb_bands = -(-H // band)
+    assert counts.shape == (nb_bands + 1,) and counts[0] == 0 and counts[-1] == len(tris)
+    for b in range(nb_bands):
+        expect = np.flatnonzero((rows[:, 0] <= rows[:, 1]) & (rows[:, 0] // band <= b) & (rows[:, 1] // band >= b))
+        np.testing.assert_array_equal(tris[counts[b]:counts[b + 1]], expect)
+    with pytest.raises(ValueError):
+        _bin(rows, H, 6)
