@@ -82,6 +82,9 @@ def _peel_kernel(bits, zlo, zhi, slices, L, ldi):
     step = coprime_stride(H)
     for r in nb.prange(H):
         i = strided(r, step, H)  # rows spread over the threads (see ..schedule)
+        for k in range(L):  # absent everywhere first: contiguous rows, not L scattered writes per pixel
+            for j in range(W):
+                ldi[k, i, j] = np.inf
         for j in range(W):
             lo = zlo[i, j]
             rng = zhi[i, j] - lo
@@ -93,8 +96,6 @@ def _peel_kernel(bits, zlo, zhi, slices, L, ldi):
                     ldi[n, i, j] = lo + b * inv * rng
                     n += 1
                     word = word & (word - np.uint32(1))  # clear the bit just found
-            for k in range(n, L):
-                ldi[k, i, j] = np.inf
 
 
 def depth_complexity(bits):
