@@ -165,10 +165,8 @@ def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
         xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
         xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
         # pixel rows / columns whose centre (256 i + 128) lies in [lo, hi]
-        i0 = max(-((128 - lo) // 256), 0)
-        i1 = min((hi - 128) // 256, H - 1)
-        j0 = max(-((128 - xlo) // 256), 0)
-        j1 = min((xhi - 128) // 256, W - 1)
+        i0, i1 = _pixel_span(lo, hi, 0, H - 1)
+        j0, j1 = _pixel_span(xlo, xhi, 0, W - 1)
         if not ok or j0 > j1:
             i0, i1 = 1, 0  # outside the guard band, or no pixel centre in its box
         rows[t, 0] = i0
@@ -236,6 +234,56 @@ def _bias(ax, ay, bx, by):
 
 
 @nb.njit(cache=True, inline="always")
+def _oriented_triangle(X, Y, A, t):
+    """Snapped triangle ``t`` with its attribute ``A``, re-oriented to a positive area.
+
+    No culling: a triangle given the other way round has vertices 1 and 2
+    swapped. Returns ``(x0, y0, x1, y1, x2, y2, a0, a1, a2, area, flipped)``,
+    ``area`` twice the screen area in fixed point (0: degenerate).
+    """
+    x0 = X[t, 0]
+    y0 = Y[t, 0]
+    x1 = X[t, 1]
+    y1 = Y[t, 1]
+    x2 = X[t, 2]
+    y2 = Y[t, 2]
+    a0 = A[t, 0]
+    a1 = A[t, 1]
+    a2 = A[t, 2]
+    area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+    if area < 0:
+        return x0, y0, x2, y2, x1, y1, a0, a2, a1, -area, True
+    return x0, y0, x1, y1, x2, y2, a0, a1, a2, area, False
+
+
+@nb.njit(cache=True, inline="always")
+def _pixel_span(lo, hi, first, last):
+    """Pixels whose centre ``256 k + 128`` lies in [lo, hi] (1/256-pixel fixed point), clamped to [first, last]."""
+    return max(-((128 - lo) // 256), first), min((hi - 128) // 256, last)
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_setup(x0, y0, x1, y1, x2, y2):
+    """Column steps and top-left biases of a triangle's three edges (positive area, rows down).
+
+    Returns ``(a0, a1, a2, b0, b1, b2)``: edge function ``k`` decreases by
+    ``256 a_k`` from one pixel centre to the next in a row, and the centre is
+    covered when every ``w_k + b_k >= 0`` (:func:`_edge_values`).
+    """
+    return (y2 - y1, y0 - y2, y1 - y0,
+            _bias(x1, y1, x2, y2), _bias(x2, y2, x0, y0), _bias(x0, y0, x1, y1))
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_values(x0, y0, x1, y1, x2, y2, px, py):
+    """The three edge functions at the sample (px, py): twice the signed areas of the
+    sub-triangles opposite each vertex, so also its unnormalised barycentric weights."""
+    return ((x2 - x1) * (py - y1) - (y2 - y1) * (px - x1),
+            (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2),
+            (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0))
+
+
+@nb.njit(cache=True, inline="always")
 def _set_slice_bit(bits, i, j, d, lo, hi, slices, add):
     """Set the bit of slice ``round((d - lo) / (hi - lo) * (S - 1))`` in pixel (i, j)'s mask.
 
@@ -279,53 +327,23 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
     nf = frag_off[b] if keep else 0
     for q in range(counts[b], counts[b + 1]):
         t = tris[q]
-        x0 = X[t, 0]
-        y0 = Y[t, 0]
-        d0 = D[t, 0]
-        x1 = X[t, 1]
-        y1 = Y[t, 1]
-        d1 = D[t, 1]
-        x2 = X[t, 2]
-        y2 = Y[t, 2]
-        d2 = D[t, 2]
-        area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+        x0, y0, x1, y1, x2, y2, d0, d1, d2, area, flipped = _oriented_triangle(X, Y, D, t)
         if area == 0:
             continue
-        facing = np.int8(-1)
-        if area < 0:  # no culling: re-orient instead
-            x1, x2 = x2, x1
-            y1, y2 = y2, y1
-            d1, d2 = d2, d1
-            area = -area
-            facing = np.int8(1)
+        facing = np.int8(1) if flipped else np.int8(-1)
         i0 = max(rows[t, 0], r0)
         i1 = min(rows[t, 1], r1)
-        xmin = min(x0, min(x1, x2))
-        xmax = max(x0, max(x1, x2))
-        # columns whose centre 256 j + 128 lies in [xmin, xmax] (integer ceil / floor)
-        j0 = max(-((128 - xmin) // 256), 0)
-        j1 = min((xmax - 128) // 256, W - 1)
+        j0, j1 = _pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), 0, W - 1)
         if j0 > j1 or i0 > i1:
             continue
-        b0 = _bias(x1, y1, x2, y2)
-        b1 = _bias(x2, y2, x0, y0)
-        b2 = _bias(x0, y0, x1, y1)
+        a0, a1, a2, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
         inv_area = 1.0 / area
         # D holds 1/depth for perspective set-ups, depth for orthographic ones:
         # either way the attribute interpolates linearly on screen
-        i0d = d0
-        i1d = d1
-        i2d = d2
-        # edge functions at the first pixel centre, stepped incrementally
-        a0 = y2 - y1
-        a1 = y0 - y2
-        a2 = y1 - y0
+        # edge functions at the first pixel centre of each row, stepped incrementally
         px0 = 256 * j0 + 128
         for i in range(i0, i1 + 1):
-            py = 256 * i + 128
-            w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
-            w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
-            w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
+            w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
             for j in range(j0, j1 + 1):
                 if j > j0:
                     w0 -= 256 * a0
@@ -334,9 +352,9 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                 if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                     continue
                 if perspective:
-                    d = 1.0 / ((w0 * i0d + w1 * i1d + w2 * i2d) * inv_area)
+                    d = 1.0 / ((w0 * d0 + w1 * d1 + w2 * d2) * inv_area)
                 else:
-                    d = (w0 * i0d + w1 * i1d + w2 * i2d) * inv_area
+                    d = (w0 * d0 + w1 * d1 + w2 * d2) * inv_area
                 if op == 0:
                     if d < fbuf[i, j]:
                         fbuf[i, j] = d
@@ -457,8 +475,7 @@ def _band_capacity(X, rows, counts, tris, W, band):
             i1 = min(rows[t, 1], r1)
             xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
             xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
-            j0 = max(-((128 - xlo) // 256), 0)
-            j1 = min((xhi - 128) // 256, W - 1)
+            j0, j1 = _pixel_span(xlo, xhi, 0, W - 1)
             if i1 >= i0 and j1 >= j0:
                 c += (i1 - i0 + 1) * (j1 - j0 + 1)
         off[b + 1] = c

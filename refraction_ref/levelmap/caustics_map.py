@@ -47,7 +47,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import _MAX_COORD, BAND, _bias, _bin
+from ..raster import _MAX_COORD, BAND, _bin, _edge_setup, _edge_values, _oriented_triangle, _pixel_span
 from .planes import dir_to_map, to_map
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane"]
@@ -157,10 +157,8 @@ def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, 
             hi = max(Y[m, 0], max(Y[m, 1], Y[m, 2]))
             xlo = min(X[m, 0], min(X[m, 1], X[m, 2]))
             xhi = max(X[m, 0], max(X[m, 1], X[m, 2]))
-            i0 = max(-((128 - lo) // 256), rect[0])
-            i1 = min((hi - 128) // 256, rect[1])
-            j0 = max(-((128 - xlo) // 256), rect[2])
-            j1 = min((xhi - 128) // 256, rect[3])
+            i0, i1 = _pixel_span(lo, hi, rect[0], rect[1])
+            j0, j1 = _pixel_span(xlo, xhi, rect[2], rect[3])
             if j0 > j1 or i0 > i1:
                 i0, i1 = 1, 0
         else:
@@ -180,38 +178,17 @@ def _splat(X, Y, C, B, rows, counts, tris, cand, tbar, tdz, W, H, band, rect,
         for q in range(counts[b], counts[b + 1]):
             m = tris[q]
             t = cand[m]
-            x0 = X[m, 0]
-            y0 = Y[m, 0]
-            c0 = C[m, 0]
-            x1 = X[m, 1]
-            y1 = Y[m, 1]
-            c1 = C[m, 1]
-            x2 = X[m, 2]
-            y2 = Y[m, 2]
-            c2 = C[m, 2]
-            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+            # a folded beam (negative area): same coverage, re-oriented
+            x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = _oriented_triangle(X, Y, C, m)
             if area == 0:
                 continue
-            if area < 0:  # a folded beam: same coverage, re-oriented
-                x1, x2 = x2, x1
-                y1, y2 = y2, y1
-                c1, c2 = c2, c1
-                area = -area
             i0 = max(rows[m, 0], r0)
             i1 = min(rows[m, 1], r1)
-            xmin = min(x0, min(x1, x2))
-            xmax = max(x0, max(x1, x2))
-            j0 = max(-((128 - xmin) // 256), rect[2])
-            j1 = min((xmax - 128) // 256, rect[3])
+            j0, j1 = _pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rect[2], rect[3])
             if j0 > j1 or i0 > i1:
                 continue
-            b0 = _bias(x1, y1, x2, y2)
-            b1 = _bias(x2, y2, x0, y0)
-            b2 = _bias(x0, y0, x1, y1)
+            a0, a1, a2, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
             inv_area = 1.0 / area
-            a0 = y2 - y1
-            a1 = y0 - y2
-            a2 = y1 - y0
             tx = tbar[t, 0]
             ty = tbar[t, 1]
             tz = tbar[t, 2]
@@ -219,10 +196,7 @@ def _splat(X, Y, C, B, rows, counts, tris, cand, tbar, tdz, W, H, band, rect,
             base = B[m]
             px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
-                py = 256 * i + 128
-                w0 = (x2 - x1) * (py - y1) - a0 * (px0 - x1)
-                w1 = (x0 - x2) * (py - y2) - a1 * (px0 - x2)
-                w2 = (x1 - x0) * (py - y0) - a2 * (px0 - x0)
+                w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
                 for j in range(j0, j1 + 1):
                     if j > j0:
                         w0 -= 256 * a0

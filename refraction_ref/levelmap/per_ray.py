@@ -33,7 +33,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import _MAX_COORD, BAND, _bias, _bin
+from ..raster import _MAX_COORD, BAND, _bin, _edge_setup, _edge_values
 
 __all__ = ["search_hits", "per_ray_caustics"]
 
@@ -179,12 +179,9 @@ def _splat_own_depth(O, D, flux, inv_tv, tbar, tdz, cand, rows, cols, counts, tr
                         y1, y2 = y2, y1
                         l1, l2 = l2, l1
                         area = -area
-                    px = 256 * j + 128
-                    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-                    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
-                    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
-                    if (w0 + _bias(x1, y1, x2, y2) < 0 or w1 + _bias(x2, y2, x0, y0) < 0
-                            or w2 + _bias(x0, y0, x1, y1) < 0):
+                    w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, 256 * j + 128, py)
+                    _, _, _, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
+                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                         continue
                     af = (FC[1] - FC[0]) * (FR[2] - FR[0]) - (FR[1] - FR[0]) * (FC[2] - FC[0])
                     a_tex = max(0.5 * abs(af), 1.0)  # unsnapped area in texels, >= one texel
