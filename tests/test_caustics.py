@@ -8,7 +8,6 @@ sit above.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 
@@ -212,16 +211,9 @@ def test_orthographic_light_view_traces_like_the_analytic_sphere():
     assert np.median(ang) < 0.5 and np.percentile(ang, 95) < 1.5  # measured 0.27 / 0.65 deg
 
 
-def test_deterministic_across_thread_counts():
+def test_deterministic_across_thread_counts(on_one_and_two_threads):
     sc = rr.load_scene(_scene(photons=128, cmap=128, eye_res=64, absorption=(0.2, 0.0, 0.1)))
-    before = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        a = rr.render(sc)
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        b = rr.render(sc)
-    finally:
-        numba.set_num_threads(before)
+    a, b = on_one_and_two_threads(lambda: rr.render(sc))
     keys = [k for k in a.arrays if k.startswith(("caustic", "image"))]
     assert "caustic_map_0" in keys and "image_caustics_single" in keys
     for k in keys:

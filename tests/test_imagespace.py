@@ -677,18 +677,11 @@ def test_missing_scene_file_is_refused(tmp_path):
 # determinism, outputs
 # --------------------------------------------------------------------------
 
-def test_deterministic_and_thread_count_independent():
+def test_deterministic_and_thread_count_independent(on_one_and_two_threads):
     sc = rr.load_scene(_sphere_scene(64, ior=1.4, tir=True, absorption=(0.3, 0.1, 0.0)))
     a = rr.render(sc)
     b = rr.render(sc)
-    before = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        c = rr.render(sc)
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        d = rr.render(sc)
-    finally:
-        numba.set_num_threads(before)
+    c, d = on_one_and_two_threads(lambda: rr.render(sc))
     assert c.meta["numba_threads"] == 1
     for k in a.arrays:
         for other in (b, c, d):

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import pytest
 
@@ -240,16 +239,9 @@ def test_volumetric_baseline_is_texel_identical_to_level_map():
 
 
 @pytest.mark.parametrize("variant", ["levelmap", "volumetric", "per_ray"])
-def test_deterministic_across_thread_counts(variant):
+def test_deterministic_across_thread_counts(variant, on_one_and_two_threads):
     sc = load_scene(wavy_scene(), {"levelmap.variant": variant})
-    prev = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        a, _ = render_levelmap(sc)
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        b, _ = render_levelmap(sc)
-    finally:
-        numba.set_num_threads(prev)
+    (a, _), (b, _) = on_one_and_two_threads(lambda: render_levelmap(sc))
     for k in a:
         assert np.array_equal(a[k], b[k]), k
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -333,7 +332,7 @@ def test_triangles_crossing_the_near_plane_are_clipped():
 # determinism
 # --------------------------------------------------------------------------
 
-def test_bit_identical_whatever_the_thread_count():
+def test_bit_identical_whatever_the_thread_count(on_one_and_two_threads):
     cam = _cam(96, 80, fov=30.0)
     tris = np.concatenate([_sphere_tris((0.0, 0.0, -3.0)), _sphere_tris((0.15, 0.1, -3.4)),
                            _quad(cam, -5, 100, 30, 34, 3.2), _quad(cam, -5, 100, 30, 34, 3.2)])
@@ -347,14 +346,7 @@ def test_bit_identical_whatever_the_thread_count():
         out += list(rasterize(tris, cam, "collect", capacity=6))
         return out
 
-    before = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        a = run()
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        b = run()
-    finally:
-        numba.set_num_threads(before)
+    a, b = on_one_and_two_threads(run)
     for x, y in zip(a, b):
         assert x.dtype == y.dtype
         np.testing.assert_array_equal(x, y)

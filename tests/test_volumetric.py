@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 
-import numba
 import numpy as np
 import pytest
 
@@ -165,19 +164,12 @@ def test_constant_nodes_are_crossed_in_one_step():
 
 
 # ------------------------------------------------------------------ determinism
-def test_deterministic_whatever_the_thread_count():
+def test_deterministic_whatever_the_thread_count(on_one_and_two_threads):
     scene = rr.load_scene({"camera": {"width": 24, "height": 24},
                            "objects": [{"mesh": "sphere", "fit": 1.0, "material": {"ior": 1.4, "absorption": [0.5, 0.2, 0]}}],
                            "lights": [{"type": "point", "position": [0.3, 2.0, 0.5], "radiance": [1, 0.5, 0.2]}],
                            "volumetric": {"resolution": 32, "photons": 48, "padding": 3, "phase_g": 0.4}})
-    old = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        a, _ = rr.volumetric.render_volumetric(scene)
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        b, _ = rr.volumetric.render_volumetric(scene)
-    finally:
-        numba.set_num_threads(old)
+    (a, _), (b, _) = on_one_and_two_threads(lambda: rr.volumetric.render_volumetric(scene))
     for k in ("radiance", "direction", "photon_exit_pos", "photon_exit_dir", "image", "ior"):
         assert np.array_equal(a[k], b[k], equal_nan=True), k
     assert int(a["photon_steps"]) == int(b["photon_steps"]) > 0
