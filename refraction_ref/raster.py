@@ -530,6 +530,23 @@ def _fragment_buffers(rs, W):
                      rs.shape, np.empty(n, np.int8))
 
 
+def _vertex_buffers(n):
+    """Empty per-vertex buffers of a set-up: fixed-point x, y, the depth attribute, in-guard-band flag."""
+    return np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.float64), np.empty(n, np.bool_)
+
+
+def _gather_and_bin(faces, snapped, W, H):
+    """Per-triangle snapped vertices and row ranges (:func:`_gather`), binned into bands (:func:`_bin`)."""
+    T = faces.shape[0]
+    X = np.empty((T, 3), np.int64)
+    Y = np.empty((T, 3), np.int64)
+    D = np.empty((T, 3), np.float64)
+    rows = np.empty((T, 2), np.int64)
+    _gather(faces, *snapped, W, H, X, Y, D, rows)
+    counts, tris = _bin(rows, H, BAND)
+    return X, Y, D, rows, counts, tris
+
+
 def raster_setup(tri_view, camera, clip=True, faces=None):
     """Clip, project to fixed-point screen coordinates and bin triangles into row bands.
 
@@ -557,17 +574,10 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
         vv = tv.reshape(-1, 3)
         fc = np.arange(len(vv), dtype=np.int64).reshape(-1, 3)
     T = fc.shape[0]
-    XV = np.empty(len(vv), np.int64)
-    YV = np.empty(len(vv), np.int64)
-    DV = np.empty(len(vv), np.float64)
-    okv = np.empty(len(vv), np.bool_)
-    _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv, bool(getattr(camera, "ortho", False)))
-    X = np.empty((T, 3), np.int64)
-    Y = np.empty((T, 3), np.int64)
-    D = np.empty((T, 3), np.float64)
-    rows = np.empty((T, 2), np.int64)
-    _gather(fc, XV, YV, DV, okv, W, H, X, Y, D, rows)
-    counts, tris = _bin(rows, H, BAND)
+    snapped = _vertex_buffers(len(vv))
+    _snap_vertices(vv, W, H, sx, sy, *snapped, bool(getattr(camera, "ortho", False)))
+    X, Y, D, rows, counts, tris = _gather_and_bin(fc, snapped, W, H)
+    okv = snapped[3]
     dropped = int(np.count_nonzero(~okv[fc].all(axis=1))) if not okv.all() else 0
     return RasterSetup(X, Y, D, rows, counts, tris, int(T), dropped, (H, W))
 
@@ -741,17 +751,9 @@ def ortho_setup(tri_tex, shape):
     vv = np.ascontiguousarray(tri_tex, dtype=np.float64).reshape(-1, 3)
     T = len(vv) // 3
     fc = np.arange(3 * T, dtype=np.int64).reshape(-1, 3)
-    XV = np.empty(len(vv), np.int64)
-    YV = np.empty(len(vv), np.int64)
-    DV = np.empty(len(vv), np.float64)
-    okv = np.empty(len(vv), np.bool_)
-    _snap_texels(vv, XV, YV, DV, okv)
-    X = np.empty((T, 3), np.int64)
-    Y = np.empty((T, 3), np.int64)
-    Z = np.empty((T, 3), np.float64)
-    rows = np.empty((T, 2), np.int64)
-    _gather(fc, XV, YV, DV, okv, W, H, X, Y, Z, rows)
-    counts, tris = _bin(rows, H, BAND)
+    snapped = _vertex_buffers(len(vv))
+    _snap_texels(vv, *snapped)
+    X, Y, Z, rows, counts, tris = _gather_and_bin(fc, snapped, W, H)
     dropped = int(np.count_nonzero(rows[:, 0] > rows[:, 1]))
     return RasterSetup(X, Y, Z, rows, counts, tris, int(T), dropped, (H, W))
 
