@@ -163,7 +163,8 @@ class Camera:
     def primary_rays_view(self):
         """Unit view-space directions through every pixel centre, (H, W, 3) (all ``-z`` when orthographic)."""
         d = np.empty((self.height, self.width, 3))
-        _primary_dirs(self.width, self.height, self.sx, self.sy, np.eye(3), d, self.ortho)
+        _primary_rays(self.width, self.height, self.sx, self.sy, np.eye(3), np.zeros(3), np.empty((0, 0, 3)), d,
+                      self.ortho)
         return d
 
     def primary_rays(self):
@@ -211,39 +212,37 @@ def _affine(p, m, t):
 
 
 @nb.njit(cache=True, inline="always")
+def _pixel_xy(i, j, W, H, sx, sy):
+    """(x, y) of pixel (row i, col j)'s centre on the image plane at unit depth (on the window, orthographic)."""
+    return ((j + 0.5) / W * 2.0 - 1.0) * sx, (1.0 - (i + 0.5) / H * 2.0) * sy
+
+
+@nb.njit(cache=True, inline="always")
 def primary_dir(i, j, W, H, sx, sy, ortho=False):
     """Unit view-space direction of the primary ray through pixel (row i, col j)'s centre."""
     if ortho:
         return 0.0, 0.0, -1.0
-    y = (1.0 - (i + 0.5) / H * 2.0) * sy
-    x = ((j + 0.5) / W * 2.0 - 1.0) * sx
+    x, y = _pixel_xy(i, j, W, H, sx, sy)
     s = 1.0 / np.sqrt(x * x + y * y + 1.0)
     return x * s, y * s, -s
 
 
 @nb.njit(cache=True, parallel=True)
-def _primary_dirs(W, H, sx, sy, basis, out, ortho=False):
-    """Unit directions through pixel centres, rotated by ``basis`` (rows: right, up, back)."""
+def _primary_rays(W, H, sx, sy, basis, eye, origin, out, ortho=False):
+    """Directions through pixel centres rotated by ``basis`` (rows: right, up, back), and their
+    origins moved by ``eye`` (skipped when ``origin`` is empty)."""
+    with_origin = origin.shape[0] > 0
     for i in nb.prange(H):
         for j in range(W):
             x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
             for k in range(3):
                 out[i, j, k] = x * basis[0, k] + y * basis[1, k] + z * basis[2, k]
-
-
-@nb.njit(cache=True, parallel=True)
-def _primary_rays(W, H, sx, sy, basis, eye, origin, out, ortho=False):
-    """World-space origins and directions through pixel centres (one pass of :func:`_primary_dirs`)."""
-    for i in nb.prange(H):
-        y = (1.0 - (i + 0.5) / H * 2.0) * sy
-        for j in range(W):
-            x, yv, z = primary_dir(i, j, W, H, sx, sy, ortho)
-            for k in range(3):
-                out[i, j, k] = x * basis[0, k] + yv * basis[1, k] + z * basis[2, k]
+            if not with_origin:
+                continue
             if ortho:
-                xw = ((j + 0.5) / W * 2.0 - 1.0) * sx
+                xw, yw = _pixel_xy(i, j, W, H, sx, sy)
                 for k in range(3):
-                    origin[i, j, k] = eye[k] + xw * basis[0, k] + y * basis[1, k]
+                    origin[i, j, k] = eye[k] + xw * basis[0, k] + yw * basis[1, k]
             else:
                 for k in range(3):
                     origin[i, j, k] = eye[k]

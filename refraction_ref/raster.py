@@ -338,8 +338,6 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
             continue
         a0, a1, a2, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
         inv_area = 1.0 / area
-        # D holds 1/depth for perspective set-ups, depth for orthographic ones:
-        # either way the attribute interpolates linearly on screen
         # edge functions at the first pixel centre of each row, stepped incrementally
         px0 = 256 * j0 + 128
         for i in range(i0, i1 + 1):
@@ -351,6 +349,8 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
                     w2 -= 256 * a2
                 if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                     continue
+                # D holds 1/depth for perspective set-ups, depth for orthographic ones:
+                # either way the attribute interpolates linearly on screen
                 if perspective:
                     d = 1.0 / ((w0 * d0 + w1 * d1 + w2 * d2) * inv_area)
                 else:
