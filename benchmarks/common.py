@@ -7,13 +7,13 @@ Everything here is plain Python on top of the public API (``rr.load_scene``,
 Scenes
 ------
 ``bunny_scene``            the default scene (built-in bunny, 69,451 tris, IOR 1.2, eye (0,0,2.6))
-``igea_scene``             Igea (268,686 tris) from ``../shared/models`` in the same set-up
+``igea_scene``             Igea (268,686 tris, shipped in ``refraction_ref/data``) in the same set-up
 ``lowpoly_bunny_scene``    the bunny decimated to ~15,000 tris (cached PLY in ``results/``)
 ``two_bunnies_scene``      two bunnies side by side (fit 1.0, x = -/+0.55), camera pulled back
 
-Meshes under ``/work/shared/models`` (``../shared/models`` relative to the repo)
-are optional: a builder that needs a missing file raises :class:`Skip` with a
-message, and the scripts print it and leave the row out.
+Every mesh the tables need ships with the package (``refraction_ref/data``); a
+builder whose file is missing (a trimmed install) raises :class:`Skip` with a
+message, and the scripts print it and leave the row out. Nothing is downloaded.
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 RESULTS = os.path.join(HERE, "results")
-MODELS = os.path.normpath(os.path.join(REPO, "..", "shared", "models"))
 
 if REPO not in sys.path:  # run as `python benchmarks/x.py` without installing
     sys.path.insert(0, REPO)
@@ -76,12 +75,12 @@ def _json_default(o):
 
 
 def model_path(name):
-    """Absolute path of ``../shared/models/NAME``; :class:`Skip` when absent."""
-    p = os.path.join(MODELS, name)
-    if not os.path.isdir(MODELS):
-        raise Skip(f"model folder {MODELS} is absent; skipping rows that need {name}")
+    """Absolute path of a mesh shipped in ``refraction_ref/data``; :class:`Skip` when absent."""
+    from refraction_ref.meshes import _DATA
+
+    p = os.path.join(_DATA, name)
     if not os.path.isfile(p):
-        raise Skip(f"{p} is absent; skipping rows that need it")
+        raise Skip(f"{p} is absent (a trimmed install?); skipping rows that need it")
     return p
 
 
@@ -265,7 +264,7 @@ def bunny_scene(res=512, **imagespace):
 
 
 def igea_scene(res=512, **imagespace):
-    """Igea (268,686 tris) from ``../shared/models``, same camera and glass; :class:`Skip` if absent."""
+    """Igea (268,686 tris, shipped with the package), same camera and glass; :class:`Skip` if absent."""
     return make_scene([_obj(model_path("igea.ply"))], res, **imagespace)
 
 

@@ -59,7 +59,7 @@ def scene_builders():
         "Bunny and Bunny": (lambda res, L: C.two_bunnies_scene(res, lowpoly=True, layers=L),
                             "two decimated bunnies, 2 x 15,000"),
         "Bunny I": (lambda res, L: C.bunny_scene(res, layers=L), "the bunny, 69,451"),
-        "Igea": (lambda res, L: C.igea_scene(res, layers=L), "Igea, 268,686 (../shared/models)"),
+        "Igea": (lambda res, L: C.igea_scene(res, layers=L), "Igea, 268,686"),
         "I-A": (lambda res, L: C.two_bunnies_scene(res, lowpoly=False, layers=L), "two full bunnies, 2 x 69,451"),
     }
 

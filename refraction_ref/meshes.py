@@ -35,7 +35,10 @@ __all__ = ["BUILTIN_MESHES", "Geometry", "eye_inside", "load_mesh", "object_mesh
            "rotation_matrix", "sine_displacement"]
 
 _DATA = os.path.join(os.path.dirname(__file__), "data")
-BUILTIN_MESHES = ("bunny", "teapot", "sphere", "plane")
+#: Built-in names. ``bunny``, ``teapot``, ``igea`` and ``fandisk`` are PLY files shipped in
+#: ``refraction_ref/data`` (the meshes of the papers' tables, and a CAD mesh with sharp edges);
+#: ``sphere`` and ``plane`` are generated.
+BUILTIN_MESHES = ("bunny", "teapot", "sphere", "plane", "igea", "fandisk")
 
 
 @functools.lru_cache(maxsize=16)
