@@ -31,6 +31,39 @@ triangles produce no fragments. The image is split into bands of rows and
 each band is rasterized by one thread, triangles in index order, so every
 result is bit-identical whatever the thread count.
 
+Public toolkit
+--------------
+Kernels elsewhere that draw their own triangles or splat their own points
+(with a blend the ops above do not cover) reuse the rasterizer's pieces, so
+that they inherit its coverage rule and its determinism:
+
+========================== ==========================================================
+name                       used by
+========================== ==========================================================
+:data:`SUBPIXEL`           the 1/256-pixel fixed point the helpers below assume
+:data:`BAND`               :mod:`~refraction_ref.caustics.splat`,
+                           :mod:`~refraction_ref.levelmap.caustics_map`,
+                           :mod:`~refraction_ref.levelmap.per_ray` (rows per band)
+:data:`MAX_COORD`          :mod:`~refraction_ref.levelmap.caustics_map`,
+                           :mod:`~refraction_ref.levelmap.per_ray` (guard band)
+:func:`bin_bands`          :mod:`~refraction_ref.caustics.splat` (photons),
+                           :mod:`~refraction_ref.levelmap.caustics_map`,
+                           :mod:`~refraction_ref.levelmap.per_ray` (beams)
+:func:`oriented_triangle`  :mod:`~refraction_ref.levelmap.caustics_map`
+:func:`pixel_span`         :mod:`~refraction_ref.levelmap.caustics_map`
+:func:`edge_setup`         :mod:`~refraction_ref.levelmap.caustics_map`,
+                           :mod:`~refraction_ref.levelmap.per_ray`
+:func:`edge_values`        :mod:`~refraction_ref.levelmap.caustics_map`,
+                           :mod:`~refraction_ref.levelmap.per_ray`
+========================== ==========================================================
+
+:func:`bin_bands` is a parallel kernel called from Python. The four drawing
+helpers are ``numba.njit(inline="always")`` functions meant to be called
+from other njit kernels, into which they are inlined; changing one does not
+invalidate the Numba caches of kernels in *other* files that inline it
+(Numba keys a cache on the caller's source file only): clear them with
+``find refraction_ref -name '*.nb[ic]' -delete``.
+
 References
 ----------
 .. [1] J. Pineda, "A Parallel Algorithm for Polygon Rasterization",
@@ -52,13 +85,20 @@ import numpy as np
 from .schedule import coprime_stride, strided
 
 __all__ = ["rasterize", "raster_setup", "RasterSetup", "Fragments", "clip_near", "OPS", "ortho_setup",
-           "rasterize_ortho", "ortho_fragments"]
+           "rasterize_ortho", "ortho_fragments",
+           # public toolkit (see the module docstring)
+           "SUBPIXEL", "BAND", "MAX_COORD", "bin_bands", "oriented_triangle", "pixel_span", "edge_setup",
+           "edge_values"]
 
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
 
-SUBPIXEL = 256  # fixed-point steps per pixel (8 sub-pixel bits)
-BAND = 8  # rows per band (unit of parallel work)
-_MAX_COORD = float(1 << 22)  # guard band in pixels; beyond it a triangle is dropped
+#: fixed-point steps per pixel (8 sub-pixel bits)
+SUBPIXEL = 256
+#: rows per band: the unit of parallel work, and the ``band`` of :func:`bin_bands`
+BAND = 8
+#: guard band in pixels: a vertex with ``|col|`` or ``|row|`` beyond it drops its
+#: triangle (keeps the fixed-point edge functions far from int64 overflow)
+MAX_COORD = float(1 << 22)
 _NO_SLAB = np.zeros(4)
 
 
@@ -136,7 +176,7 @@ def _snap_vertices(vv, W, H, sx, sy, XV, YV, DV, okv, ortho=False):
         s = 1.0 if ortho else d
         col = (vv[k, 0] / (s * sx) * 0.5 + 0.5) * W
         row = (0.5 - vv[k, 1] / (s * sy) * 0.5) * H
-        okv[k] = abs(col) < _MAX_COORD and abs(row) < _MAX_COORD and d > 0.0
+        okv[k] = abs(col) < MAX_COORD and abs(row) < MAX_COORD and d > 0.0
         if okv[k]:
             XV[k] = np.int64(np.round(col * 256.0))
             YV[k] = np.int64(np.round(row * 256.0))
@@ -165,8 +205,8 @@ def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
         xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
         xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
         # pixel rows / columns whose centre (256 i + 128) lies in [lo, hi]
-        i0, i1 = _pixel_span(lo, hi, 0, H - 1)
-        j0, j1 = _pixel_span(xlo, xhi, 0, W - 1)
+        i0, i1 = pixel_span(lo, hi, 0, H - 1)
+        j0, j1 = pixel_span(xlo, xhi, 0, W - 1)
         if not ok or j0 > j1:
             i0, i1 = 1, 0  # outside the guard band, or no pixel centre in its box
         rows[t, 0] = i0
@@ -174,19 +214,46 @@ def _gather(faces, XV, YV, DV, okv, W, H, X, Y, D, rows):
 
 
 @nb.njit(cache=True, parallel=True)
-def _bin(rows, H, band):
-    """Bin triangles into bands of rows (CSR lists, triangles in index order).
+def bin_bands(rows, H, band):
+    """Bin items (triangles, photons, beams) into bands of rows: one list per band.
 
-    ``band`` must be a power of two: a row's band is a shift, not an
-    integer division (which would dominate this loop). A parallel counting
-    sort over a fixed number of chunks of triangles: the lists come out in
-    triangle order whatever the thread count.
+    A parallel counting sort over a fixed number of chunks of items, so the
+    lists come out in item index order whatever the thread count. A kernel
+    that then gives each band to one thread, and walks its list in order,
+    accumulates in the same order on every run: bit-identical results.
+
+    Parameters
+    ----------
+    rows : (T, 2) int64 ndarray
+        First and last row ``(i0, i1)`` that item ``t`` may touch, already
+        clamped to ``[0, H - 1]``; ``i0 > i1`` (e.g. ``(1, 0)``) marks an
+        item that touches nothing and is listed nowhere.
+    H : int
+        Number of rows of the target image.
+    band : int
+        Rows per band, a power of two (a row's band is then a shift, not an
+        integer division, which would dominate this loop); usually
+        :data:`BAND`.
+
+    Returns
+    -------
+    counts : (nbands + 1,) int64 ndarray
+        CSR offsets, ``nbands = ceil(H / band)``: band ``b``'s items are
+        ``tris[counts[b]:counts[b + 1]]``.
+    tris : (N,) int64 ndarray
+        Item indices, increasing within each band; an item spanning several
+        bands is listed in each of them.
+
+    Raises
+    ------
+    ValueError
+        When ``band`` is not a power of two.
     """
     sh = 0
     while (1 << sh) < band:
         sh += 1
     if (1 << sh) != band:
-        raise ValueError("_bin: band must be a power of two")
+        raise ValueError("bin_bands: band must be a power of two")
     T = rows.shape[0]
     nb_bands = (H + band - 1) >> sh
     C = max(1, min(64, T // 4096))
@@ -234,12 +301,30 @@ def _bias(ax, ay, bx, by):
 
 
 @nb.njit(cache=True, inline="always")
-def _oriented_triangle(X, Y, A, t):
+def oriented_triangle(X, Y, A, t):
     """Snapped triangle ``t`` with its attribute ``A``, re-oriented to a positive area.
 
     No culling: a triangle given the other way round has vertices 1 and 2
-    swapped. Returns ``(x0, y0, x1, y1, x2, y2, a0, a1, a2, area, flipped)``,
-    ``area`` twice the screen area in fixed point (0: degenerate).
+    swapped (with their attributes), so that :func:`edge_setup` and
+    :func:`edge_values`, which assume a positive area (clockwise on screen,
+    rows growing downwards), apply to either orientation.
+
+    Parameters
+    ----------
+    X, Y : (T, 3) int64 ndarray
+        Vertex columns and rows in 1/256-pixel fixed point.
+    A : (T, 3) float64 ndarray
+        A per-vertex attribute (depth, 1/depth, path length, ...).
+    t : int
+        Triangle index.
+
+    Returns
+    -------
+    tuple
+        ``(x0, y0, x1, y1, x2, y2, a0, a1, a2, area, flipped)``: ``area`` is
+        twice the screen area in fixed point (exact integer, >= 0; 0 for a
+        degenerate triangle, which covers nothing), ``flipped`` whether
+        vertices 1 and 2 were swapped.
     """
     x0 = X[t, 0]
     y0 = Y[t, 0]
@@ -257,27 +342,85 @@ def _oriented_triangle(X, Y, A, t):
 
 
 @nb.njit(cache=True, inline="always")
-def _pixel_span(lo, hi, first, last):
-    """Pixels whose centre ``256 k + 128`` lies in [lo, hi] (1/256-pixel fixed point), clamped to [first, last]."""
+def pixel_span(lo, hi, first, last):
+    """Pixels whose centre ``256 k + 128`` lies in [lo, hi] (1/256-pixel fixed point), clamped to [first, last].
+
+    Integer floor divisions only, so a bounding box computed from snapped
+    vertices never misses a pixel centre that the edge functions cover.
+
+    Parameters
+    ----------
+    lo, hi : int
+        Fixed-point extent of a triangle along one axis (min and max of its
+        snapped vertex coordinates).
+    first, last : int
+        Clamp range (the image, or a scissor rectangle).
+
+    Returns
+    -------
+    k0, k1 : int
+        First and last pixel index; ``k0 > k1`` when no centre lies in the
+        range.
+    """
     return max(-((128 - lo) // 256), first), min((hi - 128) // 256, last)
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_setup(x0, y0, x1, y1, x2, y2):
+def edge_setup(x0, y0, x1, y1, x2, y2):
     """Column steps and top-left biases of a triangle's three edges (positive area, rows down).
 
-    Returns ``(a0, a1, a2, b0, b1, b2)``: edge function ``k`` decreases by
-    ``256 a_k`` from one pixel centre to the next in a row, and the centre is
-    covered when every ``w_k + b_k >= 0`` (:func:`_edge_values`).
+    Edge ``k`` is the edge opposite vertex ``k``. The bias implements the
+    top-left fill rule of D3D / Vulkan / WebGPU: a pixel centre lying
+    exactly on an edge belongs to the triangle only if that edge is a left
+    or a top edge. An edge shared by two triangles is a left/top edge of
+    exactly one of them, so with the exact integer edge functions a centre
+    on a shared edge (or vertex) yields exactly one fragment: closed meshes
+    give an even fragment count per pixel, and meshes tiling a plane
+    (neighbouring beams' cross-sections) cover each texel once.
+
+    Parameters
+    ----------
+    x0, y0, x1, y1, x2, y2 : int
+        Snapped vertices in 1/256-pixel fixed point, oriented to a positive
+        area (:func:`oriented_triangle`).
+
+    Returns
+    -------
+    a0, a1, a2 : int
+        Column steps: edge function ``k`` decreases by ``256 a_k`` from one
+        pixel centre to the next in a row.
+    b0, b1, b2 : int
+        Biases (0 or -1): the centre is covered when every
+        ``w_k + b_k >= 0``, ``w_k`` from :func:`edge_values`.
     """
     return (y2 - y1, y0 - y2, y1 - y0,
             _bias(x1, y1, x2, y2), _bias(x2, y2, x0, y0), _bias(x0, y0, x1, y1))
 
 
 @nb.njit(cache=True, inline="always")
-def _edge_values(x0, y0, x1, y1, x2, y2, px, py):
-    """The three edge functions at the sample (px, py): twice the signed areas of the
-    sub-triangles opposite each vertex, so also its unnormalised barycentric weights."""
+def edge_values(x0, y0, x1, y1, x2, y2, px, py):
+    """The three edge functions at the sample ``(px, py)``.
+
+    Exact integer arithmetic on fixed-point coordinates (no round-off, so
+    two triangles sharing an edge evaluate it to exactly opposite values);
+    pixel centre ``(i, j)`` is the sample ``(256 j + 128, 256 i + 128)``.
+
+    Parameters
+    ----------
+    x0, y0, x1, y1, x2, y2 : int
+        Snapped vertices in 1/256-pixel fixed point, positive area
+        (:func:`oriented_triangle`).
+    px, py : int
+        Sample position in the same fixed point.
+
+    Returns
+    -------
+    w0, w1, w2 : int
+        Twice the signed areas of the sub-triangles opposite each vertex,
+        so also the sample's unnormalised barycentric weights (they sum to
+        the triangle's ``area``); the sample is covered when every
+        ``w_k + b_k >= 0`` (biases from :func:`edge_setup`).
+    """
     return ((x2 - x1) * (py - y1) - (y2 - y1) * (px - x1),
             (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2),
             (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0))
@@ -327,21 +470,21 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
     nf = frag_off[b] if keep else 0
     for q in range(counts[b], counts[b + 1]):
         t = tris[q]
-        x0, y0, x1, y1, x2, y2, d0, d1, d2, area, flipped = _oriented_triangle(X, Y, D, t)
+        x0, y0, x1, y1, x2, y2, d0, d1, d2, area, flipped = oriented_triangle(X, Y, D, t)
         if area == 0:
             continue
         facing = np.int8(1) if flipped else np.int8(-1)
         i0 = max(rows[t, 0], r0)
         i1 = min(rows[t, 1], r1)
-        j0, j1 = _pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), 0, W - 1)
+        j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), 0, W - 1)
         if j0 > j1 or i0 > i1:
             continue
-        a0, a1, a2, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
+        a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
         inv_area = 1.0 / area
         # edge functions at the first pixel centre of each row, stepped incrementally
         px0 = 256 * j0 + 128
         for i in range(i0, i1 + 1):
-            w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
+            w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
             for j in range(j0, j1 + 1):
                 if j > j0:
                     w0 -= 256 * a0
@@ -475,7 +618,7 @@ def _band_capacity(X, rows, counts, tris, W, band):
             i1 = min(rows[t, 1], r1)
             xlo = min(X[t, 0], min(X[t, 1], X[t, 2]))
             xhi = max(X[t, 0], max(X[t, 1], X[t, 2]))
-            j0, j1 = _pixel_span(xlo, xhi, 0, W - 1)
+            j0, j1 = pixel_span(xlo, xhi, 0, W - 1)
             if i1 >= i0 and j1 >= j0:
                 c += (i1 - i0 + 1) * (j1 - j0 + 1)
         off[b + 1] = c
@@ -536,14 +679,14 @@ def _vertex_buffers(n):
 
 
 def _gather_and_bin(faces, snapped, W, H):
-    """Per-triangle snapped vertices and row ranges (:func:`_gather`), binned into bands (:func:`_bin`)."""
+    """Per-triangle snapped vertices and row ranges (:func:`_gather`), binned into bands (:func:`bin_bands`)."""
     T = faces.shape[0]
     X = np.empty((T, 3), np.int64)
     Y = np.empty((T, 3), np.int64)
     D = np.empty((T, 3), np.float64)
     rows = np.empty((T, 2), np.int64)
     _gather(faces, *snapped, W, H, X, Y, D, rows)
-    counts, tris = _bin(rows, H, BAND)
+    counts, tris = bin_bands(rows, H, BAND)
     return X, Y, D, rows, counts, tris
 
 
@@ -725,7 +868,7 @@ def _snap_texels(vv, XV, YV, DV, okv):
         c = vv[k, 0]
         r = vv[k, 1]
         z = vv[k, 2]
-        okv[k] = abs(c) < _MAX_COORD and abs(r) < _MAX_COORD and np.isfinite(z)
+        okv[k] = abs(c) < MAX_COORD and abs(r) < MAX_COORD and np.isfinite(z)
         XV[k] = np.int64(np.round(c * 256.0)) if okv[k] else 0
         YV[k] = np.int64(np.round(r * 256.0)) if okv[k] else 0
         DV[k] = z if okv[k] else 0.0

@@ -412,17 +412,17 @@ def test_strided_order_for_multiples_of_the_small_primes():
 def test_bin_lists_triangles_per_band_in_index_order(T):
     """The parallel counting sort gives every band the triangles whose rows meet it,
     in triangle order (what a serial pass gives), and empty triangles nowhere."""
-    from refraction_ref.raster import _bin
+    from refraction_ref.raster import bin_bands
 
     rng = np.random.default_rng(T)
     H, band = 100, 8
     i0 = rng.integers(0, H, T)
     rows = np.stack([i0, np.minimum(i0 + rng.integers(-3, 20, T), H - 1)], 1).astype(np.int64)
-    counts, tris = _bin(rows, H, band)
+    counts, tris = bin_bands(rows, H, band)
     nb_bands = -(-H // band)
     assert counts.shape == (nb_bands + 1,) and counts[0] == 0 and counts[-1] == len(tris)
     for b in range(nb_bands):
         expect = np.flatnonzero((rows[:, 0] <= rows[:, 1]) & (rows[:, 0] // band <= b) & (rows[:, 1] // band >= b))
         np.testing.assert_array_equal(tris[counts[b]:counts[b + 1]], expect)
     with pytest.raises(ValueError):
-        _bin(rows, H, 6)
+        bin_bands(rows, H, 6)

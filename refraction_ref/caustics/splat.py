@@ -37,7 +37,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, _bin
+from ..raster import BAND, bin_bands
 
 __all__ = ["splat_bilinear", "gather_gaussian", "gaussian_weights"]
 
@@ -129,7 +129,7 @@ def splat_bilinear(col, row, values, shape, out=None):
     fx = np.empty(n)
     fy = np.empty(n)
     _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
-    counts, items = _bin(rows, Hc, BAND)
+    counts, items = bin_bands(rows, Hc, BAND)
     _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, BAND, out)
     return out
 

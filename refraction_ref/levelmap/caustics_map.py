@@ -47,7 +47,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import _MAX_COORD, BAND, _bin, _edge_setup, _edge_values, _oriented_triangle, _pixel_span
+from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values, oriented_triangle, pixel_span
 from .planes import dir_to_map, to_map
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane"]
@@ -131,7 +131,7 @@ def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, 
                 lam = 0.0
             c = O[t, k, 0] + lam * D[t, k, 0]
             r = O[t, k, 1] + lam * D[t, k, 1]
-            if not (abs(c) < _MAX_COORD and abs(r) < _MAX_COORD):
+            if not (abs(c) < MAX_COORD and abs(r) < MAX_COORD):
                 ok = False
                 c = 0.0
                 r = 0.0
@@ -157,8 +157,8 @@ def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, 
             hi = max(Y[m, 0], max(Y[m, 1], Y[m, 2]))
             xlo = min(X[m, 0], min(X[m, 1], X[m, 2]))
             xhi = max(X[m, 0], max(X[m, 1], X[m, 2]))
-            i0, i1 = _pixel_span(lo, hi, rect[0], rect[1])
-            j0, j1 = _pixel_span(xlo, xhi, rect[2], rect[3])
+            i0, i1 = pixel_span(lo, hi, rect[0], rect[1])
+            j0, j1 = pixel_span(xlo, xhi, rect[2], rect[3])
             if j0 > j1 or i0 > i1:
                 i0, i1 = 1, 0
         else:
@@ -179,15 +179,15 @@ def _splat(X, Y, C, B, rows, counts, tris, cand, tbar, tdz, W, H, band, rect,
             m = tris[q]
             t = cand[m]
             # a folded beam (negative area): same coverage, re-oriented
-            x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = _oriented_triangle(X, Y, C, m)
+            x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = oriented_triangle(X, Y, C, m)
             if area == 0:
                 continue
             i0 = max(rows[m, 0], r0)
             i1 = min(rows[m, 1], r1)
-            j0, j1 = _pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rect[2], rect[3])
+            j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rect[2], rect[3])
             if j0 > j1 or i0 > i1:
                 continue
-            a0, a1, a2, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
+            a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
             inv_area = 1.0 / area
             tx = tbar[t, 0]
             ty = tbar[t, 1]
@@ -196,7 +196,7 @@ def _splat(X, Y, C, B, rows, counts, tris, cand, tbar, tdz, W, H, band, rect,
             base = B[m]
             px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
-                w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
+                w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
                 for j in range(j0, j1 + 1):
                     if j > j0:
                         w0 -= 256 * a0
@@ -253,7 +253,7 @@ def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
     rect = np.ascontiguousarray(rect, dtype=np.int64)
     _sections(beams.O, beams.D, beams.flux, beams.inv_tv, cand, float(zp), Wc, Hc,
               float(box.texel_area), rect, X, Y, C, B, rows)
-    counts, tris = _bin(rows, Hc, BAND)
+    counts, tris = bin_bands(rows, Hc, BAND)
     _splat(X, Y, C, B, rows, counts, tris, cand, beams.tbar, beams.tdz, Wc, Hc, BAND, rect,
            accept, int(key), zeta, normal, float(zp), float(K), out)
     return int(np.count_nonzero(rows[:, 0] <= rows[:, 1]))

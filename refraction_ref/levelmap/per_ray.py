@@ -33,7 +33,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..raster import _MAX_COORD, BAND, _bin, _edge_setup, _edge_values
+from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values
 
 __all__ = ["search_hits", "per_ray_caustics"]
 
@@ -153,7 +153,7 @@ def _splat_own_depth(O, D, flux, inv_tv, tbar, tdz, cand, rows, cols, counts, tr
                         L[k] = lam
                         c = O[t, k, 0] + lam * D[t, k, 0]
                         r = O[t, k, 1] + lam * D[t, k, 1]
-                        if not (abs(c) < _MAX_COORD and abs(r) < _MAX_COORD):
+                        if not (abs(c) < MAX_COORD and abs(r) < MAX_COORD):
                             ok = False
                             break
                         X[k] = np.int64(np.round(c * 256.0))
@@ -179,8 +179,8 @@ def _splat_own_depth(O, D, flux, inv_tv, tbar, tdz, cand, rows, cols, counts, tr
                         y1, y2 = y2, y1
                         l1, l2 = l2, l1
                         area = -area
-                    w0, w1, w2 = _edge_values(x0, y0, x1, y1, x2, y2, 256 * j + 128, py)
-                    _, _, _, b0, b1, b2 = _edge_setup(x0, y0, x1, y1, x2, y2)
+                    w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, 256 * j + 128, py)
+                    _, _, _, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
                     if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
                         continue
                     af = (FC[1] - FC[0]) * (FR[2] - FR[0]) - (FR[1] - FR[0]) * (FC[2] - FC[0])
@@ -231,7 +231,7 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
     rows = np.empty((len(cand), 2), np.int64)
     cols = np.empty((len(cand), 2), np.int64)
     _regions(beams.O, beams.D, cand, hit, zlo, zhi, Wc, Hc, rows, cols)
-    counts, tris = _bin(rows, Hc, BAND)
+    counts, tris = bin_bands(rows, Hc, BAND)
     accept = lm.own & (lm.depth >= -box.h / 2.0) & (lm.depth <= box.h / 2.0)
     _splat_own_depth(beams.O, beams.D, beams.flux, beams.inv_tv, beams.tbar, beams.tdz, cand, rows, cols,
                      counts, tris, Wc, Hc, BAND, accept, lm.depth, lm.normal, float(K),

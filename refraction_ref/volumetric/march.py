@@ -27,6 +27,20 @@ iterating when fewer than ``stop_fraction`` of the photons are active) is
 applied exactly: photons still active at that iteration have their later
 deposits removed again (see below) and count as stopped.
 
+Photon status codes (``photons["status"]`` of :func:`march_photons`, also
+:data:`STATUS` by name). Three have the meaning of the oracle codes of
+:mod:`refraction_ref.status` and use those names; the other two are the
+march's own, with values that the oracle gives other meanings to (they are
+never per-pixel statuses):
+
+==  ===================  ==============================================================
+ 0  ``PHOTON_ACTIVE``    not traced (yet); not the oracle's ``MISSED``
+ 1  ``EXITED``           left the volume; ``exit_pos`` / ``exit_dir`` are valid
+ 2  ``LIMIT``            stopped at ``max_steps``, or cut by the stopping rule
+ 3  ``PHOTON_ABSORBED``  radiance fell below ``min_radiance`` of its start; not ``TIR``
+ 4  ``LOST``             |v| or n collapsed, or a non-finite state
+==  ===================  ==============================================================
+
 Determinism: deposits are accumulated as 64-bit fixed-point integers, in one
 buffer per worker, and the buffers are summed at the end (in parallel, by
 :func:`_merge_buffers`; the buffers are kept for the next march, as fresh
@@ -52,10 +66,19 @@ import threading
 import numba as nb
 import numpy as np
 
-__all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS"]
+from ..status import EXITED, LIMIT, LOST
 
-#: Photon status codes.
-STATUS = {"active": 0, "exited": 1, "stopped": 2, "absorbed": 3, "lost": 4}
+__all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS",
+           "PHOTON_ACTIVE", "PHOTON_ABSORBED"]
+
+# The march's own photon codes (module docstring); EXITED, LIMIT and LOST come from refraction_ref.status.
+#: photon not traced (yet): the initial status (same value as the oracle's MISSED, other meaning)
+PHOTON_ACTIVE = 0
+#: photon's radiance fell below ``min_radiance`` of its start (same value as the oracle's TIR, other meaning)
+PHOTON_ABSORBED = 3
+
+#: Photon status codes by name.
+STATUS = {"active": PHOTON_ACTIVE, "exited": EXITED, "stopped": LIMIT, "absorbed": PHOTON_ABSORBED, "lost": LOST}
 
 INTEG_EULER = 0
 INTEG_RK4 = 1
@@ -277,7 +300,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
     lmax0 = max(lr, max(lg, lb))
     thr = min_rad * lmax0
     steps = 0
-    status = 0
+    status = PHOTON_ACTIVE
     drift = 0.0
     nudge = 1e-4 * hmin
     carried = False
@@ -289,7 +312,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
         path_n[0] = 1
     while True:
         if steps >= max_steps:
-            status = 2
+            status = LIMIT
             break
         i, j, k = voxel_of(lo, ih, nx, ny, nz, x, y, z)
         cap = smax[i, j, k]
@@ -304,7 +327,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
         carried = False
         vn = math.sqrt(vx * vx + vy * vy + vz * vz)
         if not (vn > 1e-12 * n) or not (n > 0.0):
-            status = 4
+            status = LOST
             break
         dr = abs(vn - n) / n
         if dr > drift:
@@ -334,7 +357,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
             carried = True
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                 and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
-            status = 4
+            status = LOST
             break
         s = segment_exit(lo, hi, x, y, z, x1, y1, z1)
         ex, ey, ez = x + s * (x1 - x), y + s * (y1 - y), z + s * (z1 - z)
@@ -358,7 +381,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
             path[path_n[0], 2] = ez
             path_n[0] += 1
         if s < 1.0:
-            status = 1
+            status = EXITED
             if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
                 vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, s * ds)[3:]
             v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
@@ -372,7 +395,7 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
         x, y, z, vx, vy, vz = x1, y1, z1, vx1, vy1, vz1
         lr, lg, lb = nr, ng, nb_
         if max(lr, max(lg, lb)) < thr or lmax0 <= 0.0:
-            status = 3
+            status = PHOTON_ABSORBED
             break
     return steps, status, drift
 
@@ -557,7 +580,7 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     sr = 2.0 ** 58 / (16.0 * total)  # 16 = generous bound on one photon's length per voxel
     sd = sr / 3.0
     steps = np.zeros(P, np.int32)
-    status = np.zeros(P, np.int8)
+    status = np.full(P, PHOTON_ACTIVE, np.int8)
     drift = np.zeros(P, np.float64)
     exit_pos = np.full((P, 3), np.nan)
     exit_dir = np.full((P, 3), np.nan)
@@ -579,14 +602,14 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
             late = np.flatnonzero(steps > cut)
             if len(late):
                 s2 = np.zeros(P, np.int32)
-                st2 = np.zeros(P, np.int8)
+                st2 = np.full(P, PHOTON_ACTIVE, np.int8)
                 d2 = np.zeros(P)
                 e2p = np.full((P, 3), np.nan)
                 e2d = np.full((P, 3), np.nan)
                 _march_kernel(*args, late.astype(np.int64), ds_w, float(stiff), integ, int(max_steps),
                               float(min_radiance), cut, -1, acc, sr, sd, s2, st2, d2, e2p, e2d)
                 steps[late] = cut
-                status[late] = STATUS["stopped"]
+                status[late] = LIMIT
                 exit_pos[late] = np.nan
                 exit_dir[late] = np.nan
                 truncated = int(len(late))

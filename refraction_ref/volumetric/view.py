@@ -23,9 +23,11 @@ Per-pixel ORACLE keys: ``exit_pos``/``exit_dir`` are where and in which
 direction the viewing ray leaves the *volume box*; ``hit`` means the ray
 met refractive material (``|n - outside| > 1/2`` of the volume's largest
 contrast); ``interfaces`` counts crossings of that half-contrast level set,
-``path_length`` the length travelled beyond it; ``status`` is 0 (did not
-meet material), 1 (exited), 2 (stopped at the step limit) or 4 (lost: |v|
-collapsed).
+``path_length`` the length travelled beyond it; ``status`` (the codes of
+:mod:`refraction_ref.status`) is ``MISSED`` (left the box without meeting
+material, or missed the box), ``EXITED`` (met material and left the box),
+``LIMIT`` (stopped at ``max_steps``) or ``LOST`` (|v| collapsed, or the
+integrator produced a non-finite state).
 
 References
 ----------
@@ -42,6 +44,7 @@ import math
 import numba as nb
 import numpy as np
 
+from ..status import EXITED, LIMIT, LOST, MISSED
 from .march import _geometry, _integ_code, advance, sample_field, segment_exit, voxel_of
 
 __all__ = ["view_volume", "hg_phase", "source_volume"]
@@ -125,7 +128,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
         crossings = 0
         plen = 0.0
         met = inside
-        st = 2
+        st = LIMIT  # unless the ray exits or is lost within max_steps
         ds = hmin
         # the unit direction v / |v| is reused while v does not change (straight steps in constant nodes)
         ux, uy, uz = 0.0, 0.0, 0.0
@@ -150,7 +153,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
             if not u_ok:
                 vn = math.sqrt(vx * vx + vy * vy + vz * vz)
                 if not (vn > 1e-12):
-                    st = 4
+                    st = LOST
                     break
                 ux, uy, uz = vx / vn, vy / vn, vz / vn
                 u_ok = True
@@ -166,7 +169,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
                 u_ok = False
                 if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                         and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
-                    st = 4
+                    st = LOST
                     break
             s = segment_exit(lo, hi, x, y, z, x1, y1, z1)
             if const:  # a straight step: its length is ds (the chord would only add rounding noise)
@@ -202,7 +205,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
             if inside:
                 plen += seg
             if s < 1.0:
-                st = 1
+                st = EXITED
                 if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
                     vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, s * ds)[3:]
                 v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
@@ -223,7 +226,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
         hit[r] = met
         interfaces[r] = crossings
         path_len[r] = plen
-        status[r] = st if met or st != 1 else 0
+        status[r] = st if met or st != EXITED else MISSED
 
 
 def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", phase_g=0.0,
@@ -279,17 +282,17 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     hit = np.zeros(R, np.bool_)
     inter = np.zeros(R, np.int16)
     plen = np.zeros(R)
-    status = np.zeros(R, np.int8)
+    status = np.full(R, MISSED, np.int8)  # rays that miss the box keep it
     _view_kernel(np.ascontiguousarray(field), np.ascontiguousarray(src), np.ascontiguousarray(smax),
                  lo, hi, h, ih, hmin, org, d, _integ_code(integrator), float(phase_g), float(outside_ior),
                  float(n_half), side, int(max_steps), color, trans, exit_pos, exit_dir, hit, inter, plen, status)
     # the direction the environment is seen along (NaN, i.e. black, where the ray did not get out)
     last_dir = exit_dir.copy()
-    stuck = (status == 2) | (status == 4)
+    stuck = (status == LIMIT) | (status == LOST)
     last_dir[stuck] = np.nan
     exit_pos[stuck] = np.nan
     exit_dir[stuck] = np.nan
-    miss = status == 0
+    miss = status == MISSED
     exit_pos[miss] = np.nan
     exit_dir[miss] = d[miss]
     return {"inscatter": color, "transmittance": trans, "exit_pos": exit_pos, "exit_dir": exit_dir,
