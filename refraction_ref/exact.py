@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import optics
+from .status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
     "trace_exact",
@@ -40,11 +41,12 @@ __all__ = [
     "STATUS_LOST",
 ]
 
-STATUS_MISSED = 0
-STATUS_EXITED = 1
-STATUS_BOUNCE_LIMIT = 2
-STATUS_BOUNCE_LIMIT_TIR = 3
-STATUS_LOST = 4
+# the historical names of this module, aliases of :mod:`refraction_ref.status`
+STATUS_MISSED = MISSED
+STATUS_EXITED = EXITED
+STATUS_BOUNCE_LIMIT = LIMIT
+STATUS_BOUNCE_LIMIT_TIR = TIR
+STATUS_LOST = LOST
 
 _CHUNK = 65536
 _OUTSIDE = -1  # medium index of the surrounding medium
@@ -168,7 +170,7 @@ def _unit(a):
 def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
                 origins, dirs, *, vertex_normals=None, smooth=True,
                 outside_ior=1.0, max_bounces=64, progress=False,
-                epsilon=None, chunk_size=_CHUNK) -> dict:
+                epsilon=None, chunk_size=_CHUNK, record=0) -> dict:
     """Trace rays through a triangle scene, refracting at every interface.
 
     Each ray is intersected with the real triangles: Embree (float32) finds
@@ -227,6 +229,9 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         are recomputed in float64 from the un-offset surface point.
     chunk_size : int, default 65536
         Rays per Embree call.
+    record : int, default 0
+        Keep the first ``record`` events of every path in ``path_pos`` and
+        ``path_dir``; 0 records nothing (and adds no keys).
 
     Returns
     -------
@@ -234,9 +239,10 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         ``hit`` (bool)
             The first ray hit a triangle.
         ``status`` (int8)
-            0 missed, 1 exited, 2 stopped at the bounce limit, 3 stopped at
-            the bounce limit with TIR as last event, 4 lost (non-finite
-            direction; should not happen).
+            :mod:`refraction_ref.status`: 0 ``MISSED``, 1 ``EXITED``, 2
+            ``LIMIT`` (stopped at the bounce limit), 3 ``TIR`` (stopped at
+            the bounce limit with TIR as last event), 4 ``LOST``
+            (non-finite direction; should not happen).
         ``exit_pos`` (N, 3)
             Last surface point, where the ray left (NaN unless status 1).
         ``exit_dir`` (N, 3)
@@ -264,6 +270,17 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         ``leaked`` (bool)
             The ray escaped to infinity while its medium was an object (an
             open or inconsistently wound mesh); its status is still 1.
+        ``path_pos`` (N, K, 3), ``path_dir`` (N, K, 3)
+            Only with ``record=K > 0``. Row ``k`` is the ``k``-th surface
+            event (``k < bounces``): the float64 hit point on the triangle
+            (row 0 is ``hit_pos``, unless ``max_bounces=0``: no events) and
+            the unit direction after the event, refracted or, under TIR,
+            reflected (row 0 is ``first_dir``).
+            A lost event keeps its point with a NaN direction. Rows past
+            the path's events are NaN (all rows of a missed ray; a hit
+            beyond the bounce limit is not an event and not recorded). For
+            an exited ray with at most ``K`` events the last row is
+            ``exit_pos`` and ``exit_dir``, bit for bit.
 
     Raises
     ------
@@ -304,6 +321,9 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     epsilon = float(epsilon)
     if not (np.isfinite(epsilon) and epsilon >= 0):
         raise ValueError("epsilon must be finite and >= 0")
+    if int(record) != record or record < 0:
+        raise ValueError(f"record must be an integer >= 0, got {record!r}")
+    record = int(record)
 
     n = len(o)
     nan3 = np.full((n, 3), np.nan)
@@ -325,6 +345,9 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     first_normal = nan3.copy()
     first_dir = nan3.copy()
     leaked = np.zeros(n, dtype=bool)
+    if record:
+        path_pos = np.full((n, record, 3), np.nan)
+        path_dir = np.full((n, record, 3), np.nan)
     # index of refraction of each medium; the outside medium is the last entry
     med_ior = np.append(ior, float(outside_ior))
 
@@ -366,10 +389,10 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
             # --- rays with no further hit -----------------------------------
             mi = idx[miss]
             if bounce == 0:
-                status[mi] = STATUS_MISSED
+                status[mi] = MISSED
                 exit_dir[mi] = d[mi]
             else:
-                status[mi] = STATUS_EXITED
+                status[mi] = EXITED
                 exit_pos[mi] = pos[mi]
                 exit_dir[mi] = dirn[mi]
                 leaked[mi] = medium[mi] != _OUTSIDE
@@ -409,8 +432,7 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
                 hit_pos[hi_] = x
                 first_face[hi_] = fi
             if bounce == max_bounces:  # budget spent, and there is a further hit
-                status[hi_] = np.where(last_tir[hi_], STATUS_BOUNCE_LIMIT_TIR,
-                                       STATUS_BOUNCE_LIMIT).astype(np.int8)
+                status[hi_] = np.where(last_tir[hi_], TIR, LIMIT).astype(np.int8)
                 last_dir[hi_] = dirn[hi_]
                 continue
 
@@ -464,6 +486,9 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
 
             lost = ~np.all(np.isfinite(newd), axis=1)
             newd = np.where(lost[:, None], dd, newd)  # keep previous dir for lost rays
+            if bounce < record:  # every active ray has had `bounce` events: this is row `bounce`
+                path_pos[hi_, bounce] = x
+                path_dir[hi_, bounce] = np.where(lost[:, None], np.nan, newd)
 
             # --- bookkeeping ------------------------------------------------
             if bounce == 0:
@@ -479,15 +504,15 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
             last_dir[hi_] = newd
             side[hi_] = ng * np.where(_dot(newd, ng) >= 0.0, 1.0, -1.0)[:, None]
             if np.any(lost):
-                status[hi_[lost]] = STATUS_LOST
+                status[hi_[lost]] = LOST
         if bar is not None:
             bar.update(1)
     if bar is not None:
         bar.close()
 
     assert not np.any(status == _ACTIVE)
-    return {
-        "hit": status != STATUS_MISSED,
+    out = {
+        "hit": status != MISSED,
         "status": status,
         "exit_pos": exit_pos,
         "exit_dir": exit_dir,
@@ -502,3 +527,7 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         "transmittance": trans,
         "leaked": leaked,
     }
+    if record:
+        out["path_pos"] = path_pos
+        out["path_dir"] = path_dir
+    return out

@@ -28,26 +28,34 @@ Beyond the thesis: with ``tir`` enabled, a total internal reflection (and
 any ray turned back towards the viewer) is followed by a *backward*
 binary search against the preceding layer, bounded by that layer's minimum
 depth - the extension the thesis sketches in §4.3 - instead of giving up.
-Every way a ray can be lost gets a status code (ORACLE.md):
+Every way a ray can be lost gets a status code (ORACLE.md,
+:mod:`refraction_ref.status`):
 
-=== ==================================================================
-0   missed: the pixel shows no layer
-1   exited: left the object (behind the backmost layer, in front of
-    layer 0, or outside the object with no further layer on its path)
-2   stopped at the layer limit (a deeper layer than ``layers`` was
-    needed) or at ``max_interfaces`` events
-3   trapped by total internal reflection (``tir`` disabled, or the
-    event limit reached while reflecting)
-4   lost: the search could not resolve an intersection while inside the
-    object (a ray parallel to the image plane, turned towards the viewer
-    without ``tir``, leaving the screen, or converging where the layer is
-    absent)
-=== ==================================================================
+=== ========== =======================================================
+0   ``MISSED`` the pixel shows no layer
+1   ``EXITED`` left the object (behind the backmost layer, in front of
+               layer 0, or outside the object with no further layer on
+               its path)
+2   ``LIMIT``  stopped at the layer limit (a deeper layer than
+               ``layers`` was needed) or at ``max_interfaces`` events
+3   ``TIR``    trapped by total internal reflection (``tir`` disabled,
+               or the event limit reached while reflecting)
+4   ``LOST``   the search could not resolve an intersection while
+               inside the object (a ray parallel to the image plane,
+               turned towards the viewer without ``tir``, leaving the
+               screen, or converging where the layer is absent)
+=== ========== =======================================================
+
+With ``record=K`` the first ``K`` events of every path are kept
+(``path_pos``, ``path_dir``): one row per application of Snell's law, so
+that a port can be compared with this reference interface by interface,
+not only at the exit.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -55,6 +63,7 @@ import numpy as np
 from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
 from ..schedule import coprime_stride, strided
+from ..status import EXITED, LIMIT, LOST, MISSED, TIR
 from .normals import layer_depth, normal_at
 
 __all__ = ["trace_layers", "exit_thresholds"]
@@ -99,10 +108,74 @@ def _store(out, i, j, x, y, z, frame, m, t, point):
         out[i, j, 2] = z
 
 
+class _Layers(NamedTuple):
+    """The layered depth images and what the search reads beside them (§3.3-3.7)."""
+
+    ldi: np.ndarray  # (L, H, W) layer depths, +inf where absent
+    total: np.ndarray  # (H, W) int32 layers per pixel
+    zback: np.ndarray  # (H, W) backmost depth
+    thr: np.ndarray  # (H, W) early-termination threshold
+    bounds_hi: np.ndarray  # (L,) forward search bounds
+    bounds_lo: np.ndarray  # (L,) backward search bounds
+    lut: tuple  # on-the-fly peeling inputs (normals.no_lut when unused)
+
+
+class _Grid(NamedTuple):
+    """The image the layers were rendered in: size, half extents, projection."""
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+
+
+class _Knobs(NamedTuple):
+    """Optics and search settings of one trace."""
+
+    ior: float
+    outside_ior: float
+    iterations: int
+    nmethod: int  # normals.NORMAL_METHODS code
+    delta: int
+    tir: bool
+    max_events: int
+    layer_limit: int
+    record: int  # events kept per pixel in path_pos / path_dir (0: none)
+
+
+class _Frame(NamedTuple):
+    """Frame the outputs are written in: ``world`` applies ``x @ rot + t``."""
+
+    world: bool
+    rot: np.ndarray  # (3, 3)
+    t: np.ndarray  # (3,)
+
+
+class _Outputs(NamedTuple):
+    """Arrays the kernel fills (see :func:`trace_layers`, Returns)."""
+
+    exit_pos: np.ndarray
+    exit_dir: np.ndarray
+    last_dir: np.ndarray
+    interfaces: np.ndarray
+    path_len: np.ndarray
+    status: np.ndarray
+    path_pos: np.ndarray  # (H, W, K, 3); (1, 1, 1, 3) unused when record is 0
+    path_dir: np.ndarray
+
+
 @nb.njit(cache=True, parallel=True)
-def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy,
-                  ior, outside_ior, iterations, nmethod, delta, tir, max_events, layer_limit, lut,
-                  frame, rot, t0, exit_pos, exit_dir, last_dir, interfaces, path_len, status, ortho=False):
+def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
+    # the named tuples unpacked by name (a reordered field cannot swap two arguments)
+    ldi, total, zback, thr, lut = layers.ldi, layers.total, layers.zback, layers.thr, layers.lut
+    bhi, blo = layers.bounds_hi, layers.bounds_lo
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
+    ior, outside_ior, iterations, nmethod = knobs.ior, knobs.outside_ior, knobs.iterations, knobs.nmethod
+    delta, tir, max_events, layer_limit, rec = knobs.delta, knobs.tir, knobs.max_events, knobs.layer_limit, knobs.record
+    world, rot, t0 = frame.world, frame.rot, frame.t
+    exit_pos, exit_dir, last_dir, status = out.exit_pos, out.exit_dir, out.last_dir, out.status
+    interfaces, path_len, path_pos, path_dir = out.interfaces, out.path_len, out.path_pos, out.path_dir
     L = ldi.shape[0]
     step = coprime_stride(H)
     for r in nb.prange(H):
@@ -117,12 +190,15 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                 vz = dirs[i, j, 2]
             d0 = layer_depth(ldi, 0, i, j, lut) if L > 0 else np.inf
             if not math.isfinite(d0):
-                status[i, j] = 0
+                status[i, j] = MISSED
                 interfaces[i, j] = 0
                 path_len[i, j] = 0.0
-                _store(last_dir, i, j, vx, vy, vz, frame, rot, t0, False)
-                _store(exit_dir, i, j, vx, vy, vz, frame, rot, t0, False)
+                _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
+                _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
                 _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
+                for e in range(rec):
+                    _store(path_pos[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, True)
+                    _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
                 continue
             if ortho:  # parallel rays from the window plane z = 0
                 qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, W, H, sx, sy, True)
@@ -138,7 +214,7 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
             events = 0
             nint = 0
             plen = 0.0
-            st = 4
+            st = LOST
             last_tir = False
             while True:
                 # ---- interface at layer t: advance, refract (§3.6) --------------
@@ -150,24 +226,27 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                 n2 = ior if g2 % 2 == 0 else outside_ior
                 nx, ny, nz = normal_at(ldi, t, ti, tj, lut, nmethod, delta, W, H, sx, sy, ortho)
                 wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
+                if events < rec:  # event `events`: where, and the direction Snell gave
+                    _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
+                    _store(path_dir[i], j, events, wx, wy, wz, world, rot, t0, False)
                 events += 1
                 last_tir = is_tir
                 if is_tir and not tir:
-                    st = 3
+                    st = TIR
                     break
                 vx, vy, vz = wx, wy, wz
                 if not is_tir:
                     g = g2
                     nint += 1
                     if g == -1:  # back out through the front layer
-                        st = 1
+                        st = EXITED
                         break
                     if forward and (t >= total[ti, tj] - 1
                                     or zback[ti, tj] - layer_depth(ldi, t, ti, tj, lut) <= thr[ti, tj]):
-                        st = 1  # early termination at the backmost depth (§3.7)
+                        st = EXITED  # early termination at the backmost depth (§3.7)
                         break
                 if events >= max_events:
-                    st = 3 if last_tir else 2
+                    st = TIR if last_tir else LIMIT
                     break
                 # ---- next search: which layer, which bound (§3.7) ---------------
                 dd = -vz  # rate of change of depth along the ray
@@ -176,7 +255,7 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                     forward = True
                     t = g + 1
                     if t >= layer_limit:
-                        st = 2
+                        st = LIMIT
                         break
                     zb = bhi[t] if t < L else -np.inf
                 elif dd < -_PARALLEL_EPS and tir:
@@ -184,11 +263,11 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                     t = g
                     zb = blo[t]
                 else:
-                    st = 1 if outside and dd < 0.0 else 4
+                    st = EXITED if outside and dd < 0.0 else LOST
                     break
                 depth_p = -pz
                 if not math.isfinite(zb) or (forward and zb <= depth_p) or (not forward and zb >= depth_p):
-                    st = 1 if outside else 4  # no layer ahead: escaped, or lost inside
+                    st = EXITED if outside else LOST  # no layer ahead: escaped, or lost inside
                     break
                 k = (zb - depth_p) / dd
                 ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
@@ -207,7 +286,7 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
                 if not found:
                     found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy, ortho)
                 if not found:
-                    st = 1 if outside else 4
+                    st = EXITED if outside else LOST
                     break
                 m = 0.5 * (a + b)
                 qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
@@ -219,13 +298,16 @@ def _trace_kernel(ldi, total, zback, thr, bhi, blo, dirs, own_dirs, W, H, sx, sy
             status[i, j] = st
             interfaces[i, j] = nint
             path_len[i, j] = plen
-            _store(last_dir, i, j, vx, vy, vz, frame, rot, t0, False)
-            if st == 1:
-                _store(exit_pos, i, j, px, py, pz, frame, rot, t0, True)
-                _store(exit_dir, i, j, vx, vy, vz, frame, rot, t0, False)
+            _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
+            if st == EXITED:
+                _store(exit_pos, i, j, px, py, pz, world, rot, t0, True)
+                _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
             else:
                 _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
                 _store(exit_dir, i, j, np.nan, np.nan, np.nan, False, rot, t0, False)
+            for e in range(min(events, rec), rec):  # rows past the path's last event
+                _store(path_pos[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, True)
+                _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -252,7 +334,7 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
 
 def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
                  iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
-                 layer_limit=None, lut=None, world=False):
+                 layer_limit=None, lut=None, world=False, record=0):
     """Trace every pixel's ray through the layered depth images.
 
     Parameters
@@ -286,21 +368,41 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         Event limit (refractions plus reflections) per ray.
     layer_limit : int, optional
         The user's layer limit (default ``L``); a search for a layer at or
-        beyond it stops the ray with status 2.
+        beyond it stops the ray with status ``LIMIT``.
     lut : tuple, optional
         On-the-fly peeling inputs (see :func:`~refraction_ref.imagespace.normals.layer_depth`).
     world : bool
-        Return ``exit_pos``, ``exit_dir`` and ``last_dir`` in world space
-        (the camera's frame applied as they are written) instead of view space.
+        Return ``exit_pos``, ``exit_dir``, ``last_dir`` (and ``path_pos``,
+        ``path_dir``) in world space (the camera's frame applied as they
+        are written) instead of view space.
+    record : int, default 0
+        Keep the first ``record`` events of every path in ``path_pos`` and
+        ``path_dir``; 0 records nothing (and adds no keys).
 
     Returns
     -------
     dict
-        ``exit_pos``, ``exit_dir`` (NaN unless status 1), ``last_dir``
-        (H, W, 3) in view space (world space with ``world``),
+        ``exit_pos``, ``exit_dir`` (NaN unless status ``EXITED``),
+        ``last_dir`` (H, W, 3) in view space (world space with ``world``),
         ``interfaces`` (H, W) int16, ``path_length`` (H, W) float64,
-        ``status`` (H, W) int8. A missed pixel's ``exit_dir`` and
-        ``last_dir`` are its primary ray.
+        ``status`` (H, W) int8 (:mod:`refraction_ref.status`). A missed
+        pixel's ``exit_dir`` and ``last_dir`` are its primary ray.
+
+        With ``record=K > 0`` also ``path_pos`` and ``path_dir``
+        (H, W, K, 3) float64, in the frame of ``exit_pos``. Row ``k`` is
+        the ``k``-th event of the pixel's path, one per application of
+        Snell's law: row 0 is the point where the primary ray meets layer
+        0 of its own pixel, each later row the point the binary search
+        found on the next layer (forward, or backward after a reflection
+        with ``tir``). ``path_dir[..., k, :]`` is the unit direction
+        :func:`~refraction_ref.optics.refract3` gives there: the refracted
+        ray, or the mirror direction under total internal reflection. With
+        ``tir`` disabled the reflection that stops the ray (status ``TIR``)
+        is still recorded as its last row, its mirror direction unfollowed
+        (``last_dir`` keeps the incident one). Rows past the path's events
+        (all rows of a missed pixel; those after the event that ended the
+        path) are NaN. For an exited ray with at most ``K`` events the last
+        row is ``exit_pos`` and ``exit_dir``, bit for bit.
 
     References
     ----------
@@ -312,14 +414,15 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
 
     if normals not in NORMAL_METHODS:
         raise ValueError(f"trace_layers: unknown normals {normals!r}; choose one of {sorted(NORMAL_METHODS)}")
+    if int(record) != record or record < 0:
+        raise ValueError(f"trace_layers: record must be an integer >= 0, got {record!r}")
+    record = int(record)
     H, W = total.shape
     L = ldi.shape[0]
-    exit_pos = np.empty((H, W, 3))
-    exit_dir = np.empty((H, W, 3))
-    last_dir = np.empty((H, W, 3))
-    interfaces = np.empty((H, W), np.int16)
-    path_len = np.empty((H, W))
-    status = np.empty((H, W), np.int8)
+    shape = (H, W, record, 3) if record else (1, 1, 1, 3)
+    out = _Outputs(exit_pos=np.empty((H, W, 3)), exit_dir=np.empty((H, W, 3)), last_dir=np.empty((H, W, 3)),
+                   interfaces=np.empty((H, W), np.int16), path_len=np.empty((H, W)),
+                   status=np.empty((H, W), np.int8), path_pos=np.empty(shape), path_dir=np.empty(shape))
     Wc, Hc, sx, sy = camera.kernel_args()
     if (Hc, Wc) != (H, W):
         raise ValueError(f"trace_layers: the layers are {(H, W)}, the camera is {(Hc, Wc)}")
@@ -330,13 +433,18 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         t = np.ascontiguousarray(camera.eye, dtype=np.float64)
     else:
         m, t = np.eye(3), np.zeros(3)
-    _trace_kernel(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
-                  np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
-                  np.ascontiguousarray(bounds_hi, dtype=np.float64), np.ascontiguousarray(bounds_lo, dtype=np.float64),
-                  dirs, own, Wc, Hc, sx, sy,
-                  float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
-                  int(max_interfaces), int(L if layer_limit is None else layer_limit),
-                  no_lut(None) if lut is None else lut, bool(world), m, t,
-                  exit_pos, exit_dir, last_dir, interfaces, path_len, status, bool(camera.ortho))
-    return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir,
-            "interfaces": interfaces, "path_length": path_len, "status": status}
+    layers = _Layers(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
+                     np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
+                     np.ascontiguousarray(bounds_hi, dtype=np.float64),
+                     np.ascontiguousarray(bounds_lo, dtype=np.float64),
+                     no_lut(None) if lut is None else lut)
+    grid = _Grid(Wc, Hc, sx, sy, bool(camera.ortho))
+    knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
+                   int(max_interfaces), int(L if layer_limit is None else layer_limit), record)
+    _trace_kernel(layers, dirs, own, grid, knobs, _Frame(bool(world), m, t), out)
+    res = {"exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "last_dir": out.last_dir,
+           "interfaces": out.interfaces, "path_length": out.path_len, "status": out.status}
+    if record:
+        res["path_pos"] = out.path_pos
+        res["path_dir"] = out.path_dir
+    return res
