@@ -23,7 +23,7 @@ def _cmd_render(a):
     from . import load_scene, render
 
     scene = load_scene(a.scene, _parse_sets(a.set))
-    res = render(scene, method=a.method, progress=not a.quiet)
+    res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
     paths = res.save(a.out, overwrite=a.force)
     import numpy as np
 
@@ -31,6 +31,9 @@ def _cmd_render(a):
     print(f"{a.method}: {scene.data['camera']['width']}x{scene.data['camera']['height']}, "
           f"{res.meta.get('triangles', 0)} triangles, {res.meta['total_ms']:.0f} ms in all")
     print("stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
+    kept = sorted(k for k in res.arrays if k.startswith("stage."))
+    if kept:
+        print(f"kept {len(kept)} stage buffers: " + ", ".join(kept[:8]) + (" ..." if len(kept) > 8 else ""))
     if "status" in res.arrays:
         hist = np.bincount(res.arrays["status"].ravel().astype(np.int64), minlength=5)
         print("status 0 missed / 1 exited / 2 limit / 3 TIR / 4 lost: " + " / ".join(str(int(x)) for x in hist))
@@ -73,9 +76,9 @@ def main(argv=None):
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene (default: the bundled glass bunny)")
     r.add_argument("scene", nargs="?", default=None, help="scene JSON (ORACLE.md); omit for the default scene")
-    from .render import METHODS
+    from .graph import method_names
 
-    r.add_argument("--method", default="imagespace", choices=list(METHODS),
+    r.add_argument("--method", default="imagespace", choices=list(method_names()),
                    help="imagespace (Chaudhari 2008), exact (Embree reference), levelmap (Tipprasert 2006), "
                         "volumetric (Sun et al. 2008)")
     r.add_argument("--out", default="out/render", help="output prefix: PREFIX.npz and PREFIX.png")
@@ -83,6 +86,9 @@ def main(argv=None):
                    help="override a scene key, e.g. --set imagespace.iterations=10 (repeatable)")
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--keep", metavar="STAGES", default=None,
+                   help="also write stage buffers as stage.<stage>.<buffer> (docs/oracle.md): 'stages' for "
+                        "every stage, or a comma list of stage names, e.g. --keep peel,trace")
     r.set_defaults(fn=_cmd_render)
     c = sub.add_parser("compare", help="diff two runs: exit-direction error, interfaces, status, image RMSE")
     c.add_argument("a", help="run to test (.npz)")

@@ -1,4 +1,4 @@
-"""``render``: one entry point for every method, writing the ORACLE.md keys."""
+"""``render``: one entry point for every registered method (``docs/oracle.md`` keys)."""
 
 from __future__ import annotations
 
@@ -7,21 +7,61 @@ import time
 import numba
 import numpy as np
 
+from .contract import CONTRACT_VERSION, software_versions
+from .graph import get_method, method_names, run_graph
 from .result import Result
 from .scene import Scene, SceneError, load_scene
 
-__all__ = ["render", "METHODS"]
+__all__ = ["render", "METHODS", "run_method"]
 
-METHODS = ("imagespace", "exact", "levelmap", "volumetric")
-
-
-def _version():
-    from . import __version__
-
-    return __version__
+METHODS = method_names()
 
 
-def render(scene=None, method="imagespace", overrides=None, progress=False):
+def _params(method, scene):
+    blocks = get_method(method).blocks
+    if method == "exact" and scene.data.get("water") is not None:
+        blocks = ("levelmap", "water")
+    if len(blocks) == 1:
+        return scene.data[blocks[0]]
+    return {b: scene.data[b] for b in blocks}
+
+
+def _params_read(m, scene):
+    """Every knob block any of the scene's stages reads, e.g. ``imagespace.caustic_map`` for exact caustics."""
+    from .graph import BLOCKS
+
+    names = {r.split(".")[0] for st in m.stages(scene) for r in st.reads} & set(BLOCKS)
+    return {b: scene.data[b] for b in sorted(names)}
+
+
+def run_method(scene, method, cache=None, keep=None, progress=False):
+    """Run a method's stage graph and wrap the outputs as a :class:`Result` with the full ``meta``."""
+    m = get_method(method)
+    if m.warm is not None:  # JIT compilation (or loading the cache) stays out of total_ms
+        m.warm()
+    t0 = time.perf_counter()
+    arrays, info = run_graph(m, scene, cache=cache, keep=keep, progress=progress, warm=False)
+    total = (time.perf_counter() - t0) * 1e3
+    meta = {
+        "method": method,
+        "scene": scene.data,
+        "params": _params(method, scene),
+        "params_read": _params_read(m, scene),
+        "version": software_versions()["refraction_ref"],
+        "contract_version": CONTRACT_VERSION,
+        "versions": software_versions(),
+        "numba_threads": int(numba.get_num_threads()),
+        "total_ms": total,
+    }
+    meta.update(info)
+    meta["contract_version"] = CONTRACT_VERSION
+    for k in ("exit_pos", "exit_dir"):
+        if k in arrays and arrays[k].dtype != np.float64:
+            raise AssertionError(f"{method}: {k} must be float64 (docs/oracle.md)")
+    return Result(arrays, meta)
+
+
+def render(scene=None, method="imagespace", overrides=None, progress=False, keep=None):
     """Render a scene with one method.
 
     Parameters
@@ -40,53 +80,21 @@ def render(scene=None, method="imagespace", overrides=None, progress=False):
         Dotted keys, e.g. ``{"imagespace.iterations": 10}``.
     progress : bool
         Show a progress bar on long work.
+    keep : None, 'stages', str or list of str
+        Stages whose buffers to add to the result as ``stage.<stage>.<buffer>``
+        (``docs/oracle.md``, "Stage buffers"): ``'stages'`` for every stage,
+        or a comma list of stage names.
 
     Returns
     -------
     Result
-        ``arrays`` with the ORACLE.md keys, ``meta`` with the resolved
-        scene, the parameters used, version, thread count, ``timings_ms``
-        and ``plan``.
+        ``arrays`` with the ``docs/oracle.md`` keys, ``meta`` with the
+        resolved scene, the parameters used, versions (package, contract,
+        libraries, CPU), thread count, ``timings_ms`` (one entry per stage
+        that ran) and ``plan``.
     """
-    if method not in METHODS:
-        raise SceneError(f"render: unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    scene = load_scene(scene if scene is not None else None, overrides) if (overrides or not isinstance(scene, Scene)) else scene
-    t0 = time.perf_counter()
-    if method == "imagespace":
-        from .imagespace import render_imagespace
-
-        arrays, info = render_imagespace(scene)
-        params = scene.data["imagespace"]
-    elif method == "volumetric":
-        from .volumetric import render_volumetric  # Sun et al. 2008 volumetric relighting
-
-        arrays, info = render_volumetric(scene)
-        params = scene.data["volumetric"]
-    elif method == "levelmap":
-        from .levelmap.pipeline import render_levelmap  # Tipprasert 2006 water caustics
-
-        arrays, info = render_levelmap(scene)
-        params = {"levelmap": scene.data["levelmap"], "water": scene.data["water"]}
-    elif method == "exact" and scene.data.get("water") is not None:
-        from .levelmap.exact_water import render_water_exact  # exact water-caustics reference
-
-        arrays, info = render_water_exact(scene, progress=progress)
-        params = {"levelmap": scene.data["levelmap"], "water": scene.data["water"]}
-    else:
-        from .exact_render import render_exact
-
-        arrays, info = render_exact(scene, progress=progress)
-        params = scene.data["exact"]
-    total = (time.perf_counter() - t0) * 1e3
-    meta = {
-        "method": method,
-        "scene": scene.data,
-        "params": params,
-        "version": _version(),
-        "numba_threads": int(numba.get_num_threads()),
-        "total_ms": total,
-    }
-    meta.update(info)
-    for k in ("exit_pos", "exit_dir"):
-        assert k not in arrays or arrays[k].dtype == np.float64
-    return Result(arrays, meta)
+    if method not in method_names():
+        raise SceneError(f"render: unknown method {method!r}; choose one of {', '.join(method_names())}")
+    if overrides or not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    return run_method(scene, method, keep=keep, progress=progress)

@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides"]
+from .graph import BLOCKS
+
+__all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides", "BLOCKS"]
 
 
 class SceneError(ValueError):
@@ -49,42 +51,10 @@ DEFAULT_LIGHT = {"type": "directional", "direction": [0.0, -1.0, 0.0], "position
 DEFAULT_DEFORM = {"type": "sine", "amplitude": 0.02, "wavelength": 0.25,
                   "direction": [0.0, 1.0, 0.0], "phase": 0.0}
 
-#: Image-space method (Chaudhari 2008). Every key is a knob; see docs of
-#: :mod:`refraction_ref.imagespace`.
-IMAGESPACE_DEFAULTS = {
-    "iterations": 5,          # binary-search iterations per interface (§3.6)
-    "layers": 32,             # depth layers peeled (§3.4.2)
-    "slices": 256,            # bitmask slices S (§3.3)
-    "bounds": "mip",          # search bound: 'mip' (256x256 MIP + margin, §3.7) | 'global' (exact max)
-    "mip_size": 256,          # MIP level used for the reduction (§3.7)
-    "bound_margin": 0.01,     # the "small constant", as a fraction of the object's depth range
-    "blend": "or",            # 'or' | 'add' (GPU additive blending with carry, §3.3)
-    "depth": "bitmask",       # 'bitmask' | 'float' (A-buffer of exact fragment depths)
-    "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
-    "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
-    "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4) | 'cross'
-    "delta": 2,               # pixel step of the central differences (eq. 3.2; smoother than 1, Fig. 3.4)
-    "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
-    "tir": False,             # follow total internal reflection back to preceding layers
-    "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)
-    # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
-    "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
-    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
-    "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
-    "caustic_map": 512,       # texels per side of each receiver's caustic map (exact reference too)
-}
+def _block_defaults():
+    """Every registered knob block's defaults (the blocks' own modules hold them)."""
+    return {name: (copy.deepcopy(b.defaults) if b.defaults is not None else None) for name, b in BLOCKS.items()}
 
-EXACT_DEFAULTS = {
-    "normals": "smooth",      # 'smooth' interpolated vertex normals | 'face'
-    "max_bounces": 64,
-    "photons": 1024,          # caustics reference: jittered photons per side of the light's window
-    "photon_seed": 0,         # seed of the jitter (the reference is deterministic)
-}
-
-#: Water block (merged only when a scene has one; "water": null means no water).
-WATER_DEFAULTS = {"size": [4.0, 4.0], "height": 0.0, "resolution": 128, "ior": 1.33, "absorption": 0.0,
-                  "waves": []}
-WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], "phase": 0.0}
 
 DEFAULTS = {
     "camera": DEFAULT_CAMERA,
@@ -93,31 +63,8 @@ DEFAULTS = {
     "environment": DEFAULT_ENVIRONMENT,
     "lights": [DEFAULT_LIGHT],
     "receivers": [],          # none by default: caustics run when a scene has receivers and lights
-    "water": None,
-    "volume": None,
-    "imagespace": IMAGESPACE_DEFAULTS,
-    "volumetric": {           # Sun et al. 2008; see refraction_ref.volumetric.knobs
-        "resolution": 128, "photons": 1024, "ds_min": 1.0, "ds_max": 8.0, "eps": 0.005, "eps2": 0.02,
-        "integrator": "euler", "phase_g": 0.0, "scattering": 0.2, "absorption": 0.0,
-        "supersample": 4, "blur": 9, "padding": 6, "bounds": None, "max_steps": 0,
-        "min_radiance": 1e-3, "stop_fraction": 1e-3, "stiff": 0.25,
-    },
-    "levelmap": {             # Tipprasert 2006; see refraction_ref.levelmap.knobs
-        "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
-        "map_size": 512, "shadows": True, "ambient": 0.1, "exact_samples": 2048, "exact_seed": 0,
-    },
-    "exact": EXACT_DEFAULTS,
-}
-
-_CHOICES = {
-    ("imagespace", "bounds"): ("mip", "global"),
-    ("imagespace", "blend"): ("or", "add"),
-    ("imagespace", "depth"): ("bitmask", "float"),
-    ("imagespace", "slicing"): ("local", "global"),
-    ("imagespace", "peeling"): ("separate", "lut"),
-    ("imagespace", "normals"): ("forward", "central", "mesh3x3", "cross"),
-    ("exact", "normals"): ("smooth", "face"),
-    ("imagespace", "receiver_hit"): ("eyespace", "exact"),
+    # the knob blocks (imagespace, exact, volumetric, volume, levelmap, water) are added at the end of
+    # this module from the registry: each method's knobs module owns its defaults and checks
 }
 
 
@@ -281,61 +228,18 @@ def validate(data, base_dir="."):
         p = env["path"] if os.path.isabs(env["path"]) else os.path.join(base_dir, env["path"])
         if not os.path.isfile(p):
             raise SceneError(f"scene: environment.path '{env['path']}' does not exist (looked for {p})")
-    for (blk, key), choices in _CHOICES.items():
-        if data[blk][key] not in choices:
-            raise SceneError(f"scene: '{blk}.{key}' is {data[blk][key]!r}; choose one of {', '.join(choices)}")
-    im = data["imagespace"]
-    _num(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
-    _num(im["layers"], "imagespace.layers", 1, 32, integer=True)
-    _num(im["slices"], "imagespace.slices", 32, 4096, integer=True)
-    if im["slices"] % 32:
-        raise SceneError(f"scene: imagespace.slices is {im['slices']}; it must be a multiple of 32 "
-                         "(slices are stored in 32-bit words)")
-    _num(im["mip_size"], "imagespace.mip_size", 1, integer=True)
-    _num(im["bound_margin"], "imagespace.bound_margin", 0.0)
-    _num(im["delta"], "imagespace.delta", 1, 8, integer=True)
-    _num(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
-    _num(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
-    if not isinstance(im["tir"], bool):
-        raise SceneError(f"scene: imagespace.tir must be true or false, got {im['tir']!r}")
-    _num(data["exact"]["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
-    _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
-    _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
-    if im["gather"] % 2 == 0:
-        raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
-                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
-    _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
-    _num(data["exact"]["photons"], "exact.photons", 1, 16384, integer=True)
-    _num(data["exact"]["photon_seed"], "exact.photon_seed", 0, integer=True)
-    for k, lt in enumerate(data["lights"] or [] if data.get("water") is None else []):  # water: levelmap checks
-        if lt["type"] not in ("directional", "point"):
-            raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; use 'directional' or 'point'")
-        if lt["type"] == "directional":
-            d = _vec(lt["direction"], 3, f"lights[{k}].direction")
-            if not np.linalg.norm(d) > 0:
-                raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
-        else:
-            if lt["position"] is None:
-                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give its position")
-            _vec(lt["position"], 3, f"lights[{k}].position")
-        rad = _vec(lt["radiance"], 3, f"lights[{k}].radiance")
-        if np.any(rad < 0):
-            raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
+    from .lights import validate_lights
+
+    for block in BLOCKS.values():  # blocks given partially (water) are filled before the lights are checked
+        if block.merge is not None:
+            block.merge(data)
+    validate_lights(data)
     for k, r in enumerate(data["receivers"] or []):
         alb = _vec(r["albedo"], 3, f"receivers[{k}].albedo")
         if np.any(alb < 0):
             raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
-    W, H = c["width"], c["height"]
-    need = W * H * (im["slices"] // 8 + 8 * (im["layers"] + 24))
-    if need > 16 * 2**30:
-        raise SceneError(f"scene: {W}x{H} with {im['slices']} slices and {im['layers']} layers needs "
-                         f"about {need / 2**30:.1f} GiB; lower the resolution")
-    from .volumetric.knobs import validate_volumetric  # volumetric knobs and the 'volume' block
-
-    validate_volumetric(data, base_dir)
-    from .levelmap.knobs import merge_water, validate_levelmap  # water block and level-map knobs
-
-    validate_levelmap(merge_water(data, WATER_DEFAULTS, WAVE_DEFAULTS))
+    for name, block in BLOCKS.items():  # each method's own checks, beside the code that reads them
+        block.validate(data, base_dir)
     return data
 
 
@@ -410,10 +314,9 @@ def _resolve(raw, base_dir, callables):
     for (kind, k), fn in callables.items():
         if kind == "deform":
             data["objects"][k]["deform"] = "<python callable>"
-    if data.get("water") is not None:
-        from .levelmap.knobs import merge_water
-
-        merge_water(data, WATER_DEFAULTS, WAVE_DEFAULTS)
+    for block in BLOCKS.values():
+        if block.merge is not None:
+            block.merge(data)
     return data
 
 
@@ -467,3 +370,14 @@ def load_scene(src=None, overrides=None):
         data = apply_overrides(data, overrides)
     validate(data, base_dir)
     return Scene(data, base_dir, callables)
+
+
+# The knob blocks register themselves on import (cheap modules: no kernels). Imported last, as
+# they use this module's checks; then the scene's defaults gain every block.
+from . import exact_knobs as _exact_knobs  # noqa: E402,F401
+from .imagespace import knobs as _imagespace_knobs  # noqa: E402,F401
+from .levelmap import knobs as _levelmap_knobs  # noqa: E402,F401
+from .volumetric import knobs as _volumetric_knobs  # noqa: E402,F401
+
+DEFAULTS.update(_block_defaults())
+IMAGESPACE_DEFAULTS = _imagespace_knobs.IMAGESPACE_DEFAULTS  # for existing imports

@@ -3,26 +3,27 @@
 >>> import refraction_ref as rr
 >>> s = rr.Session({"camera": {"width": 64, "height": 64}, "volumetric": {"resolution": 32, "photons": 64}})
 >>> first = s.render("volumetric")                       # every stage runs
->>> s.update({"camera.eye": [0.5, 0.0, 2.6]})
+>>> s.update({"camera.eye": [0.5, 0.0, 2.6]})            # doctest: +ELLIPSIS
+<refraction_ref.session.Session object at ...>
 >>> again = s.render("volumetric")                       # only the viewing pass runs
 >>> [p["stage"] for p in again.meta["plan"] if p["ran"]]
 ['view']
 
-The volumetric method (Sun et al. 2008, §3) is staged: a camera change
-re-runs the viewing pass only; a light change photon generation, marching,
-smoothing and viewing; a geometry or material change everything.
-``meta["plan"]`` says, for each stage, whether it ran or was reused and why.
-Other methods are rendered afresh each time.
+Every method is a registered stage graph (:mod:`refraction_ref.graph`):
+each stage declares the scene keys and knobs it reads, and re-runs when
+one of them changed or an upstream stage re-ran. So for the volumetric
+method (Sun et al. 2008, §3) a camera change re-runs the viewing pass
+only, a light change photon generation, marching, smoothing and viewing;
+for the image-space method ``imagespace.iterations`` re-runs the trace and
+the shading only; for the level map a camera change re-runs the final
+image only. ``meta["plan"]`` says, for each stage, whether it ran or was
+reused and why.
 """
 
 from __future__ import annotations
 
-import time
-
-import numba
-
-from .render import METHODS, render
-from .result import Result
+from .graph import method_names
+from .render import run_method
 from .scene import Scene, SceneError, load_scene
 
 __all__ = ["Session"]
@@ -51,8 +52,9 @@ class Session:
     def update(self, overrides):
         """Change dotted keys, e.g. ``{"camera.eye": [0, 0, 3]}``; the scene is re-validated.
 
-        Returns the session, so calls chain. On a bad value the scene is left
-        unchanged and :class:`SceneError` is raised.
+        Returns the session, so calls chain. On a bad key or value
+        :class:`SceneError` is raised naming it, and the scene and the cached
+        stages are left as they were.
         """
         self.scene = load_scene(self.scene, overrides)
         return self
@@ -61,8 +63,16 @@ class Session:
         """Forget every cached stage."""
         self._cache.clear()
 
-    def render(self, method="volumetric", progress=False):
-        """Render the current scene; for ``volumetric``, reuse every stage whose inputs did not change.
+    def render(self, method="volumetric", progress=False, keep=None):
+        """Render the current scene, reusing every stage whose inputs did not change.
+
+        Parameters
+        ----------
+        method : str
+            A registered method.
+        progress : bool
+        keep : None, 'stages', str or list of str
+            As :func:`refraction_ref.render`.
 
         Returns
         -------
@@ -70,17 +80,6 @@ class Session:
             As :func:`refraction_ref.render`, with ``meta["plan"]`` naming
             each stage as ran or reused, and why.
         """
-        if method not in METHODS:
-            raise SceneError(f"Session.render: unknown method {method!r}; choose one of {', '.join(METHODS)}")
-        if method != "volumetric":
-            return render(self.scene, method=method, progress=progress)
-        from . import __version__
-        from .volumetric.pipeline import render_volumetric
-
-        t0 = time.perf_counter()
-        arrays, info = render_volumetric(self.scene, cache=self._cache)
-        meta = {"method": method, "scene": self.scene.data, "params": self.scene.data["volumetric"],
-                "version": __version__, "numba_threads": int(numba.get_num_threads()),
-                "total_ms": (time.perf_counter() - t0) * 1e3}
-        meta.update(info)
-        return Result(arrays, meta)
+        if method not in method_names():
+            raise SceneError(f"Session.render: unknown method {method!r}; choose one of {', '.join(method_names())}")
+        return run_method(self.scene, method, cache=self._cache, keep=keep, progress=progress)

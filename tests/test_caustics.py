@@ -64,7 +64,7 @@ def test_outputs_follow_the_contract(glass):
         np.testing.assert_allclose(fr[3], [0.0, 1.0, 0.0], atol=1e-12)
         img = res["image_caustics"]
         assert img.shape == (96, 96, 3) and img.dtype == np.float32 and np.all(np.isfinite(img))
-        assert any(p["stage"] == "caustics" and p["ran"] for p in res.meta["plan"])
+        assert any(p["stage"] == "caustic_final" and p["ran"] for p in res.meta["plan"])
     assert np.all(np.isfinite(a["image_caustics_single"]))
     assert a.meta["caustics"]["lights"][0]["projection"] == "orthographic"
     # the reference reports its own noise, and it is small (measured 7e-4)
@@ -131,7 +131,7 @@ def test_ior_one_fills_the_shadow_with_unchanged_light():
     # the final image equals the image without the object, except where gathering blurs the
     # footprint's edge across the (sharp) shadow boundary: a ring of the gathering window's width
     empty = rr.render(_scene(objects=[]))
-    assert any(p["stage"] == "caustics" and p["ran"] for p in empty.meta["plan"])
+    assert any(p["stage"] == "caustic_final" and p["ran"] for p in empty.meta["plan"])
     o, dr = a["ray_origin"], a["ray_dir"]
     fl = o + ((FLOOR_Y - o[..., 1]) / dr[..., 1])[..., None] * dr  # floor point of every pixel
     rp = np.hypot(fl[..., 0], fl[..., 2])

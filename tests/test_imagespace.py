@@ -171,7 +171,7 @@ def test_absorption_follows_beer_lambert():
     m = r["status"] == 1
     expect = np.array([0.5, 0.25, 1.0]) * np.exp(-alpha * (r["path_length"][m] * 1.5)[:, None])
     np.testing.assert_allclose(r["image"][m], expect, rtol=1e-6)
-    assert any(p["stage"] == "absorption" and p["ran"] for p in r.meta["plan"])
+    assert any(p["stage"] == "shade" and "exp(-alpha" in p["why"] for p in r.meta["plan"])
 
 
 # --------------------------------------------------------------------------
@@ -693,7 +693,7 @@ def test_outputs_meta_and_save(tmp_path):
     r = rr.render(_sphere_scene(32))
     _check_invariants(r)
     assert set(KEYS) <= set(r.arrays)
-    assert set(r.meta["timings_ms"]) == {"minmax", "voxelize", "peel", "reduce", "trace", "shade"}
+    assert set(r.meta["timings_ms"]) == {"geometry", "minmax", "voxelize", "peel", "reduce", "trace", "shade"}
     assert all(v >= 0 for v in r.meta["timings_ms"].values())
     assert all({"stage", "ran", "why"} <= set(p) for p in r.meta["plan"])
     assert r.meta["params"]["iterations"] == 5 and r.meta["version"] == rr.__version__

@@ -207,7 +207,7 @@ def test_session_reruns_only_what_changed():
     assert _ran(mat) == list(rr.volumetric.pipeline.STAGES)
     again = s.render("volumetric")
     assert _ran(again) == []
-    assert set(again.meta["timings_ms"]) == set(rr.volumetric.pipeline.STAGES)
+    assert again.meta["timings_ms"] == {}  # one entry per stage that ran
 
 
 def test_volume_input_bypasses_voxelization(tmp_path):

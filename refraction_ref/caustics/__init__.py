@@ -9,6 +9,6 @@ put together by ``pipeline`` for the image-space method and for the exact
 photon reference.
 """
 
-from .pipeline import caustics_exact, caustics_imagespace, has_caustics
+from .pipeline import exact_caustic_stages, has_caustics, imagespace_caustic_stages
 
-__all__ = ["caustics_imagespace", "caustics_exact", "has_caustics"]
+__all__ = ["imagespace_caustic_stages", "exact_caustic_stages", "has_caustics"]

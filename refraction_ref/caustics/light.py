@@ -32,69 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera import Camera
-from ..scene import SceneError
 
 __all__ = ["light_camera", "texel_flux", "light_direction_at", "window_samples"]
 
-_MARGIN = 1.02  # the window is 2 % wider than the bounding sphere
-
-
-def _bounding_sphere(vertices):
-    v = np.asarray(vertices, dtype=np.float64)
-    c = (v.min(axis=0) + v.max(axis=0)) / 2.0
-    r = float(np.sqrt(((v - c) ** 2).sum(axis=1).max()))
-    return c, max(r, 1e-9)
-
-
-def _up_for(d):
-    """An up hint not parallel to ``d``: world +y unless ``d`` is nearly vertical, then +z."""
-    return (0.0, 0.0, 1.0) if abs(d[1]) > 0.9 else (0.0, 1.0, 0.0)
-
-
-def light_camera(light, vertices, photons):
-    """The camera of a light's photon texture, fitted to the objects.
-
-    Parameters
-    ----------
-    light : dict
-        A scene light (``directional`` with ``direction``, or ``point`` with
-        ``position``).
-    vertices : (V, 3) array_like
-        World-space vertices of every refractive object.
-    photons : int
-        Texels per side of the photon texture.
-
-    Returns
-    -------
-    Camera
-        Orthographic (directional light) or perspective (point light),
-        ``photons`` x ``photons`` texels.
-
-    Raises
-    ------
-    SceneError
-        A point light inside the objects' bounding sphere.
-    """
-    c, r = _bounding_sphere(vertices)
-    n = int(photons)
-    if light["type"] == "directional":
-        d = np.asarray(light["direction"], dtype=np.float64)
-        d = d / np.linalg.norm(d)
-        eye = c - d * (1.1 * r)
-        return Camera(tuple(eye), tuple(c), _up_for(d), 1.0, n, n, 0.05 * r, 2.2 * r,
-                      projection="orthographic", ortho_height=2.0 * r * _MARGIN)
-    pos = np.asarray(light["position"], dtype=np.float64)
-    dist = float(np.linalg.norm(c - pos))
-    if dist <= r * 1.05:
-        raise SceneError(f"caustics: the point light at {pos.tolist()} lies inside the refractive objects' "
-                         f"bounding sphere (centre {np.round(c, 4).tolist()}, radius {r:.4g}); the light's "
-                         "photon texture needs it outside. Move the light away from the objects")
-    d = (c - pos) / dist
-    half = np.arcsin(min(r * _MARGIN / dist, 0.999))
-    return Camera(tuple(pos), tuple(c), _up_for(d), float(np.degrees(2.0 * half)), n, n,
-                  max(dist - 1.05 * r, 1e-4 * dist), dist + 1.05 * r)
-
+# the light camera and directions are the shared lights service; re-exported for this package
+from ..lights import light_camera, light_direction_at  # noqa: E402,F401
 
 def texel_flux(cam, col, row):
     """Flux of one photon texel for a unit light, at continuous texel positions.
@@ -119,26 +61,6 @@ def texel_flux(cam, col, row):
     x = (col / W * 2.0 - 1.0) * sx
     y = (1.0 - np.asarray(row, dtype=np.float64) / H * 2.0) * sy
     return a / (1.0 + x * x + y * y) ** 1.5
-
-
-def light_direction_at(light, points):
-    """Unit directions the light travels at world points (..., 3), and the distance factor.
-
-    Returns
-    -------
-    L : (..., 3) ndarray
-        Direction of travel of the light's rays.
-    falloff : (...) ndarray
-        1 for a directional light, ``1 / r^2`` for a point light.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    if light["type"] == "directional":
-        d = np.asarray(light["direction"], dtype=np.float64)
-        d = d / np.linalg.norm(d)
-        return np.broadcast_to(d, p.shape), np.ones(p.shape[:-1])
-    v = p - np.asarray(light["position"], dtype=np.float64)
-    r2 = np.maximum((v * v).sum(axis=-1), 1e-300)
-    return v / np.sqrt(r2)[..., None], 1.0 / r2
 
 
 def window_samples(cam, n, seed):

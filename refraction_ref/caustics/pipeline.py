@@ -1,16 +1,23 @@
 """Caustics from multiply-refracted photons onto diffuse receivers (Chaudhari 2008, §4.1), pass by pass.
 
 ==========================  =====================================================  ===========
-stage (``caustics.timings``)  pass                                                 section
+stage (``timings_ms``)      pass                                                   section
 ==========================  =====================================================  ===========
-``light_minmax`` ...        the light's min/max, voxelization, peeling, reduction   §3.3-3.7
-``photon_trace``            one photon per texel through every layer (eye kernels)  §3.6-3.8
+``receivers``               receiver triangles and their caustic-map frames         §4.1
+``receiver_depth``          the receivers' depth image from the camera              §4.1
+``photon_trace``            per light: its camera, then min/max, voxelization,      §3.3-3.8
+                            peeling, reduction (``photon_trace.minmax`` ...) and
+                            one photon per texel through every layer
 ``receiver_hit``            eye-space march (Krüger 2006) or Embree                 §4.1
 ``splat``                   bilinear splat of irradiance into each receiver's map   §2.3.2
 ``gather``                  Gaussian gathering in a window (Wyman & Davis 2006)     §2.3.2
-``final``                   receivers lit directly (shadow test) and by caustics;   §4.1
+``caustic_final``           receivers lit directly (shadow test) and by caustics;   §4.1
                             the object with single-surface and multi-layer passes
 ==========================  =====================================================  ===========
+
+These are stages of the image-space and exact methods' graphs
+(:func:`imagespace_caustic_stages`, :func:`exact_caustic_stages`), added
+when the scene has lights and receivers.
 
 Outputs (ORACLE.md, per receiver ``r``): ``caustic_map_r`` (Hc, Wc) float32,
 the irradiance carried by photons that passed through a refractive object,
@@ -34,18 +41,20 @@ halved, is its own noise, reported per receiver in ``meta['caustics']``.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..environment import environment_lookup
+from ..graph import Stage
+from ..lights import light_camera
 from ..optics import beer_lambert, refract
-from .light import light_camera, texel_flux, window_samples
+from ..status import EXITED
+from .light import texel_flux, window_samples
 from .receivers import eye_buffers, hit_exact, map_position, march_eyespace, receiver_set
 from .shade import exact_visibility, shade_points, shadow_map_visibility
 from .splat import gather_gaussian, splat_bilinear
 
-__all__ = ["has_caustics", "caustics_imagespace", "caustics_exact", "receiver_hits", "splat_maps"]
+__all__ = ["has_caustics", "imagespace_caustic_stages", "exact_caustic_stages", "caustic_arrays", "receiver_hits",
+           "splat_maps", "merge_caustics", "skip_reason", "camera_array"]
 
 
 def has_caustics(scene):
@@ -121,7 +130,7 @@ def _photon_stats(flux0, status, trans_exit, landed):
     receiver; the caller adds ``flux_on_receivers`` (what was splatted).
     """
     f = flux0
-    ex = status == 1
+    ex = status == EXITED
     t = trans_exit.mean(axis=1)
     return {
         "flux_silhouette": float(f[status != 0].sum()),
@@ -135,9 +144,8 @@ def _photon_stats(flux0, status, trans_exit, landed):
     }
 
 
-def _collect(scene, rs, per_light, arrays, gather):
+def _collect(lights, rs, per_light, arrays, gather):
     """Sum per-light unit maps into ``caustic_map_r`` / ``caustic_rgb_r``; returns the RGB maps."""
-    lights = scene.data["lights"]
     rgb_maps = []
     for r, box in enumerate(rs.boxes):
         unit = np.zeros(box.size)
@@ -158,92 +166,158 @@ def _collect(scene, rs, per_light, arrays, gather):
 
 
 # ---------------------------------------------------------------------------
-# image-space method
+# stages shared by both methods
 # ---------------------------------------------------------------------------
 
-def caustics_imagespace(scene, geom, cam, eye, ior, outside, absorption):
-    """Photon pass per light, receiver hits, splat, gather and the final images.
+def camera_array(cam):
+    """A camera as a (6, 3) float64 buffer: eye; right, up, back axes; (sx, sy, ortho); (near, far, width)."""
+    return np.array([np.asarray(cam.eye, dtype=np.float64), *cam.basis, [cam.sx, cam.sy, float(cam.ortho)],
+                     [cam.near, cam.far, float(cam.width)]], dtype=np.float64)
 
-    Parameters
-    ----------
-    scene : Scene
-    geom : Geometry
-    cam : Camera
-        The eye.
-    eye : dict
-        :func:`~refraction_ref.imagespace.pipeline.layered_trace` of the eye.
-    ior, outside : float
-    absorption : (3,) float64
 
-    Returns
-    -------
-    arrays : dict
-        ``caustic_map_r``, ``caustic_frame_r``, ``caustic_rgb_r``,
-        ``image_caustics``, ``image_caustics_single``.
-    info : dict
-        ``timings_ms`` per stage, per-light energy ``lights``, knobs used.
-    """
+def _st_receivers(ctx):
+    d = ctx.scene.data
+    rs = receiver_set(ctx.scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    ctx.note(f"{len(rs.boxes)} receiver(s), {len(rs.tris)} triangles, {d['imagespace']['caustic_map']}^2 maps")
+    return {"rs": rs, **{f"frame_{r}": rs.frame(r).astype(np.float64) for r in range(len(rs.boxes))}}
+
+
+def _st_receiver_depth(ctx):
+    from ..camera import Camera
+
+    cam = Camera.from_dict(ctx.scene.data["camera"])
+    depth, tri = eye_buffers(ctx.buf["receivers"]["rs"], cam)
+    return {"eyebuf": (depth, tri), "depth": depth, "triangle": tri, "cam": cam}
+
+
+def _receiver_stages(n_receivers):
+    return (
+        Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
+              makes=tuple(f"frame_{r}" for r in range(n_receivers)),
+              doc="receiver triangles and caustic-map frames (§4.1)"),
+        Stage("receiver_depth", _st_receiver_depth, reads=("camera",), after=("receivers",),
+              makes=("depth", "triangle"), doc="the receivers' depth image from the camera (§4.1)"),
+    )
+
+
+def _per_light_names(prefix, n):
+    return tuple(f"{prefix}_{l}" for l in range(n))
+
+
+def _photon_buffer_names(n, with_ldi):
+    """Per-light buffers of ``photon_trace`` (None for a light whose photons meet no object)."""
+    names = ("camera", "ldi", "exit_pos", "exit_dir") if with_ldi else ("camera", "exit_pos", "exit_dir")
+    return tuple(nm for k in names for nm in _per_light_names(k, n))
+
+
+def _st_gather(ctx, gather_key):
+    d = ctx.scene.data
+    rs = ctx.buf["receivers"]["rs"]
+    per_light = ctx.buf["splat"]["maps"]
+    g = int(d["imagespace"]["gather"]) if gather_key else 1
+    arrays = {}
+    rgb_maps = _collect(d["lights"], rs, per_light, arrays, g)
+    ctx.note(f"Gaussian gathering, window {g} texels (Wyman & Davis 2006)" if g > 1 else "no gathering")
+    return {"arrays": arrays, "rgb_maps": rgb_maps,
+            **{f"caustic_map_{r}": arrays[f"caustic_map_{r}"] for r in range(len(rs.boxes))}}
+
+
+# ---------------------------------------------------------------------------
+# image-space method (§4.1)
+# ---------------------------------------------------------------------------
+
+def _st_photon_trace_is(ctx):
     from ..imagespace.pipeline import layered_trace
 
-    p = scene.data["imagespace"]
-    lights = scene.data["lights"]
-    tic = time.perf_counter
-    timings = {}
-    size = int(p["caustic_map"])
-    mode = p["receiver_hit"]
-    rs = receiver_set(scene, lights[0], size)
-
-    def add(k, t0):
-        timings[k] = timings.get(k, 0.0) + (tic() - t0) * 1e3
-
-    t0 = tic()
-    eyebuf = eye_buffers(rs, cam)  # the eye-space march and the final pass both read it
-    add("receiver_depth", t0)
-    per_light, stats, shadow = [], [], []
-    for light in lights:
+    d = ctx.scene.data
+    p = d["imagespace"]
+    g = ctx.buf["geometry"]
+    geom, ior, outside, absorption = g["geom"], g["ior"], g["outside_ior"], g["absorption"]
+    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), True))}
+    for l, light in enumerate(d["lights"]):
         lcam = light_camera(light, geom.vertices, int(p["photons"])) if len(geom.faces) else None
         if lcam is None:
-            per_light.append([np.zeros(b.size + (3,)) for b in rs.boxes])
-            shadow.append(None)
-            stats.append({"photons": 0})
+            out["lights"].append(None)
             continue
-        lt, lp = {}, []
-        tv = layered_trace(geom, lcam, p, ior, outside, lt, lp)
+        lt = {}
+        tv = layered_trace(geom, lcam, p, ior, outside, lt, [])
         for k, v in lt.items():
-            timings["photon_trace" if k == "trace" else f"light_{k}"] = \
-                timings.get("photon_trace" if k == "trace" else f"light_{k}", 0.0) + v
-        t0 = tic()
+            ctx.timings[k] = ctx.timings.get(k, 0.0) + v
         tr = tv["trace"]
         st = tr["status"].ravel()
         N = lcam.width
         cols = np.tile(np.arange(N) + 0.5, N)
         rows = np.repeat(np.arange(N) + 0.5, N)
         flux0 = texel_flux(lcam, cols, rows)
-        ex = np.flatnonzero(st == 1)
+        ex = np.flatnonzero(st == EXITED)
         trans = beer_lambert(absorption, tr["path_length"].ravel()[ex], ior)
         o = tr["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
-        d = tr["exit_dir"].reshape(-1, 3)[ex]
-        add("photon_trace", t0)
-        t0 = tic()
-        P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
-        add("receiver_hit", t0)
-        t0 = tic()
-        flux = flux0[ex, None] * trans
-        per_light.append(splat_maps(rs, P, face, flux, size))
-        add("splat", t0)
-        s = _photon_stats(flux0, st, trans, face >= 0)
-        s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
-        s["photon_texture"] = [N, N]
-        s["projection"] = lcam.projection
-        stats.append(s)
-        zmin = tv["zmin"]
-        shadow.append((lcam, zmin, 1e-3 * (lcam.far - lcam.near) + 2.0 * 2.0 * lcam.sy / N))
-    t0 = tic()
-    arrays = {}
-    rgb_maps = _collect(scene, rs, per_light, arrays, int(p["gather"]))
-    add("gather", t0)
+        dd = tr["exit_dir"].reshape(-1, 3)[ex]
+        bias = 1e-3 * (lcam.far - lcam.near) + 2.0 * 2.0 * lcam.sy / N
+        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": trans, "o": o, "d": dd,
+                              "shadow": (lcam, tv["zmin"], bias)})
+        out[f"camera_{l}"] = camera_array(lcam)
+        out[f"ldi_{l}"] = tv["ldi"] if 0 not in tv["ldi"].strides else None
+        out[f"exit_pos_{l}"] = o
+        out[f"exit_dir_{l}"] = dd
+    ctx.note(f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1)")
+    return out
 
-    t0 = tic()
+
+def _st_receiver_hit(ctx, eyespace):
+    rs = ctx.buf["receivers"]["rs"]
+    rd = ctx.buf.get("receiver_depth") if eyespace else None
+    nl = len(ctx.buf["photon_trace"]["lights"])
+    out = {"hits": [], **dict.fromkeys(_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl))}
+    for l, L in enumerate(ctx.buf["photon_trace"]["lights"]):
+        if L is None:
+            out["hits"].append(None)
+            continue
+        P, face = receiver_hits(rs, L["o"], L["d"], "eyespace" if eyespace else "exact",
+                                rd["cam"] if rd else None, rd["eyebuf"] if rd else None)
+        out["hits"].append((P, face))
+        out[f"hit_pos_{l}"] = P
+        out[f"hit_face_{l}"] = face
+    ctx.note("eye-space march in the receivers' depth image (Krüger et al. 2006)" if eyespace
+             else "Embree on the receivers' triangles")
+    return out
+
+
+def _st_splat_is(ctx):
+    d = ctx.scene.data
+    size = int(d["imagespace"]["caustic_map"])
+    rs = ctx.buf["receivers"]["rs"]
+    maps, stats = [], []
+    for L, hit in zip(ctx.buf["photon_trace"]["lights"], ctx.buf["receiver_hit"]["hits"]):
+        if L is None:
+            maps.append([np.zeros(b.size + (3,)) for b in rs.boxes])
+            stats.append({"photons": 0})
+            continue
+        P, face = hit
+        flux = L["flux0"][L["ex"], None] * L["trans"]
+        maps.append(splat_maps(rs, P, face, flux, size))
+        s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
+        s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
+        s["photon_texture"] = [L["cam"].width, L["cam"].width]
+        s["projection"] = L["cam"].projection
+        stats.append(s)
+    ctx.stats["caustic_lights"] = stats
+    return {"maps": maps, **_splat_buffers(maps, len(rs.boxes))}
+
+
+def _splat_buffers(maps, R):
+    """The splatted maps before gathering, summed over lights and channels' mean: ``splat_r`` (Hc, Wc)."""
+    return {f"splat_{r}": np.sum([m[r].mean(axis=2) for m in maps], axis=0).astype(np.float32) for r in range(R)}
+
+
+def _st_final_is(ctx):
+    d = ctx.scene.data
+    p = d["imagespace"]
+    b = ctx.buf
+    g = b["geometry"]
+    rs = b["receivers"]["rs"]
+    rd = b["receiver_depth"]
+    shadow = [None if L is None else L["shadow"] for L in b["photon_trace"]["lights"]]
 
     def vis(l, pts, nrm):
         if shadow[l] is None:
@@ -251,12 +325,60 @@ def caustics_imagespace(scene, geom, cam, eye, ior, outside, absorption):
         lcam, zmin, bias = shadow[l]
         return shadow_map_visibility(lcam, zmin, pts, bias)
 
-    img, img1 = _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p)
-    arrays["image_caustics"] = img
-    arrays["image_caustics_single"] = img1
-    add("final", t0)
-    info = {"timings_ms": timings, "lights": stats, "receivers": len(rs.boxes), "receiver_hit": mode,
-            "gather": int(p["gather"]), "photons": int(p["photons"]), "caustic_map": size}
+    eye = {"trace": b["trace"], "zmin": b["minmax"]["zmin"]}
+    img, img1 = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"], vis,
+                                  p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
+    ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
+             "single-surface (the thesis's) final passes")
+    return {"image_caustics": img, "image_caustics_single": img1}
+
+
+def imagespace_caustic_stages(scene):
+    """The caustic stages the image-space method adds for a scene with lights and receivers (§4.1)."""
+    from ..imagespace.pipeline import MINMAX_KNOBS, PEEL_KNOBS, REDUCE_KNOBS, TRACE_KNOBS, VOXELIZE_KNOBS
+
+    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
+    eyespace = scene.data["imagespace"]["receiver_hit"] == "eyespace"
+    knobs = tuple(dict.fromkeys(("photons",) + MINMAX_KNOBS + VOXELIZE_KNOBS + PEEL_KNOBS + REDUCE_KNOBS
+                                + TRACE_KNOBS))
+    return _receiver_stages(nr) + (
+        Stage("photon_trace", _st_photon_trace_is, reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs),
+              after=("geometry",),
+              makes=_photon_buffer_names(nl, True),
+              doc="per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)"),
+        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, eyespace),
+              reads=("imagespace.receiver_hit",),
+              after=("receivers", "photon_trace") + (("receiver_depth",) if eyespace else ()),
+              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
+              doc="where exiting photons meet the receivers (§4.1)"),
+        Stage("splat", _st_splat_is, reads=("imagespace.caustic_map",),
+              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
+              doc="bilinear splat of each photon's irradiance (§2.3.2)"),
+        Stage("gather", lambda ctx: _st_gather(ctx, True), reads=("imagespace.gather", "lights"),
+              after=("receivers", "splat"), makes=_per_light_names("caustic_map", nr),
+              doc="Gaussian gathering (Wyman & Davis 2006)"),
+        Stage("caustic_final", _st_final_is,
+              reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
+                     "imagespace.receiver_hit"),
+              after=("geometry", "minmax", "trace", "receivers", "receiver_depth", "photon_trace", "gather"),
+              makes=("image_caustics", "image_caustics_single"),
+              doc="receivers lit directly and by caustics, seen through the object (§4.1)"),
+    )
+
+
+def caustic_arrays(scene, method, bufs, stats):
+    """The caustic output keys and ``meta['caustics']`` from the caustic stages' buffers."""
+    arrays = dict(bufs["gather"]["arrays"])
+    arrays.update({k: v for k, v in bufs["caustic_final"].items() if k.startswith("image_caustics")})
+    d = scene.data
+    info = {"lights": stats.get("caustic_lights", []), "receivers": len(bufs["receivers"]["rs"].boxes),
+            "caustic_map": int(d["imagespace"]["caustic_map"])}
+    if method == "exact":
+        info.update({"receiver_hit": "exact", "gather": 1, "photons": int(d["exact"]["photons"]),
+                     "reference_noise_rel_l1": stats.get("reference_noise_rel_l1", [])})
+    else:
+        info.update({"receiver_hit": d["imagespace"]["receiver_hit"], "gather": int(d["imagespace"]["gather"]),
+                     "photons": int(d["imagespace"]["photons"])})
     return arrays, info
 
 
@@ -333,106 +455,131 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
 # exact photon reference
 # ---------------------------------------------------------------------------
 
-def caustics_exact(scene, geom, cam, eye_tr, origin, rdir, vn):
-    """The exact photon reference and the exact final image (see the module docstring).
-
-    Parameters
-    ----------
-    scene, geom, cam :
-    eye_tr : dict
-        :func:`~refraction_ref.exact.trace_exact` of the primary rays (flat, N rows).
-    origin, rdir : (H, W, 3)
-        Primary rays.
-    vn : (V, 3) vertex normals of the objects.
-
-    Returns
-    -------
-    arrays, info : dict, dict
-    """
+def _st_photon_trace_exact(ctx):
     from ..exact import trace_exact
-    from ..levelmap.metrics import relative_l1
 
-    pe = scene.data["exact"]
-    pi = scene.data["imagespace"]
-    lights = scene.data["lights"]
-    size = int(pi["caustic_map"])
-    tic = time.perf_counter
-    timings = {}
-    rs = receiver_set(scene, lights[0], size)
-    obj_tris = geom.vertices[geom.faces] if len(geom.faces) else np.zeros((0, 3, 3))
-    per_light, stats, halves = [], [], []
+    d = ctx.scene.data
+    pe = d["exact"]
+    g = ctx.buf["geometry"]
+    geom, vn = g["geom"], g["vertex_normals"]
     n = int(pe["photons"])
-    for l, light in enumerate(lights):
+    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), False))}
+    for l, light in enumerate(d["lights"]):
         if not len(geom.faces):
-            per_light.append([np.zeros(b.size + (3,)) for b in rs.boxes])
-            stats.append({"photons": 0})
+            out["lights"].append(None)
             continue
         lcam = light_camera(light, geom.vertices, n)
-        t0 = tic()
-        o, d, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
-        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, d,
+        o, dd, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
+        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, dd,
                          vertex_normals=vn, smooth=pe["normals"] == "smooth",
-                         outside_ior=float(scene.data["outside_ior"]), max_bounces=int(pe["max_bounces"]))
-        timings["photon_trace"] = timings.get("photon_trace", 0.0) + (tic() - t0) * 1e3
+                         outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
         st = tr["status"].astype(np.int8)
-        ex = np.flatnonzero(st == 1)
-        t0 = tic()
-        t_hit, face = hit_exact(rs.tris, tr["exit_pos"][ex], tr["exit_dir"][ex])
-        P = tr["exit_pos"][ex] + t_hit[:, None] * tr["exit_dir"][ex]
-        timings["receiver_hit"] = timings.get("receiver_hit", 0.0) + (tic() - t0) * 1e3
-        t0 = tic()
-        flux = flux0[ex, None] * tr["transmittance"][ex]
-        maps = splat_maps(rs, P, face, flux, size)
-        hv = half[ex]
-        hA = splat_maps(rs, P, np.where(hv == 0, face, -1), flux, size)
-        hB = splat_maps(rs, P, np.where(hv == 1, face, -1), flux, size)
-        timings["splat"] = timings.get("splat", 0.0) + (tic() - t0) * 1e3
-        per_light.append(maps)
-        halves.append((hA, hB))
-        s = _photon_stats(flux0, st, tr["transmittance"][ex], face >= 0)
+        ex = np.flatnonzero(st == EXITED)
+        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": tr["transmittance"][ex],
+                              "o": tr["exit_pos"][ex], "d": tr["exit_dir"][ex], "half": half[ex]})
+        out[f"camera_{l}"] = camera_array(lcam)
+        out[f"exit_pos_{l}"] = tr["exit_pos"][ex]
+        out[f"exit_dir_{l}"] = tr["exit_dir"][ex]
+    ctx.note(f"exact photon reference: {n}x{n} jittered photons per light through the triangles")
+    return out
+
+
+def _st_splat_exact(ctx):
+    from ..levelmap.metrics import relative_l1
+
+    d = ctx.scene.data
+    size = int(d["imagespace"]["caustic_map"])
+    rs = ctx.buf["receivers"]["rs"]
+    maps, stats, halves = [], [], []
+    for L, hit in zip(ctx.buf["photon_trace"]["lights"], ctx.buf["receiver_hit"]["hits"]):
+        if L is None:
+            maps.append([np.zeros(b.size + (3,)) for b in rs.boxes])
+            stats.append({"photons": 0})
+            continue
+        P, face = hit
+        flux = L["flux0"][L["ex"], None] * L["trans"]
+        maps.append(splat_maps(rs, P, face, flux, size))
+        hv = L["half"]
+        halves.append((splat_maps(rs, P, np.where(hv == 0, face, -1), flux, size),
+                       splat_maps(rs, P, np.where(hv == 1, face, -1), flux, size)))
+        s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
         s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
-        s["photons"] = [n, n]
+        s["photons"] = [int(d["exact"]["photons"])] * 2
         stats.append(s)
-    arrays = {}
-    rgb_maps = _collect(scene, rs, per_light, arrays, 1)
     noise = []
     for r in range(len(rs.boxes)):
         a = sum(h[0][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
         b = sum(h[1][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
         noise.append(0.5 * relative_l1(a, b, blur=1.0) if np.abs(b).sum() > 0 else 0.0)
+    ctx.stats["caustic_lights"] = stats
+    ctx.stats["reference_noise_rel_l1"] = noise
+    ctx.note("own noise (relative L1 of two interleaved halves, one-texel blur): "
+             + ", ".join(f"{v:.3g}" for v in noise))
+    return {"maps": maps, **_splat_buffers(maps, len(rs.boxes))}
 
-    t0 = tic()
+
+def _st_final_exact(ctx):
+    d = ctx.scene.data
+    b = ctx.buf
+    geom = b["geometry"]["geom"]
+    lights = d["lights"]
+    rs = b["receivers"]["rs"]
+    rgb_maps = b["gather"]["rgb_maps"]
+    eye_tr = b["trace"]["flat"]
+    origin, rdir = b["trace"]["ray_origin"], b["trace"]["ray_dir"]
+    obj_tris = geom.vertices[geom.faces] if len(geom.faces) else np.zeros((0, 3, 3))
 
     def vis(l, pts, nrm):
         return exact_visibility(obj_tris, lights[l], pts, nrm)
 
-    H, W = cam.shape
+    H, W = origin.shape[:2]
     o = origin.reshape(-1, 3)
-    d = rdir.reshape(-1, 3)
-    t_rec, f_rec = hit_exact(rs.tris, o, d)
+    dd = rdir.reshape(-1, 3)
+    t_rec, f_rec = hit_exact(rs.tris, o, dd)
     hp = eye_tr.get("hit_pos")
     t_obj = np.full(len(o), np.inf) if hp is None else np.where(np.isfinite(hp[:, 0]),
                                                               np.linalg.norm(hp - o, axis=1), np.inf)
     rec = np.isfinite(t_rec) & (t_rec < t_obj)
     img = np.zeros((len(o), 3))
     if rec.any():
-        img[rec] = shade_points(rs, lights, rgb_maps, o[rec] + t_rec[rec, None] * d[rec], f_rec[rec], d[rec], vis)
+        img[rec] = shade_points(rs, lights, rgb_maps, o[rec] + t_rec[rec, None] * dd[rec], f_rec[rec], dd[rec], vis)
     obj = np.isfinite(t_obj) & ~rec
     bg = ~rec & ~obj
-    env = scene.data["environment"]
+    env = d["environment"]
     if bg.any():
-        img[bg] = environment_lookup(env, d[bg], scene.base_dir)
+        img[bg] = environment_lookup(env, dd[bg], ctx.scene.base_dir)
     st = eye_tr["status"]
-    ex = obj & (st == 1)
+    ex = obj & (st == EXITED)
     if ex.any():
-        img[ex] = _shade_rays(scene, rs, None, eye_tr["exit_pos"][ex], eye_tr["exit_dir"][ex], "exact", None,
+        img[ex] = _shade_rays(ctx.scene, rs, None, eye_tr["exit_pos"][ex], eye_tr["exit_dir"][ex], "exact", None,
                               rgb_maps, vis)
-    stuck = obj & (st != 1)
+    stuck = obj & (st != EXITED)
     if stuck.any():
-        img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], scene.base_dir)
+        img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], ctx.scene.base_dir)
     img[obj] *= eye_tr["transmittance"][obj]
-    arrays["image_caustics"] = img.reshape(H, W, 3).astype(np.float32)
-    timings["final"] = (tic() - t0) * 1e3
-    info = {"timings_ms": timings, "lights": stats, "receivers": len(rs.boxes), "receiver_hit": "exact",
-            "gather": 1, "photons": n, "caustic_map": size, "reference_noise_rel_l1": noise}
-    return arrays, info
+    ctx.note("receivers lit directly (exact shadow rays) and by the caustics; the object traced exactly")
+    return {"image_caustics": img.reshape(H, W, 3).astype(np.float32)}
+
+
+def exact_caustic_stages(scene):
+    """The caustic stages of the exact reference for a scene with lights and receivers."""
+    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
+    return _receiver_stages(nr)[:1] + (
+        Stage("photon_trace", _st_photon_trace_exact,
+              reads=("lights", "outside_ior", "exact.photons", "exact.photon_seed", "exact.normals",
+                     "exact.max_bounces"),
+              after=("geometry",),
+              makes=_photon_buffer_names(nl, False),
+              doc="exact photons through the triangles (Embree)"),
+        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, False), after=("receivers", "photon_trace"),
+              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
+              doc="Embree on the receivers' triangles"),
+        Stage("splat", _st_splat_exact, reads=("imagespace.caustic_map", "exact.photons"),
+              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
+              doc="bilinear splat; the reference's own noise from two interleaved halves"),
+        Stage("gather", lambda ctx: _st_gather(ctx, False), reads=("lights",), after=("receivers", "splat"),
+              makes=_per_light_names("caustic_map", nr), doc="sum over lights, no gathering"),
+        Stage("caustic_final", _st_final_exact, reads=("environment", "lights"),
+              after=("geometry", "trace", "receivers", "gather"), makes=("image_caustics",),
+              doc="receivers lit directly and by caustics, the object traced exactly"),
+    )

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .light import light_direction_at
+from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
 __all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility"]

@@ -5,6 +5,12 @@
 together by ``pipeline``.
 """
 
-from .pipeline import render_imagespace
-
 __all__ = ["render_imagespace"]
+
+
+def __getattr__(name):  # lazy: scene loading imports .knobs without the kernels
+    if name == "render_imagespace":
+        from .pipeline import render_imagespace
+
+        return render_imagespace
+    raise AttributeError(name)

@@ -1,15 +1,22 @@
-"""The image-space multiple-refraction pipeline (Chaudhari 2008, ch. 3), pass by pass.
+"""The image-space multiple-refraction pipeline (Chaudhari 2008, ch. 3) as a registered stage graph.
 
 ======================  ===========================================  =========
 stage (``timings_ms``)  pass                                          section
 ======================  ===========================================  =========
+``geometry``            the objects' triangles in world space          §3.2
 ``minmax``              min / max depth, per-pixel local bounds       §3.3
 ``voxelize``            bitmask voxelization (or the float A-buffer)  §3.3
 ``peel``                layered depth images                          §3.4
 ``reduce``              search bounds per layer                       §3.7
+``normals``             per-layer normal maps (only when kept: the    §3.5
+                        trace computes its normals on the fly)
 ``trace``               binary search + Snell at every interface      §3.6-3.7
 ``shade``               environment look-up, Beer-Lambert absorption  §3.8
 ======================  ===========================================  =========
+
+With lights and receivers the caustic stages of §4.1 follow
+(:func:`refraction_ref.caustics.pipeline.imagespace_caustic_stages`).
+The same passes in a light's view make the photon pass (:func:`layered_trace`).
 """
 
 from __future__ import annotations
@@ -20,17 +27,27 @@ import numpy as np
 
 from ..camera import Camera
 from ..environment import environment_lookup
+from ..graph import Method, Stage, register_method, run_graph
 from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
 from ..scene import SceneError
 from .depth_bounds import depth_bounds, global_bounds
+from .normals import layer_normals
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
 from .search_bounds import search_bounds
 from .trace import exit_thresholds, trace_layers
 from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
 
-__all__ = ["render_imagespace", "check_materials", "layered_trace"]
+__all__ = ["render_imagespace", "check_materials", "layered_trace", "METHOD", "TRACE_KNOBS",
+           "pass_minmax", "pass_voxelize", "pass_peel", "pass_reduce", "pass_trace"]
+
+#: the knobs each pass reads (the eye's stages and the light's photon pass declare the same)
+MINMAX_KNOBS = ("depth",)
+VOXELIZE_KNOBS = ("depth", "slices", "slicing", "blend", "layers")
+PEEL_KNOBS = ("depth", "layers", "peeling", "slices")
+REDUCE_KNOBS = ("bounds", "mip_size", "bound_margin")
+TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layers", "exit_threshold", "slices")
 
 
 def check_materials(geom):
@@ -42,6 +59,101 @@ def check_materials(geom):
                          f"(ior {geom.ior.tolist()}); the occupancy bitmask cannot tell objects apart "
                          "(Chaudhari 2008, §4.1). Give all objects the same material, or use --method exact")
     return float(geom.ior[0]), geom.absorption[0]
+
+
+# --------------------------------------------------------------------- passes (any view)
+def pass_minmax(geom, cam, p):
+    """Per-pixel Zmin/Zmax of the objects in a view, and their global range (§3.3).
+
+    Returns
+    -------
+    dict
+        ``tri_view`` (the view's triangle set-up), ``zmin``, ``zmax`` (H, W)
+        float64 depth (``+inf`` / ``-inf`` where no object), ``frags`` (the
+        fragments, kept for the bitmask pass) or None, ``gmin``, ``gmax``.
+    """
+    tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
+    mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
+    zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
+    gmin, gmax = global_bounds(zmin, zmax)
+    return {"tri_view": tri_view, "zmin": zmin, "zmax": zmax, "frags": frags, "gmin": gmin, "gmax": gmax}
+
+
+def pass_voxelize(mm, cam, p):
+    """Bitmask voxelization (§3.3), or, for ``depth='float'``, the A-buffer of exact depths.
+
+    Returns
+    -------
+    dict
+        ``bits`` (H, W, S/32) uint32 occupancy words (bit k of word w is slice
+        32 w + k, slice 0 nearest) or None, ``zlo``, ``zhi`` (H, W) the depth
+        range the slices span, and for ``depth='float'`` ``ldi`` and ``total``.
+    """
+    if p["depth"] == "bitmask":
+        zlo, zhi = slice_bounds(mm["zmin"], mm["zmax"], p["slicing"])
+        src = mm["tri_view"] if mm["frags"] is None else mm["frags"]
+        bits = voxelize_bitmask(src, cam, zlo, zhi, int(p["slices"]), p["blend"])
+        return {"bits": bits, "zlo": zlo, "zhi": zhi, "ldi": None, "total": None}
+    ldi, total = collect_depths(mm["tri_view"], cam, int(p["layers"]))
+    Lr = int(min(int(p["layers"]), total.max(initial=0)))
+    # the grid the early-termination threshold counts in
+    return {"bits": None, "zlo": mm["zmin"], "zhi": mm["zmax"], "ldi": np.ascontiguousarray(ldi[:Lr]),
+            "total": total}
+
+
+def pass_peel(vox, shape, p):
+    """Layered depth images from the bitmask (§3.4.2), or the on-the-fly tables of §3.4.1.
+
+    Returns
+    -------
+    dict
+        ``ldi`` (L, H, W) float32 (``+inf`` where a pixel has fewer layers),
+        ``total`` (H, W) int32 set bits per pixel, ``lut`` (on-the-fly
+        peeling inputs) or None, ``why``.
+    """
+    H, W = shape
+    L = int(p["layers"])
+    if vox["bits"] is None:
+        return {"ldi": vox["ldi"], "total": vox["total"], "lut": None, "ran": False,
+                "why": "the A-buffer is already sorted into layers"}
+    S = int(p["slices"])
+    total = depth_complexity(vox["bits"])
+    if p["peeling"] == "separate":
+        ldi, total = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], S, L, total)
+        return {"ldi": ldi, "total": total, "lut": None, "ran": True,
+                "why": f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
+                       f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)"}
+    Lr = int(min(L, total.max(initial=0)))
+    ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
+    lut = (True, vox["bits"], np.ascontiguousarray(vox["zlo"]), np.ascontiguousarray(vox["zhi"]), S,
+           POPCOUNT8, SELECT8)
+    return {"ldi": ldi, "total": total, "lut": lut, "ran": False,
+            "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"}
+
+
+def pass_reduce(mm, peel, p):
+    """Search bounds per layer (§3.7): ``bounds_hi``, ``bounds_lo`` (L,) float64 and ``why``."""
+    L = peel["ldi"].shape[0]
+    if peel["lut"] is not None:
+        # no LDI to reduce: the exact global bound serves every layer
+        return {"bounds_hi": np.full(L, mm["gmax"]), "bounds_lo": np.full(L, mm["gmin"]),
+                "why": "on-the-fly peeling has no LDI: the global Zmax bounds every layer"}
+    margin = float(p["bound_margin"]) * (mm["gmax"] - mm["gmin"]) if np.isfinite(mm["gmax"]) else 0.0
+    bhi, blo = search_bounds(peel["ldi"], p["bounds"], int(p["mip_size"]), margin)
+    why = (f"max-reduction of the {p['mip_size']}x{p['mip_size']} MIP level + margin {margin:.3g} (§3.7)"
+           if p["bounds"] == "mip" else "exact per-layer maxima")
+    return {"bounds_hi": bhi, "bounds_lo": blo, "why": why}
+
+
+def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
+    """Every pixel's ray through the layers (§3.6-3.7), world space (:func:`trace_layers`)."""
+    thr = exit_thresholds(vox["zlo"], vox["zhi"], int(p["slices"]), p["exit_threshold"])
+    kw = {"record": int(record)} if record else {}
+    return trace_layers(peel["ldi"], peel["total"], mm["zmax"], thr, red["bounds_hi"], red["bounds_lo"], None,
+                        cam, ior=ior, outside_ior=outside, world=True, iterations=int(p["iterations"]),
+                        normals=p["normals"], delta=int(p["delta"]), tir=bool(p["tir"]),
+                        max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel["lut"],
+                        **kw)
 
 
 def layered_trace(geom, cam, p, ior, outside, timings, plan):
@@ -72,83 +184,214 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
         pass: ``zmin`` doubles as a shadow map in a light's view),
         ``pixels_over_layer_limit``.
     """
-    H, W = cam.shape
     tic = time.perf_counter
     t0 = tic()
-    tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
-    mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
-    zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
-    gmin, gmax = global_bounds(zmin, zmax)
+    mm = pass_minmax(geom, cam, p)
     timings["minmax"] = (tic() - t0) * 1e3
     plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
-    S = int(p["slices"])
-    L = int(p["layers"])
-
     t0 = tic()
-    lut = None
-    if p["depth"] == "bitmask":
-        zlo, zhi = slice_bounds(zmin, zmax, p["slicing"])
-        bits = voxelize_bitmask(tri_view if frags is None else frags, cam, zlo, zhi, S, p["blend"])
-        timings["voxelize"] = (tic() - t0) * 1e3
-        plan.append({"stage": "voxelize", "ran": True,
-                     "why": f"{S} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)"})
-        t0 = tic()
-        total = depth_complexity(bits)
-        if p["peeling"] == "separate":
-            ldi, total = peel_layers(bits, zlo, zhi, S, L, total)
-            plan.append({"stage": "peel", "ran": True,
-                         "why": f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
-                                f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)"})
-        else:
-            Lr = int(min(L, total.max(initial=0)))
-            ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
-            lut = (True, bits, np.ascontiguousarray(zlo), np.ascontiguousarray(zhi), S, POPCOUNT8, SELECT8)
-            plan.append({"stage": "peel", "ran": False,
-                         "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"})
-        timings["peel"] = (tic() - t0) * 1e3
-    else:
-        ldi, total = collect_depths(tri_view, cam, L)
-        Lr = int(min(L, total.max(initial=0)))
-        ldi = np.ascontiguousarray(ldi[:Lr])
-        timings["voxelize"] = (tic() - t0) * 1e3
-        timings["peel"] = 0.0
-        plan.append({"stage": "voxelize", "ran": True,
-                     "why": "float depth: exact fragment depths kept per pixel (A-buffer), no bitmask"})
-        plan.append({"stage": "peel", "ran": False, "why": "the A-buffer is already sorted into layers"})
-        zlo, zhi = zmin, zmax  # the grid the early-termination threshold counts in
-
+    vox = pass_voxelize(mm, cam, p)
+    timings["voxelize"] = (tic() - t0) * 1e3
+    plan.append({"stage": "voxelize", "ran": True, "why": "float depth: exact fragment depths (A-buffer)"
+                 if vox["bits"] is None else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending"})
     t0 = tic()
-    if lut is not None:
-        # no LDI to reduce: the exact global bound serves every layer
-        bhi = np.full(ldi.shape[0], gmax)
-        blo = np.full(ldi.shape[0], gmin)
-        plan.append({"stage": "reduce", "ran": False,
-                     "why": "on-the-fly peeling has no LDI: the global Zmax bounds every layer"})
-    else:
-        margin = float(p["bound_margin"]) * (gmax - gmin) if np.isfinite(gmax) else 0.0
-        bhi, blo = search_bounds(ldi, p["bounds"], int(p["mip_size"]), margin)
-        plan.append({"stage": "reduce", "ran": True,
-                     "why": (f"max-reduction of the {p['mip_size']}x{p['mip_size']} MIP level + margin "
-                             f"{margin:.3g} (§3.7)") if p["bounds"] == "mip" else "exact per-layer maxima"})
+    pl = pass_peel(vox, cam.shape, p)
+    timings["peel"] = (tic() - t0) * 1e3
+    plan.append({"stage": "peel", "ran": pl["ran"], "why": pl["why"]})
+    t0 = tic()
+    red = pass_reduce(mm, pl, p)
     timings["reduce"] = (tic() - t0) * 1e3
-
+    plan.append({"stage": "reduce", "ran": pl["lut"] is None, "why": red["why"]})
     t0 = tic()
-    thr = exit_thresholds(zlo, zhi, S, p["exit_threshold"])
-    tr = trace_layers(ldi, total, zmax, thr, bhi, blo, None, cam, ior=ior, outside_ior=outside, world=True,
-                      iterations=int(p["iterations"]), normals=p["normals"], delta=int(p["delta"]),
-                      tir=bool(p["tir"]), max_interfaces=int(p["max_interfaces"]), layer_limit=L, lut=lut)
+    tr = pass_trace(mm, vox, pl, red, cam, p, ior, outside)
     timings["trace"] = (tic() - t0) * 1e3
-    plan.append({"stage": "trace", "ran": True,
-                 "why": f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
-                        + (", total internal reflection followed" if p["tir"] else "")})
-
-    n_over = int(np.count_nonzero(total > L))  # for the plan and meta: not part of the pipeline
-    return {"trace": tr, "total": total, "ldi": ldi, "zmin": zmin, "zmax": zmax,
+    plan.append({"stage": "trace", "ran": True, "why": f"{p['iterations']} binary-search iterations"})
+    total = pl["total"]
+    n_over = int(np.count_nonzero(total > int(p["layers"])))
+    return {"trace": tr, "total": total, "ldi": pl["ldi"], "zmin": mm["zmin"], "zmax": mm["zmax"],
             "pixels_over_layer_limit": n_over}
 
 
-def render_imagespace(scene, warm=True):
-    """Render a scene with the image-space method.
+# --------------------------------------------------------------------- the eye's stages
+def _k(*names):
+    return tuple(f"imagespace.{n}" for n in names)
+
+
+def _st_geometry(ctx):
+    sc = ctx.scene
+    geom = scene_geometry(sc)
+    ior, absorption = check_materials(geom)
+    for k, nb_ in enumerate(geom.boundary_edges):
+        if nb_:
+            ctx.note(f"object {k} is open ({int(nb_)} boundary edges): pixels can see an odd number of layers, "
+                     "and inside/outside then follows layer parity")
+    for k, nd in enumerate(geom.degenerate):
+        if nd:
+            ctx.note(f"object {k} has {int(nd)} zero-area triangles; they produce no fragments")
+    ctx.stats["triangles"] = int(len(geom.faces))
+    return {"geom": geom, "ior": ior, "absorption": absorption, "outside_ior": float(sc.data["outside_ior"])}
+
+
+def _st_minmax(ctx):
+    g = ctx.buf["geometry"]
+    cam = Camera.from_dict(ctx.scene.data["camera"])
+    if eye_inside(g["geom"], cam.eye):
+        raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
+                         "needs the viewer outside (its first layer is the front face). Move camera.eye "
+                         "outside the objects")
+    mm = pass_minmax(g["geom"], cam, ctx.scene.data["imagespace"])
+    ctx.note("per-pixel Zmin/Zmax (§3.3)")
+    return dict(mm, cam=cam)
+
+
+def _st_voxelize(ctx):
+    p = ctx.scene.data["imagespace"]
+    mm = ctx.buf["minmax"]
+    vox = pass_voxelize(mm, mm["cam"], p)
+    ctx.note("float depth: exact fragment depths kept per pixel (A-buffer), no bitmask" if vox["bits"] is None
+             else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)")
+    return vox
+
+
+def _st_peel(ctx):
+    p = ctx.scene.data["imagespace"]
+    pl = pass_peel(ctx.buf["voxelize"], ctx.buf["minmax"]["cam"].shape, p)
+    ctx.note(pl["why"])
+    total = pl["total"]
+    ctx.stats.update({"layers_used": int(pl["ldi"].shape[0]),
+                      "pixels_over_layer_limit": int(np.count_nonzero(total > int(p["layers"]))),
+                      "depth_complexity_max": int(total.max(initial=0))})
+    return dict(pl, depth_complexity=total.astype(np.int16))
+
+
+def _st_reduce(ctx):
+    red = pass_reduce(ctx.buf["minmax"], ctx.buf["peel"], ctx.scene.data["imagespace"])
+    ctx.note(red["why"])
+    return red
+
+
+def _st_normals(ctx):
+    """Per-layer normal maps, as the trace's normal rule gives them at pixel centres (§3.5)."""
+    p = ctx.scene.data["imagespace"]
+    cam = ctx.buf["minmax"]["cam"]
+    pl = ctx.buf["peel"]
+    ldi = pl["ldi"]
+    if pl["lut"] is not None:  # on-the-fly peeling: materialise the layers to show their normals
+        vox = ctx.buf["voxelize"]
+        ldi, _ = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], int(p["slices"]), int(p["layers"]))
+    out = np.full(ldi.shape + (3,), np.nan)
+    for k in range(ldi.shape[0]):
+        out[k] = layer_normals(ldi[k], cam, p["normals"], int(p["delta"]))
+    ctx.note(f"{p['normals']} normals (delta {p['delta']}) of {ldi.shape[0]} layers, view space, for inspection")
+    return {"normals": out}
+
+
+def _st_trace(ctx):
+    p = ctx.scene.data["imagespace"]
+    g = ctx.buf["geometry"]
+    b = ctx.buf
+    tr = pass_trace(b["minmax"], b["voxelize"], b["peel"], b["reduce"], b["minmax"]["cam"], p, g["ior"],
+                    g["outside_ior"], record=int(p["record"]))
+    ctx.note(f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
+             + (", total internal reflection followed" if p["tir"] else ""))
+    out = dict(tr)
+    out.setdefault("path_pos", None)
+    out.setdefault("path_dir", None)
+    return out
+
+
+def _st_shade(ctx):
+    g = ctx.buf["geometry"]
+    tr = ctx.buf["trace"]
+    sc = ctx.scene
+    image = environment_lookup(sc.data["environment"], tr["last_dir"], sc.base_dir)
+    if np.any(g["absorption"] > 0):
+        trans = beer_lambert(g["absorption"], tr["path_length"], g["ior"])
+        image = (image * trans).astype(np.float32)
+        ctx.note("environment look-up; I = I0 exp(-alpha l eta) (§3.8)")
+    else:
+        ctx.note("environment look-up; absorption is zero")
+    return {"image": image}
+
+
+def eye_stages():
+    """The eye's stages of chapter 3 (without caustics)."""
+    return (
+        Stage("geometry", _st_geometry, reads=("objects", "outside_ior"), makes=("geom", "ior", "absorption"),
+              doc="the objects' triangles, one material (§3.2, §4.1)"),
+        Stage("minmax", _st_minmax, reads=("camera",) + _k(*MINMAX_KNOBS), after=("geometry",),
+              makes=("zmin", "zmax"), doc="per-pixel Zmin/Zmax (§3.3)"),
+        Stage("voxelize", _st_voxelize, reads=("camera",) + _k(*VOXELIZE_KNOBS), after=("minmax",),
+              makes=("bits", "zlo", "zhi"), doc="bitmask voxelization (§3.3)"),
+        Stage("peel", _st_peel, reads=_k(*PEEL_KNOBS), after=("minmax", "voxelize"),
+              makes=("ldi", "depth_complexity"), doc="layered depth images (§3.4)"),
+        Stage("reduce", _st_reduce, reads=_k(*REDUCE_KNOBS), after=("minmax", "peel"),
+              makes=("bounds_hi", "bounds_lo"), doc="search bounds per layer (§3.7)"),
+        Stage("normals", _st_normals, reads=_k("normals", "delta", "slices", "layers"),
+              after=("minmax", "voxelize", "peel"), makes=("normals",), diagnostic=True,
+              doc="per-layer normal maps, view space (§3.5); only when kept"),
+        Stage("trace", _st_trace, reads=_k(*TRACE_KNOBS, "record"),
+              after=("geometry", "minmax", "voxelize", "peel", "reduce"),
+              makes=("exit_pos", "exit_dir", "last_dir", "interfaces", "path_length", "status", "path_pos",
+                     "path_dir"), doc="binary search + Snell at every interface (§3.6-3.7)"),
+        Stage("shade", _st_shade, reads=("environment",), after=("geometry", "trace"), makes=("image",),
+              doc="environment look-up, Beer-Lambert absorption (§3.8)"),
+    )
+
+
+def _stages(scene):
+    from ..caustics.pipeline import has_caustics, imagespace_caustic_stages
+
+    st = eye_stages()
+    return st + (imagespace_caustic_stages(scene) if has_caustics(scene) else ())
+
+
+def _skipped(scene):
+    from ..caustics.pipeline import has_caustics, skip_reason
+
+    return [] if has_caustics(scene) else [{"stage": "caustics", "ran": False, "why": skip_reason(scene)}]
+
+
+def _assemble(scene, bufs, stats):
+    cam = bufs["minmax"]["cam"]
+    tr = bufs["trace"]
+    origin, rdir = cam.primary_rays()
+    arrays = {
+        "ray_origin": origin,
+        "ray_dir": rdir,
+        "hit": tr["status"] != 0,
+        "exit_pos": tr["exit_pos"],
+        "exit_dir": tr["exit_dir"],
+        "interfaces": tr["interfaces"],
+        "path_length": tr["path_length"],
+        "status": tr["status"],
+        "image": bufs["shade"]["image"],
+        "depth_complexity": bufs["peel"]["depth_complexity"],
+    }
+    info = {k: stats[k] for k in ("layers_used", "pixels_over_layer_limit", "depth_complexity_max", "triangles")}
+    if "caustic_final" in bufs:
+        from ..caustics.pipeline import caustic_arrays
+
+        c_arrays, info["caustics"] = caustic_arrays(scene, "imagespace", bufs, stats)
+        from ..caustics.pipeline import merge_caustics
+
+        merge_caustics(arrays, c_arrays)
+    return arrays, info
+
+
+def _warm():
+    from .. import _warmup
+
+    _warmup.imagespace()
+
+
+METHOD = register_method(Method(
+    "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
+    doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
+
+
+def render_imagespace(scene, warm=True, cache=None, keep=None):
+    """Render a scene with the image-space method (runs :data:`METHOD`'s stage graph).
 
     Parameters
     ----------
@@ -157,11 +400,15 @@ def render_imagespace(scene, warm=True):
     warm : bool
         Compile (or load from the cache) every kernel on a tiny scene first,
         so that ``timings_ms`` measure run time, not JIT time.
+    cache : dict, optional
+        Stage cache (:class:`~refraction_ref.session.Session` keeps one).
+    keep : str or list, optional
+        Stages whose buffers to return as ``stage.<stage>.<buffer>``.
 
     Returns
     -------
     arrays : dict
-        The ORACLE.md per-pixel keys plus ``depth_complexity``.
+        The per-pixel keys of ``docs/oracle.md`` plus ``depth_complexity``.
     info : dict
         ``timings_ms``, ``plan`` and method statistics for ``meta``.
 
@@ -169,85 +416,4 @@ def render_imagespace(scene, warm=True):
     ----------
     Chaudhari (2008), chapter 3.
     """
-    if warm:
-        from .. import _warmup
-
-        _warmup.imagespace()
-    p = scene.data["imagespace"]
-    cam = Camera.from_dict(scene.data["camera"])
-    H, W = cam.shape
-    timings, plan = {}, []
-    tic = time.perf_counter
-
-    geom = scene_geometry(scene)
-    ior, absorption = check_materials(geom)
-    outside = float(scene.data["outside_ior"])
-    if eye_inside(geom, cam.eye):
-        raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
-                         "needs the viewer outside (its first layer is the front face). Move camera.eye "
-                         "outside the objects")
-    for k, nb in enumerate(geom.boundary_edges):
-        if nb:
-            plan.append({"stage": "geometry", "ran": True,
-                         "why": f"object {k} is open ({int(nb)} boundary edges): pixels can see an odd number "
-                                "of layers, and inside/outside then follows layer parity"})
-    for k, nd in enumerate(geom.degenerate):
-        if nd:
-            plan.append({"stage": "geometry", "ran": True,
-                         "why": f"object {k} has {int(nd)} zero-area triangles; they produce no fragments"})
-
-    tv = layered_trace(geom, cam, p, ior, outside, timings, plan)
-    tr, total, ldi, n_over = tv["trace"], tv["total"], tv["ldi"], tv["pixels_over_layer_limit"]
-    L = int(p["layers"])
-
-    t0 = tic()
-    status = tr["status"]
-    hit = status != 0
-    exit_dir, exit_pos = tr["exit_dir"], tr["exit_pos"]
-    env = scene.data["environment"]
-    image = environment_lookup(env, tr["last_dir"], scene.base_dir)
-    if np.any(absorption > 0):
-        trans = beer_lambert(absorption, tr["path_length"], ior)
-        image = (image * trans).astype(np.float32)
-        plan.append({"stage": "absorption", "ran": True, "why": "I = I0 exp(-alpha l eta) (§3.8)"})
-    else:
-        plan.append({"stage": "absorption", "ran": False, "why": "absorption is zero"})
-    timings["shade"] = (tic() - t0) * 1e3
-    from ..caustics.pipeline import caustics_imagespace, has_caustics, merge_caustics, skip_reason
-
-    caustics = None
-    if has_caustics(scene):
-        c_arrays, caustics = caustics_imagespace(scene, geom, cam, tv, ior, outside, absorption)
-        plan.append({"stage": "caustics", "ran": True,
-                     "why": f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1), "
-                            f"{p['receiver_hit']} receiver hits, {p['caustic_map']}^2 maps, gathering window "
-                            f"{p['gather']}; timings in meta['caustics']"})
-    else:
-        plan.append({"stage": "caustics", "ran": False, "why": skip_reason(scene)})
-
-    origin, rdir = cam.primary_rays()
-    arrays = {
-        "ray_origin": origin,
-        "ray_dir": rdir,
-        "hit": hit,
-        "exit_pos": exit_pos,
-        "exit_dir": exit_dir,
-        "interfaces": tr["interfaces"],
-        "path_length": tr["path_length"],
-        "status": status,
-        "image": image,
-        "depth_complexity": total.astype(np.int16),
-    }
-    if caustics is not None:
-        merge_caustics(arrays, c_arrays)
-    info = {
-        "timings_ms": timings,
-        "plan": plan,
-        "layers_used": int(ldi.shape[0]),
-        "pixels_over_layer_limit": n_over,
-        "depth_complexity_max": int(total.max(initial=0)),
-        "triangles": int(len(geom.faces)),
-    }
-    if caustics is not None:
-        info["caustics"] = caustics
-    return arrays, info
+    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)

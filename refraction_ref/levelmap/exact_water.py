@@ -132,8 +132,12 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
     return {"photons": M * M, "hit": n_hit, "deposited": n_dep}
 
 
-def render_water_exact(scene, progress=False):
+def render_water_exact(scene, progress=False, cache=None, keep=None):
     """Exact reference caustics maps for a water scene (same keys as the level map).
+
+    The exact method's graph for water scenes (:mod:`refraction_ref.exact_render`):
+    the level map's ``water``, ``planes`` and ``level_map`` stages, then
+    ``trace`` (:func:`trace_water_photons` per light) and ``image``.
 
     Returns
     -------
@@ -141,32 +145,6 @@ def render_water_exact(scene, progress=False):
         ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
         ``timings_ms``, ``plan``, ``stats``.
     """
-    p = scene.data["levelmap"]
-    timings = {}
-    ctx = prepare(scene, timings)
-    tic = time.perf_counter()
-    R = len(ctx["pairs"])
-    out = [np.zeros(ctx["pairs"][r][0].box.size) for r in range(R)]
-    stats = []
-    for l in range(len(scene.data["lights"])):
-        stats.append(trace_water_photons(scene, ctx, l, int(p["exact_samples"]), int(p["exact_seed"]), out,
-                                         progress))
-    timings["trace"] = (time.perf_counter() - tic) * 1e3
-    arrays = {}
-    for r in range(R):
-        arrays[f"caustic_map_{r}"] = np.nan_to_num(out[r]).astype(np.float32)
-        arrays[f"caustic_frame_{r}"] = frame_of(ctx["pairs"][r][0].box)
-    tic = time.perf_counter()
-    cam = Camera.from_dict(scene.data["camera"])
-    image, mask = shade_image(cam, ctx["receivers"], [ctx["pairs"][r][0].box for r in range(R)],
-                              [arrays[f"caustic_map_{r}"] for r in range(R)], ctx["receivers"].albedo,
-                              float(p["ambient"]))
-    arrays["image"] = image
-    arrays["object_mask"] = mask
-    timings["image"] = (time.perf_counter() - tic) * 1e3
-    M = int(p["exact_samples"])
-    plan = [{"stage": "trace", "ran": True,
-             "why": f"{M}x{M} jittered samples of the analytic surface per light, Embree first hits"},
-            {"stage": "image", "ran": True, "why": "eq. 4-19 with the exact maps"}]
-    return arrays, {"timings_ms": timings, "plan": plan, "stats": stats,
-                    "triangles": int(len(ctx["receivers"].tris))}
+    from ..exact_render import render_exact
+
+    return render_exact(scene, progress=progress, cache=cache, keep=keep)

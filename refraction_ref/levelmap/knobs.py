@@ -1,5 +1,7 @@
-"""Validation of the ``water`` and ``levelmap`` scene blocks (called by
-:func:`refraction_ref.scene.validate`; defaults live in ``scene.py``).
+"""The ``levelmap`` and ``water`` knob blocks (Tipprasert 2006): defaults and validation side by side.
+
+Importing this module is cheap (no kernels): scene loading reads it. The
+lights of a water scene are checked by :func:`refraction_ref.lights.validate_lights`.
 
 Water fields: ``size`` [sx, sz] (> 0, centred on the origin in x and z),
 ``height``, ``resolution`` (quads per side), ``ior`` (> 0; above the
@@ -17,16 +19,27 @@ exact reference, 2..16384), ``exact_seed`` (jitter of those samples).
 
 from __future__ import annotations
 
-
-
 import numpy as np
 
-__all__ = ["merge_water", "validate_levelmap", "VARIANTS"]
+from ..graph import KnobBlock, register_block
+
+__all__ = ["merge_water", "validate_levelmap", "VARIANTS", "LEVELMAP_DEFAULTS", "WATER_DEFAULTS",
+           "WAVE_DEFAULTS"]
 
 VARIANTS = ("levelmap", "volumetric", "per_ray")
 
+LEVELMAP_DEFAULTS = {
+    "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
+    "map_size": 512, "shadows": True, "ambient": 0.1, "exact_samples": 2048, "exact_seed": 0,
+}
 
-def merge_water(data, water_defaults, wave_defaults):
+#: Water block (merged only when a scene has one; "water": null means no water).
+WATER_DEFAULTS = {"size": [4.0, 4.0], "height": 0.0, "resolution": 128, "ior": 1.33, "absorption": 0.0,
+                  "waves": []}
+WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], "phase": 0.0}
+
+
+def merge_water(data, water_defaults=WATER_DEFAULTS, wave_defaults=WAVE_DEFAULTS):
     """Fill a present ``water`` block (and each wave) with the defaults; idempotent."""
     from ..scene import SceneError, _merge
 
@@ -44,10 +57,11 @@ def merge_water(data, water_defaults, wave_defaults):
     return data
 
 
-def validate_levelmap(data):
-    """Check the ``levelmap`` knobs, the ``water`` block and, for water scenes, the lights."""
+def validate_levelmap(data, base_dir="."):
+    """Check the ``levelmap`` knobs and the ``water`` block (merged with its defaults first)."""
     from ..scene import SceneError, _num, _vec
 
+    merge_water(data)
     p = data["levelmap"]
     _num(p["planes"], "levelmap.planes", 1, 4096, integer=True)
     _num(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
@@ -78,29 +92,9 @@ def validate_levelmap(data):
         if not np.any(d != 0):
             raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
         _num(wave["phase"], f"water.waves[{k}].phase")
-    top = float(w["height"]) + amp
-    for k, lt in enumerate(data["lights"]):
-        if lt["type"] == "directional":
-            d = _vec(lt["direction"], 3, f"lights[{k}].direction")
-            if not np.linalg.norm(d) > 0:
-                raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
-            if d[1] >= 0:
-                raise SceneError(f"scene: 'lights[{k}].direction' is {lt['direction']}: the light comes from "
-                                 "below the horizon (or along it) and never enters the water from above; "
-                                 "give the direction a negative y component")
-        elif lt["type"] == "point":
-            if lt["position"] is None:
-                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give [x, y, z]")
-            pos = _vec(lt["position"], 3, f"lights[{k}].position")
-            if pos[1] <= top:
-                raise SceneError(f"scene: 'lights[{k}].position' y = {pos[1]} is not above the water "
-                                 f"(its crests reach y = {top}); raise the light above the water")
-        else:
-            raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; water caustics need "
-                             "'directional' or 'point' lights")
-        rad = _vec(lt["radiance"], 3, f"lights[{k}].radiance")
-        if np.any(rad < 0):
-            raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
     return data
 
 
+BLOCK = register_block(KnobBlock("levelmap", LEVELMAP_DEFAULTS, validate_levelmap, owner="levelmap"))
+WATER_BLOCK = register_block(KnobBlock("water", None, lambda data, base_dir=".": data, owner="levelmap",
+                                       merge=merge_water))

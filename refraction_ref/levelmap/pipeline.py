@@ -7,13 +7,20 @@ stage (``timings_ms``)  pass                                             section
                         illumination volumes (eq. 4-14)
 ``planes``              reference boxes and slicing (eqs. 4-1 to 4-9)    §4.2.1
 ``level_map``           position and diffuse maps (eqs. 4-10 to 4-13)    §4.2.2
-``smart_slicing``       depth profile, sub-boxes (eqs. 4-21, 4-22)       §4.7.2
-``caustics``            intersection test (eq. 4-15) and caustics map    §4.4, §4.5
+``caustics``            per (receiver, light): smart slicing             §4.7.2,
+                        (``caustics.smart_slicing``, eqs. 4-21, 4-22),   §4.4, §4.5
+                        intersection test (eq. 4-15) and caustics map
                         (eq. 4-18); or the volumetric baseline's slices  §5.2.1
                         and caustics; or the per-ray variant             §6.3
 ``casting``             several lights into one map (eq. 4-20)           §4.7.1
 ``image``               camera view shaded with caustics (eq. 4-19)      §4.6
 =====================  ===============================================  ===========
+
+A registered stage graph (:data:`METHOD`): a camera change re-runs
+``image`` only; a level-map knob the stages from ``caustics`` on; a light
+or water change everything but nothing of the camera. The exact water
+reference (:mod:`.exact_water`) shares ``water``, ``planes`` and
+``level_map``.
 
 One set of planes, one box and one level map per (receiver, light) pair.
 ``caustic_map_r`` is in the frame of receiver r's box for the first light.
@@ -28,6 +35,7 @@ import time
 import numpy as np
 
 from ..camera import Camera
+from ..graph import Method, Stage, register_method, run_graph
 from ..meshes import object_mesh
 from ..scene import SceneError, load_scene
 from .caustics_map import beams_in_map, cull_beams, splat_plane
@@ -41,7 +49,8 @@ from .smart_slicing import smart_planes
 from .volumetric import volumetric_caustics
 from .water import water_mesh
 
-__all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAULT_SCENE_PATH"]
+__all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAULT_SCENE_PATH", "METHOD",
+           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage"]
 
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
@@ -91,6 +100,9 @@ def _check(scene):
 def prepare(scene, timings=None):
     """Water beams per light, and box, set-up and level map per (receiver, light).
 
+    The ``water``, ``planes`` and ``level_map`` stages in one call (tests,
+    benchmarks).
+
     Returns
     -------
     dict
@@ -99,35 +111,58 @@ def prepare(scene, timings=None):
     """
     _check(scene)
     timings = {} if timings is None else timings
-    p = scene.data["levelmap"]
-    water = scene.data["water"]
-    eta = float(scene.data["outside_ior"]) / float(water["ior"])
     tic = time.perf_counter()
-    mesh = water_mesh(water)
-    vols = [illumination_volumes(lt, mesh, eta) for lt in scene.data["lights"]]
+    w = water_pass(scene)
     timings["water"] = timings.get("water", 0.0) + (time.perf_counter() - tic) * 1e3
     tic = time.perf_counter()
+    pl = planes_pass(scene)
+    timings["planes"] = timings.get("planes", 0.0) + (time.perf_counter() - tic) * 1e3
+    tic = time.perf_counter()
+    pairs = level_map_pass(pl["receivers"], pl["boxes"], bool(scene.data["levelmap"]["shadows"]))
+    timings["level_map"] = timings.get("level_map", 0.0) + (time.perf_counter() - tic) * 1e3
+    return {"mesh": w["mesh"], "vols": w["vols"], "receivers": pl["receivers"], "pairs": pairs,
+            "eta": w["eta"], "K": w["K"]}
+
+
+def water_pass(scene):
+    """The water mesh and each light's illumination volumes (eqs. 2-8, 4-14)."""
+    water = scene.data["water"]
+    eta = float(scene.data["outside_ior"]) / float(water["ior"])
+    mesh = water_mesh(water)
+    vols = [illumination_volumes(lt, mesh, eta) for lt in scene.data["lights"]]
+    return {"mesh": mesh, "vols": vols, "eta": eta, "K": float(water["absorption"]),
+            "water_vertices": mesh.vertices, "water_normals": mesh.normals}
+
+
+def planes_pass(scene):
+    """Receivers and one reference box per (receiver, light) (eqs. 4-1 to 4-9)."""
+    water = scene.data["water"]
+    eta = float(scene.data["outside_ior"]) / float(water["ior"])
     rec = receivers_of(scene)
     boxes = []
     for r, v in enumerate(rec.vertices):
         centre = (v.min(axis=0) + v.max(axis=0)) / 2.0
-        boxes.append([reference_box(v, refracted_axis(lt, water, eta, centre), int(p["map_size"]))
+        boxes.append([reference_box(v, refracted_axis(lt, water, eta, centre), int(scene.data["levelmap"]["map_size"]))
                       for lt in scene.data["lights"]])
-    timings["planes"] = timings.get("planes", 0.0) + (time.perf_counter() - tic) * 1e3
-    tic = time.perf_counter()
+    return {"receivers": rec, "boxes": boxes}
+
+
+def level_map_pass(rec, boxes, shadows):
+    """Position and diffuse maps per (receiver, light) (eqs. 4-10 to 4-13): ``pairs[r][l]``."""
     pairs = []
     for r in range(len(rec.vertices)):
         row = []
         for box in boxes[r]:
-            lm, sel, setup = level_map(rec, r, box, bool(p["shadows"]))
+            lm, sel, setup = level_map(rec, r, box, shadows)
             row.append(_Pair(box, sel, setup, lm))
         pairs.append(row)
-    timings["level_map"] = timings.get("level_map", 0.0) + (time.perf_counter() - tic) * 1e3
-    return {"mesh": mesh, "vols": vols, "receivers": rec, "pairs": pairs, "eta": eta,
-            "K": float(water["absorption"])}
+    return pairs
 
 
-def _caustics_pair(ctx, r, l, p, variant, timings, stats):
+def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=None):
+    """The caustics map of one (receiver, light); ``extra`` gets the planes' offsets ``zeta`` and the
+    indices ``used`` (level map), and with ``per_plane`` (a list) each used plane's own map is appended
+    as ``(index, zeta, map)`` instead of being summed (the ``plane_maps`` inspection stage)."""
     pair = ctx["pairs"][r][l]
     box, lm = pair.box, pair.lm
     n = int(p["planes"])
@@ -151,7 +186,13 @@ def _caustics_pair(ctx, r, l, p, variant, timings, stats):
         rects = plane_rects(pidx, n)
         drawn = 0
         for i in keep:
-            drawn += splat_plane(beams, cand, box, zeta[i], K, rects[i], pidx, int(i), lm.depth, lm.normal, out)
+            target = out if per_plane is None else np.zeros(box.size)
+            drawn += splat_plane(beams, cand, box, zeta[i], K, rects[i], pidx, int(i), lm.depth, lm.normal, target)
+            if per_plane is not None:
+                per_plane.append((int(i), float(zeta[i]), target))
+        if extra is not None:
+            extra["zeta"] = np.asarray(zeta, dtype=np.float64)
+            extra["used"] = np.asarray(keep, dtype=np.int64)
         st["planes_used"] = int(len(keep))
         st["triangles_drawn"] = drawn
     elif variant == "volumetric":
@@ -181,7 +222,182 @@ def warm_up():
         render_levelmap(load_scene(base, {"levelmap.variant": v}), warm=False)
 
 
-def render_levelmap(scene, warm=True):
+# --------------------------------------------------------------------- stages
+def _st_water(ctx):
+    _check(ctx.scene)
+    w = water_pass(ctx.scene)
+    n = int(ctx.scene.data["water"]["resolution"])
+    ctx.note(f"{n}x{n} quads, {len(w['mesh'].faces)} beams per light, {len(ctx.scene.data['lights'])} light(s)")
+    return w
+
+
+def _st_planes(ctx):
+    pl = planes_pass(ctx.scene)
+    ctx.stats["triangles"] = int(len(pl["receivers"].tris))
+    out = dict(pl)
+    for r, row in enumerate(pl["boxes"]):
+        for l, box in enumerate(row):
+            out[f"box_{r}_{l}"] = np.array([box.center, box.U, box.V, box.W, [box.w, box.h, box.d]])
+    ctx.note(f"one reference box per (receiver, light), {ctx.scene.data['levelmap']['map_size']}^2 maps")
+    return out
+
+
+def _st_level_map(ctx):
+    shadows = bool(ctx.scene.data["levelmap"]["shadows"])
+    pl = ctx.buf["planes"]
+    pairs = level_map_pass(pl["receivers"], pl["boxes"], shadows)
+    out = {"pairs": pairs}
+    for r, row in enumerate(pairs):
+        for l, pr in enumerate(row):
+            out[f"position_{r}_{l}"] = pr.lm.depth
+            out[f"diffuse_{r}_{l}"] = pr.lm.diffuse
+            out[f"normal_{r}_{l}"] = pr.lm.normal
+    ctx.note(f"orthographic maps, {'receivers shadow each other' if shadows else 'each receiver alone'}")
+    return out
+
+
+def _st_caustics(ctx):
+    d = ctx.scene.data
+    p = d["levelmap"]
+    variant = p["variant"]
+    ctx_ = {"vols": ctx.buf["water"]["vols"], "K": ctx.buf["water"]["K"], "pairs": ctx.buf["level_map"]["pairs"],
+            "receivers": ctx.buf["planes"]["receivers"]}
+    stats, sub = [], {}
+    maps, extras = [], {}
+    for r in range(len(ctx_["pairs"])):
+        row = []
+        for l in range(len(ctx_["vols"])):
+            ex = extras[(r, l)] = {}
+            row.append(_caustics_pair(ctx_, r, l, p, variant, sub, stats, extra=ex))
+        maps.append(row)
+    if "smart_slicing" in sub:
+        ctx.timings["smart_slicing"] = sub["smart_slicing"]
+    ctx.stats["levelmap_stats"] = stats
+    ctx.stats["planes_used_per_receiver"] = [[s["planes_used"] for s in stats if s["receiver"] == r]
+                                             for r in range(len(maps))]
+    smart = bool(p["smart_slicing"]) and variant == "levelmap"
+    ctx.note({"levelmap": "intersection triangles on every plane, depth-tested against the position map"
+              + (f"; smart slicing over {p['depth_levels']} depth levels" if smart else "; smart slicing off"),
+              "volumetric": "one slice image per sample plane (Iwasaki et al.), composited front to back",
+              "per_ray": "each beam drawn once where its rays hit (§6.3); planes replaced by a per-ray search"}[variant])
+    out = {"maps": maps}
+    for r, row in enumerate(maps):
+        for l, m in enumerate(row):
+            out[f"caustic_map_{r}_{l}"] = m
+            out[f"planes_{r}_{l}"] = extras[(r, l)].get("zeta")
+            out[f"planes_used_{r}_{l}"] = extras[(r, l)].get("used")
+    return out
+
+
+def _st_plane_maps(ctx):
+    """Each used plane's own contribution to the caustics map (eq. 4-18), for inspection."""
+    d = ctx.scene.data
+    p = d["levelmap"]
+    ctx_ = {"vols": ctx.buf["water"]["vols"], "K": ctx.buf["water"]["K"], "pairs": ctx.buf["level_map"]["pairs"],
+            "receivers": ctx.buf["planes"]["receivers"]}
+    out = {}
+    for r in range(len(ctx_["pairs"])):
+        for l in range(len(ctx_["vols"])):
+            planes = []
+            _caustics_pair(ctx_, r, l, p, p["variant"], {}, [], per_plane=planes)
+            if planes:
+                out[f"plane_maps_{r}_{l}"] = np.stack([m for _, _, m in planes]).astype(np.float32)
+                out[f"plane_index_{r}_{l}"] = np.array([i for i, _, _ in planes], np.int64)
+    ctx.note("one map per used plane (their sum is the pair's caustics map up to rounding)"
+             if p["variant"] == "levelmap" else f"the {p['variant']} variant has no per-plane maps")
+    return out
+
+
+def _st_casting(ctx):
+    pairs = ctx.buf["level_map"]["pairs"]
+    maps = ctx.buf["caustics"]["maps"]
+    L = len(ctx.scene.data["lights"])
+    out = {}
+    for r, row in enumerate(maps):
+        total = row[0].copy()
+        for l in range(1, L):
+            cast_between(row[l], pairs[r][l].box, pairs[r][l].lm, pairs[r][0].box, pairs[r][0].lm, total)
+        total = np.nan_to_num(total, nan=0.0, posinf=0.0, neginf=0.0)
+        out[f"caustic_map_{r}"] = total.astype(np.float32)
+        out[f"caustic_frame_{r}"] = frame_of(pairs[r][0].box)
+    ctx.note(f"{L - 1} more light(s) cast into the first light's frame (eq. 4-20)" if L > 1 else
+             "one light: its map is the caustics map")
+    return out
+
+
+def shade_stage(ctx, casting):
+    """The camera's view of the receivers with their caustics maps (eq. 4-19)."""
+    p = ctx.scene.data["levelmap"]
+    pairs = ctx.buf["level_map"]["pairs"]
+    R = len(pairs)
+    cam = Camera.from_dict(ctx.scene.data["camera"])
+    maps = [ctx.buf[casting][f"caustic_map_{r}"] for r in range(R)]
+    image, mask = shade_image(cam, ctx.buf["planes"]["receivers"], [pairs[r][0].box for r in range(R)], maps,
+                              ctx.buf["planes"]["receivers"].albedo, float(p["ambient"]))
+    ctx.note("eq. 4-19 with ambient " + str(p["ambient"]))
+    return {"image": image, "object_mask": mask}
+
+
+def shared_stages(scene):
+    """``water``, ``planes`` and ``level_map``: the light side the level map and the exact water share."""
+    R, L = len(scene.data["receivers"]), len(scene.data["lights"])
+    rl = [(r, l) for r in range(R) for l in range(L)]
+    return (
+        Stage("water", _st_water, reads=("water", "lights", "outside_ior"),
+              makes=("water_vertices", "water_normals"), doc="water mesh and illumination volumes (eqs. 2-8, 4-14)"),
+        Stage("planes", _st_planes, reads=("receivers", "lights", "water", "outside_ior", "levelmap.map_size"),
+              makes=tuple(f"box_{r}_{l}" for r, l in rl), doc="reference boxes (eqs. 4-1 to 4-9)"),
+        Stage("level_map", _st_level_map, reads=("levelmap.shadows",), after=("planes",),
+              makes=tuple(f"{k}_{r}_{l}" for r, l in rl for k in ("position", "diffuse", "normal")),
+              doc="position and diffuse maps (eqs. 4-10 to 4-13)"),
+    )
+
+
+def _stages(scene):
+    R, L = len(scene.data["receivers"]), len(scene.data["lights"])
+    return shared_stages(scene) + (
+        Stage("caustics", _st_caustics,
+              reads=("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant"),
+              after=("water", "planes", "level_map"),
+              makes=tuple(f"{k}_{r}_{l}" for r in range(R) for l in range(L)
+                          for k in ("caustic_map", "planes", "planes_used")),
+              doc="smart slicing, intersection test and caustics map per (receiver, light) (§4.4-4.7)"),
+        Stage("plane_maps", _st_plane_maps,
+              reads=("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant"),
+              after=("water", "planes", "level_map"), diagnostic=True,
+              makes=tuple(f"{k}_{r}_{l}" for r in range(R) for l in range(L) for k in ("plane_maps", "plane_index")),
+              doc="each used plane's own caustics map (eq. 4-18); only when kept"),
+        Stage("casting", _st_casting, reads=("lights",), after=("level_map", "caustics"),
+              makes=tuple(f"caustic_map_{r}" for r in range(R)), doc="lights cast into one map (eq. 4-20)"),
+        Stage("image", lambda ctx: shade_stage(ctx, "casting"), reads=("camera", "levelmap.ambient"),
+              after=("planes", "level_map", "casting"), makes=("image", "object_mask"),
+              doc="camera view shaded with caustics (eq. 4-19)"),
+    )
+
+
+def _assemble(scene, bufs, stats):
+    p = scene.data["levelmap"]
+    R = len(bufs["level_map"]["pairs"])
+    arrays = {}
+    for r in range(R):
+        arrays[f"caustic_map_{r}"] = bufs["casting"][f"caustic_map_{r}"]
+        arrays[f"caustic_frame_{r}"] = bufs["casting"][f"caustic_frame_{r}"]
+    arrays["image"] = bufs["image"]["image"]
+    arrays["object_mask"] = bufs["image"]["object_mask"]
+    used = stats["planes_used_per_receiver"]
+    info = {"planes_requested": int(p["planes"]), "planes_used": int(max(max(u) for u in used)),
+            "planes_used_per_receiver": used, "variant": p["variant"],
+            "stats": json.loads(json.dumps(stats["levelmap_stats"], default=float)),
+            "triangles": stats["triangles"]}
+    return arrays, info
+
+
+METHOD = register_method(Method(
+    "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble, warm=lambda: warm_up(),
+    doc="Tipprasert (2006): water caustics by reference planes, position maps and a caustics map"))
+
+
+def render_levelmap(scene, warm=True, cache=None, keep=None):
     """Render water caustics with the level-map method (or its baseline / per-ray variant).
 
     Parameters
@@ -190,13 +406,15 @@ def render_levelmap(scene, warm=True):
         With a ``water`` block, receivers and lights above the water.
     warm : bool
         Load every kernel first so that ``timings_ms`` exclude JIT time.
+    cache, keep :
+        As :func:`refraction_ref.graph.run_graph`.
 
     Returns
     -------
     arrays : dict
         ``caustic_map_r`` (Hc, Wc) float32 irradiance and ``caustic_frame_r``
-        (4, 3) per receiver r (ORACLE.md), ``image`` (H, W, 3) float32 and
-        ``object_mask`` (H, W) bool (the pixels showing a receiver).
+        (4, 3) per receiver r (``docs/oracle.md``), ``image`` (H, W, 3)
+        float32 and ``object_mask`` (H, W) bool (the pixels showing a receiver).
     info : dict
         ``timings_ms``, ``plan``, ``planes_requested``, ``planes_used`` (the
         most any receiver used), ``planes_used_per_receiver`` (per light),
@@ -206,61 +424,5 @@ def render_levelmap(scene, warm=True):
     ----------
     Tipprasert (2006), chapter 4; Figs. 4-15 and 4-17.
     """
-    if warm:
-        warm_up()
-    p = scene.data["levelmap"]
-    variant = p["variant"]
-    timings, plan, stats = {}, [], []
-    ctx = prepare(scene, timings)
-    L = len(scene.data["lights"])
-    R = len(ctx["pairs"])
-    arrays = {}
-    maps = []
-    used = []
-    for r in range(R):
-        E0 = _caustics_pair(ctx, r, 0, p, variant, timings, stats)
-        used_r = [stats[-1]["planes_used"]]
-        total = E0.copy()
-        for l in range(1, L):
-            El = _caustics_pair(ctx, r, l, p, variant, timings, stats)
-            used_r.append(stats[-1]["planes_used"])
-            t_c = time.perf_counter()
-            cast_between(El, ctx["pairs"][r][l].box, ctx["pairs"][r][l].lm,
-                         ctx["pairs"][r][0].box, ctx["pairs"][r][0].lm, total)
-            timings["casting"] = timings.get("casting", 0.0) + (time.perf_counter() - t_c) * 1e3
-        used.append(used_r)
-        total = np.nan_to_num(total, nan=0.0, posinf=0.0, neginf=0.0)
-        arrays[f"caustic_map_{r}"] = total.astype(np.float32)
-        arrays[f"caustic_frame_{r}"] = frame_of(ctx["pairs"][r][0].box)
-        maps.append(arrays[f"caustic_map_{r}"])
-    tic = time.perf_counter()
-    cam = Camera.from_dict(scene.data["camera"])
-    image, mask = shade_image(cam, ctx["receivers"], [ctx["pairs"][r][0].box for r in range(R)], maps,
-                              ctx["receivers"].albedo, float(p["ambient"]))
-    arrays["image"] = image
-    arrays["object_mask"] = mask
-    timings["image"] = (time.perf_counter() - tic) * 1e3
-    nmesh = int(scene.data["water"]["resolution"])
-    plan.append({"stage": "water", "ran": True,
-                 "why": f"{nmesh}x{nmesh} quads, {len(ctx['mesh'].faces)} beams per light, {L} light(s)"})
-    plan.append({"stage": "planes", "ran": variant != "per_ray",
-                 "why": (f"{p['planes']} planes per (receiver, light)" if variant != "per_ray"
-                         else "per-ray variant: planes replaced by a per-ray search (boxes still built)")})
-    plan.append({"stage": "level_map", "ran": True, "why": f"{p['map_size']}^2 orthographic maps, "
-                 f"{'receivers shadow each other' if p['shadows'] else 'each receiver alone'}"})
-    plan.append({"stage": "smart_slicing", "ran": bool(p["smart_slicing"]) and variant == "levelmap",
-                 "why": (f"{p['depth_levels']} depth levels" if p["smart_slicing"] and variant == "levelmap"
-                         else ("off (levelmap.smart_slicing is false)" if variant == "levelmap"
-                               else f"not used by the {variant} variant"))})
-    plan.append({"stage": "caustics", "ran": True, "why": {
-        "levelmap": "intersection triangles on every plane, depth-tested against the position map",
-        "volumetric": "one slice image per sample plane (Iwasaki et al.), composited front to back",
-        "per_ray": "each beam drawn once where its rays hit (§6.3)"}[variant]})
-    plan.append({"stage": "casting", "ran": L > 1,
-                 "why": f"{L - 1} more light(s) cast into the first light's frame" if L > 1 else "one light"})
-    plan.append({"stage": "image", "ran": True, "why": "eq. 4-19 with ambient " + str(p["ambient"])})
-    info = {"timings_ms": timings, "plan": plan, "planes_requested": int(p["planes"]),
-            "planes_used": int(max(max(u) for u in used)), "planes_used_per_receiver": used,
-            "variant": variant, "stats": json.loads(json.dumps(stats, default=float)),
-            "triangles": int(len(ctx["receivers"].tris))}
-    return arrays, info
+    _check(scene)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)

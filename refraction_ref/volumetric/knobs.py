@@ -1,9 +1,10 @@
 """Validation of the ``volumetric`` knobs and of the ``volume`` input block.
 
-The defaults live in :data:`refraction_ref.scene.DEFAULTS` ``["volumetric"]``
-(one source of truth); :func:`validate_volumetric` is called at the end of
-:func:`refraction_ref.scene.validate`, so a bad knob is refused when the
-scene is loaded, before any work starts.
+Defaults (:data:`VOLUMETRIC_DEFAULTS`, Sun et al. 2008's own settings) and
+checks live here side by side; the blocks register themselves, and
+:func:`refraction_ref.scene.load_scene` calls :func:`validate_volumetric`,
+so a bad knob is refused when the scene is loaded, before any work starts.
+Importing this module is cheap (no kernels).
 
 Knobs (scene block ``volumetric``)
 ----------------------------------
@@ -58,7 +59,16 @@ import os
 
 import numpy as np
 
-__all__ = ["validate_volumetric", "INTEGRATORS", "VOLUME_KEYS"]
+from ..graph import KnobBlock, register_block
+
+__all__ = ["validate_volumetric", "INTEGRATORS", "VOLUME_KEYS", "VOLUMETRIC_DEFAULTS"]
+
+VOLUMETRIC_DEFAULTS = {
+    "resolution": 128, "photons": 1024, "ds_min": 1.0, "ds_max": 8.0, "eps": 0.005, "eps2": 0.02,
+    "integrator": "euler", "phase_g": 0.0, "scattering": 0.2, "absorption": 0.0,
+    "supersample": 4, "blur": 9, "padding": 6, "bounds": None, "max_steps": 0,
+    "min_radiance": 1e-3, "stop_fraction": 1e-3, "stiff": 0.25,
+}
 
 INTEGRATORS = ("euler", "rk4")
 VOLUME_KEYS = ("ior", "extinction", "scattering", "bounds")
@@ -159,3 +169,7 @@ def validate_volumetric(data, base_dir="."):
                 raise SceneError(f"scene: 'volume.{k}' names '{x}', which does not exist (looked for {p}); "
                                  "give an existing .npy file or an array")
     return data
+
+
+BLOCK = register_block(KnobBlock("volumetric", VOLUMETRIC_DEFAULTS, validate_volumetric, owner="volumetric"))
+VOLUME_BLOCK = register_block(KnobBlock("volume", None, lambda data, base_dir=".": data, owner="volumetric"))

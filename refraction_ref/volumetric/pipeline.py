@@ -38,16 +38,13 @@ References
 
 from __future__ import annotations
 
-import copy
-import hashlib
-import json
 import os
-import time
 
 import numpy as np
 
 from ..camera import Camera
 from ..environment import environment_lookup
+from ..graph import Method, Stage, describe, register_method, run_graph
 from ..scene import SceneError
 from .gradient import gradient_field
 from .march import march_photons, smooth_radiance
@@ -55,80 +52,9 @@ from .octree import build_octree
 from .photons import generate_photons
 from .view import source_volume, view_volume
 
-__all__ = ["render_volumetric", "load_volume", "STAGES"]
+__all__ = ["render_volumetric", "load_volume", "STAGES", "METHOD"]
 
 STAGES = ("voxelize", "gradient", "octree", "photons", "march", "smooth", "view")
-_UPSTREAM = {
-    "voxelize": (),
-    "gradient": ("voxelize",),
-    "octree": ("voxelize",),
-    "photons": ("voxelize",),
-    "march": ("voxelize", "gradient", "octree", "photons"),
-    "smooth": ("march",),
-    "view": ("voxelize", "gradient", "octree", "smooth"),
-}
-
-
-# --------------------------------------------------------------------- inputs
-def _array_descr(x):
-    if x is None:
-        return None
-    if isinstance(x, (str, os.PathLike)):
-        p = os.fspath(x)
-        st = os.stat(p) if os.path.exists(p) else None
-        return {"path": p, "mtime": st.st_mtime if st else None, "size": st.st_size if st else None}
-    a = np.ascontiguousarray(x)
-    if a.ndim == 0 or a.size <= 3:
-        return a.tolist()
-    return {"array": list(a.shape), "dtype": str(a.dtype), "sha1": hashlib.sha1(a.view(np.uint8)).hexdigest()}
-
-
-def _stage_inputs(scene):
-    d = scene.data
-    v = d["volumetric"]
-    vol = d["volume"]
-    objects = copy.deepcopy(d["objects"]) if vol is None else "ignored (volume given)"
-    if vol is None:
-        for (kind, k), fn in scene.callables.items():
-            if kind == "deform":
-                objects[k]["deform"] = f"<callable {id(fn)}>"
-    return {
-        "voxelize": {"objects": objects, "outside_ior": d["outside_ior"],
-                     "volume": None if vol is None else {k: _array_descr(vol[k]) for k in vol},
-                     **({k: v[k] for k in ("resolution", "padding", "supersample", "blur", "bounds")}
-                        if vol is None else {})},
-        "gradient": {},
-        "octree": {k: v[k] for k in ("eps", "eps2", "ds_max")},
-        "photons": {"lights": d["lights"], "photons": v["photons"]},
-        "march": {k: v[k] for k in ("ds_min", "stiff", "integrator", "max_steps", "min_radiance",
-                                     "stop_fraction", "scattering", "absorption")},
-        "smooth": {},
-        "view": {"camera": d["camera"], "environment": d["environment"], "outside_ior": d["outside_ior"],
-                 **{k: v[k] for k in ("phase_g", "integrator", "scattering", "absorption")}},
-    }
-
-
-def _diff(old, new, prefix=""):
-    """Dotted names of the entries that differ between two JSON-like dicts."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        out = []
-        for k in sorted(set(old) | set(new)):
-            name = f"{prefix}.{k}" if prefix else str(k)
-            if k not in old or k not in new:
-                out.append(name)
-            else:
-                out += _diff(old[k], new[k], name)
-        return out
-    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
-        out = []
-        for k, (a, b) in enumerate(zip(old, new)):
-            out += _diff(a, b, f"{prefix}.{k}" if prefix else str(k))
-        return out
-    return [] if old == new else [prefix or "(all)"]
-
-
-def _canon(x):
-    return json.loads(json.dumps(x, sort_keys=True, default=str))
 
 
 # --------------------------------------------------------------------- volume input
@@ -269,8 +195,154 @@ def _warm():
 _warm.done = False
 
 
-def render_volumetric(scene, cache=None, warm=True):
-    """Render a scene with the volumetric method of Sun et al. (2008).
+# --------------------------------------------------------------------- the stage graph
+_V = "volumetric."
+
+
+def _st_voxelize(ctx):
+    vox = _run_voxelize(ctx.scene)
+    for n in vox["notes"]:
+        ctx.note(n)
+    ctx.stats["triangles"] = vox["triangles"]
+    return dict(vox, ior_volume=vox["ior"])
+
+
+def _st_gradient(ctx):
+    vox = ctx.buf["voxelize"]
+    return {"field": gradient_field(vox["ior"], vox["bounds"])}
+
+
+def _st_octree(ctx):
+    v = ctx.scene.data["volumetric"]
+    level, smax, ost = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"])
+    msg = (f"{100 * ost['constant_fraction']:.1f}% of voxels in constant nodes (crossed in one step), "
+           f"{100 * ost['limited_fraction']:.1f}% limited to ds_max = {v['ds_max']} voxels")
+    if ost["constant_index"]:
+        msg += "; the index is constant everywhere: photons and rays go straight"
+    ctx.note(msg)
+    ctx.stats["octree"] = {k: ost[k] for k in ("constant_fraction", "limited_fraction", "levels", "constant_index")}
+    return {"level": level, "step_max": smax, "info": ost}
+
+
+def _st_photons(ctx):
+    d = ctx.scene.data
+    vox = ctx.buf["voxelize"]
+    if not d["lights"]:
+        z = np.zeros((0, 3))
+        ph = (z, z.copy(), z.copy(), np.zeros(0, np.int32), ["no lights: no photons"])
+    else:
+        ph = generate_photons(d["lights"], vox["bounds"], vox["ior"].shape, int(d["volumetric"]["photons"]))
+    for n in ph[4]:
+        ctx.note(n)
+    return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2]}
+
+
+def _st_march(ctx):
+    v = ctx.scene.data["volumetric"]
+    b = ctx.buf
+    vox, octv, ph = b["voxelize"], b["octree"], b["photons"]["ph"]
+    kappa = _media(vox, v)[1]
+    pos, dirs, rad = ph[0], ph[1], ph[2]
+    sums, minfo = march_photons(b["gradient"]["field"], kappa, octv["level"], octv["step_max"], vox["bounds"],
+                                pos, dirs, rad, ds_min=float(v["ds_min"]), stiff=float(v["stiff"]),
+                                integrator=v["integrator"], max_steps=int(v["max_steps"]),
+                                min_radiance=float(v["min_radiance"]), stop_fraction=float(v["stop_fraction"]))
+    ctx.note(f"{len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
+             f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
+             f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
+    ctx.stats["march"] = {"photons": int(len(pos)), "photon_steps": minfo["total_steps"],
+                          "photons_truncated": minfo["truncated"], "drift_max": minfo["drift_max"],
+                          "drift_median": minfo["drift_median"], "drift_p99": minfo["drift_p99"],
+                          "deposit_buffers": minfo["buffers"]}
+    return {"sums": sums, "minfo": minfo, "exit_pos": minfo["exit_pos"], "exit_dir": minfo["exit_dir"],
+            "photon_status": minfo["status"]}
+
+
+def _st_smooth(ctx):
+    v = ctx.scene.data["volumetric"]
+    rad, dirn = smooth_radiance(ctx.buf["march"]["sums"])
+    # what a viewing ray reads per voxel (sigma L, direction, kappa): it does not depend on the
+    # camera, so it is packed once here rather than on every camera change
+    src = source_volume(rad, dirn, *_media(ctx.buf["voxelize"], v))
+    return {"radiance": rad, "direction": dirn, "source": src}
+
+
+def _st_view(ctx):
+    d = ctx.scene.data
+    v = d["volumetric"]
+    b = ctx.buf
+    ost = b["octree"]["info"]
+    cam = Camera.from_dict(d["camera"])
+    H, W = cam.shape
+    origin, rdir = cam.primary_rays()
+    vw = view_volume(b["gradient"]["field"], b["smooth"]["source"], b["octree"]["step_max"], b["voxelize"]["bounds"],
+                     origin.reshape(-1, 3), rdir.reshape(-1, 3), integrator=v["integrator"],
+                     phase_g=float(v["phase_g"]), outside_ior=float(d["outside_ior"]),
+                     n_range=(ost["n_min"], ost["n_max"]))
+    env = environment_lookup(d["environment"], vw["last_dir"], ctx.scene.base_dir).astype(np.float64)
+    img = vw["inscatter"] + vw["transmittance"] * env
+    return {
+        "ray_origin": origin, "ray_dir": rdir,
+        "hit": vw["hit"].reshape(H, W),
+        "exit_pos": vw["exit_pos"].reshape(H, W, 3),
+        "exit_dir": vw["exit_dir"].reshape(H, W, 3),
+        "interfaces": vw["interfaces"].reshape(H, W),
+        "path_length": vw["path_length"].reshape(H, W),
+        "status": vw["status"].reshape(H, W),
+        "image": img.reshape(H, W, 3).astype(np.float32),
+    }
+
+
+def _stages(scene):
+    return (
+        Stage("voxelize", _st_voxelize, reads=("objects", "outside_ior", "volume", _V + "resolution", _V + "padding",
+                                                _V + "supersample", _V + "blur", _V + "bounds"),
+              makes=("ior_volume",), doc="solid voxelization, coverage -> index, Gaussian blur (§4.1)"),
+        Stage("gradient", _st_gradient, after=("voxelize",), makes=("field",),
+              doc="central differences of n (§3, eq. 3)"),
+        Stage("octree", _st_octree, reads=(_V + "eps", _V + "eps2", _V + "ds_max"), after=("voxelize",),
+              makes=("level", "step_max"), doc="min/max pyramid, leaf levels, step-size map (§4.2, §5.3)"),
+        Stage("photons", _st_photons, reads=("lights", _V + "photons"), after=("voxelize",),
+              makes=("start_pos", "start_dir", "start_radiance"), doc="one photon per covered light texel (§4.3)"),
+        Stage("march", _st_march, reads=tuple(_V + k for k in ("ds_min", "stiff", "integrator", "max_steps",
+                                                                 "min_radiance", "stop_fraction", "scattering",
+                                                                 "absorption")),
+              after=("voxelize", "gradient", "octree", "photons"), makes=("exit_pos", "exit_dir", "photon_status"),
+              doc="adaptive marching and deposition (§4.4, eqs. 4-6)"),
+        Stage("smooth", _st_smooth, reads=(_V + "scattering", _V + "absorption"), after=("voxelize", "march"),
+              makes=("radiance", "direction"), doc="3x3x3 smoothing of the radiance (§4.4)"),
+        Stage("view", _st_view, reads=("camera", "environment", "outside_ior") + tuple(
+            _V + k for k in ("phase_g", "integrator")), after=("voxelize", "gradient", "octree", "smooth"),
+              makes=("hit", "exit_pos", "exit_dir", "status", "image"),
+              doc="curved viewing rays, Henyey-Greenstein in-scattering (§4.5)"),
+    )
+
+
+def _assemble(scene, bufs, stats):
+    d = scene.data
+    vox, march = bufs["voxelize"], bufs["march"]
+    minfo = march["minfo"]
+    ior = vox["ior"]
+    arrays = {
+        "ior": ior, "radiance": bufs["smooth"]["radiance"], "direction": bufs["smooth"]["direction"],
+        "volume_bounds": np.asarray(vox["bounds"], np.float64),
+        "photon_exit_pos": minfo["exit_pos"], "photon_exit_dir": minfo["exit_dir"],
+        "photon_steps": np.asarray(minfo["total_steps"], np.int64), "photon_status": minfo["status"],
+    }
+    arrays.update(bufs["view"])
+    st = {"volume_shape": list(ior.shape), "triangles": vox["triangles"], **stats["march"],
+          "occupied_voxels": int(np.count_nonzero(np.abs(ior - float(d["outside_ior"])) > 1e-6)),
+          "octree": stats["octree"]}
+    return arrays, {"triangles": vox["triangles"], "stats": st, "scene": _summary(d)}
+
+
+METHOD = register_method(Method(
+    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=lambda: _warm(),
+    doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
+
+
+def render_volumetric(scene, cache=None, warm=True, keep=None):
+    """Render a scene with the volumetric method of Sun et al. (2008) (runs :data:`METHOD`'s graph).
 
     Parameters
     ----------
@@ -282,11 +354,13 @@ def render_volumetric(scene, cache=None, warm=True):
         (:class:`refraction_ref.session.Session` keeps one).
     warm : bool
         Compile every kernel first so that ``timings_ms`` exclude JIT time.
+    keep : str or list, optional
+        Stages whose buffers to return as ``stage.<stage>.<buffer>``.
 
     Returns
     -------
     arrays : dict
-        ORACLE.md keys: ``ior``, ``radiance``, ``direction``,
+        ``docs/oracle.md`` keys: ``ior``, ``radiance``, ``direction``,
         ``volume_bounds``, ``photon_exit_pos``, ``photon_exit_dir``,
         ``photon_steps`` (total), plus ``photon_status`` and the per-pixel
         keys ``ray_origin``, ``ray_dir``, ``hit``, ``exit_pos``,
@@ -300,136 +374,7 @@ def render_volumetric(scene, cache=None, warm=True):
     ----------
     Sun et al. (2008), §3-§5.
     """
-    if warm:
-        _warm()
-    if cache is None:
-        cache = {}
-    d = scene.data
-    v = d["volumetric"]
-    inputs = _canon(_stage_inputs(scene))
-    timings, plan, stats = {}, [], {}
-    ran = {}
-    out = {}
-    tic = time.perf_counter
-
-    def step(name, fn):
-        prev = cache.get(name)
-        up = [u for u in _UPSTREAM[name] if ran.get(u)]
-        if prev is not None and prev["inputs"] == inputs[name] and not up:
-            out[name] = prev["out"]
-            ran[name] = False
-            timings[name] = 0.0
-            plan.append({"stage": name, "ran": False, "why": "reused: its inputs and upstream stages are unchanged"})
-            return out[name]
-        if prev is None:
-            why = "no earlier result"
-        else:
-            changed = _diff(prev["inputs"], inputs[name])
-            why = ("changed: " + ", ".join(changed[:6]) + (" ..." if len(changed) > 6 else "")) if changed else ""
-            if up:
-                why = (why + "; " if why else "") + "upstream re-ran: " + ", ".join(up)
-        t0 = tic()
-        res = fn()
-        timings[name] = (tic() - t0) * 1e3
-        cache[name] = {"inputs": inputs[name], "out": res}
-        out[name] = res
-        ran[name] = True
-        plan.append({"stage": name, "ran": True, "why": why})
-        return res
-
-    vox = step("voxelize", lambda: _run_voxelize(scene))
-    if ran["voxelize"]:
-        plan[-1]["why"] += " | " + "; ".join(vox["notes"])
-        if not vox["ran"]:
-            plan[-1]["why"] = plan[-1]["why"].replace("no earlier result | ", "")
-    ior, bounds = vox["ior"], vox["bounds"]
-    shape = ior.shape
-    field = step("gradient", lambda: gradient_field(ior, bounds))
-    octv = step("octree", lambda: build_octree(ior, v["eps"], v["eps2"], v["ds_max"]))
-    level, smax, ost = octv
-    if ran["octree"]:
-        msg = (f"{100 * ost['constant_fraction']:.1f}% of voxels in constant nodes (crossed in one step), "
-               f"{100 * ost['limited_fraction']:.1f}% limited to ds_max = {v['ds_max']} voxels")
-        if ost["constant_index"]:
-            msg += "; the index is constant everywhere: photons and rays go straight"
-        elif d["volume"] is None and len(d["objects"]):
-            msg += "; every object has a constant index: only the blurred boundary shells bend light"
-        plan[-1]["why"] += " | " + msg
-    media = {}
-
-    def _sigma_kappa():  # only the stages that run need them (not a camera-only re-render)
-        if not media:
-            media["sk"] = _media(vox, v)
-        return media["sk"]
-
-    def _photons():
-        if not d["lights"]:
-            z = np.zeros((0, 3))
-            return z, z.copy(), z.copy(), np.zeros(0, np.int32), ["no lights: no photons"]
-        return generate_photons(d["lights"], bounds, shape, int(v["photons"]))
-
-    ph = step("photons", _photons)
-    if ran["photons"]:
-        plan[-1]["why"] += " | " + "; ".join(ph[4])
-    pos, dirs, rad = ph[0], ph[1], ph[2]
-
-    def _march():
-        return march_photons(field, _sigma_kappa()[1], level, smax, bounds, pos, dirs, rad, ds_min=float(v["ds_min"]),
-                             stiff=float(v["stiff"]), integrator=v["integrator"], max_steps=int(v["max_steps"]),
-                             min_radiance=float(v["min_radiance"]), stop_fraction=float(v["stop_fraction"]))
-
-    sums, minfo = step("march", _march)
-    if ran["march"]:
-        plan[-1]["why"] += (f" | {len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
-                            f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
-                            f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
-    def _smooth():
-        rad, dirn = smooth_radiance(sums)
-        # what a viewing ray reads per voxel (sigma L, direction, kappa): it does not depend on the
-        # camera, so it is packed once here rather than on every camera change
-        return rad, dirn, source_volume(rad, dirn, *_sigma_kappa())
-
-    rad_v, dir_v, src = step("smooth", _smooth)
-
-    cam = Camera.from_dict(d["camera"])
-    H, W = cam.shape
-
-    def _view():
-        origin, rdir = cam.primary_rays()
-        vw = view_volume(field, src, smax, bounds, origin.reshape(-1, 3), rdir.reshape(-1, 3),
-                         integrator=v["integrator"], phase_g=float(v["phase_g"]),
-                         outside_ior=float(d["outside_ior"]), n_range=(ost["n_min"], ost["n_max"]))
-        env = environment_lookup(d["environment"], vw["last_dir"], scene.base_dir).astype(np.float64)
-        img = vw["inscatter"] + vw["transmittance"] * env
-        return {
-            "ray_origin": origin, "ray_dir": rdir,
-            "hit": vw["hit"].reshape(H, W),
-            "exit_pos": vw["exit_pos"].reshape(H, W, 3),
-            "exit_dir": vw["exit_dir"].reshape(H, W, 3),
-            "interfaces": vw["interfaces"].reshape(H, W),
-            "path_length": vw["path_length"].reshape(H, W),
-            "status": vw["status"].reshape(H, W),
-            "image": img.reshape(H, W, 3).astype(np.float32),
-        }
-
-    px = step("view", _view)
-
-    arrays = {
-        "ior": ior, "radiance": rad_v, "direction": dir_v, "volume_bounds": np.asarray(bounds, np.float64),
-        "photon_exit_pos": minfo["exit_pos"], "photon_exit_dir": minfo["exit_dir"],
-        "photon_steps": np.asarray(minfo["total_steps"], np.int64), "photon_status": minfo["status"],
-    }
-    arrays.update(px)
-    stats = {
-        "volume_shape": list(shape), "triangles": vox["triangles"], "photons": int(len(pos)),
-        "photon_steps": minfo["total_steps"], "photons_truncated": minfo["truncated"],
-        "drift_max": minfo["drift_max"], "drift_median": minfo["drift_median"], "drift_p99": minfo["drift_p99"],
-        "occupied_voxels": int(np.count_nonzero(np.abs(ior - float(d["outside_ior"])) > 1e-6)),
-        "octree": {k: ost[k] for k in ("constant_fraction", "limited_fraction", "levels", "constant_index")},
-        "deposit_buffers": minfo["buffers"],
-    }
-    return arrays, {"timings_ms": timings, "plan": plan, "triangles": vox["triangles"], "stats": stats,
-                    "scene": _summary(d)}
+    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
 
 
 def _summary(d):
@@ -437,6 +382,6 @@ def _summary(d):
     if d["volume"] is None:
         return d
     s = dict(d)
-    s["volume"] = {k: (x if x is None or isinstance(x, (str, list)) else _array_descr(x))
+    s["volume"] = {k: (x if x is None or isinstance(x, (str, list)) else describe(x))
                    for k, x in d["volume"].items()}
     return s

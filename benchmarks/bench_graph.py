@@ -1,0 +1,141 @@
+"""The stage graph's cost and what reuse buys (issue: one stage graph for every method).
+
+1. **No slow-down.** The image-space bunny (512x512, the default scene) at
+   the stage graph's parent commit and at HEAD, interleaved render by render
+   in one run: two worker processes, one per source tree, each rendering
+   on request; at least 15 timed renders each after warm-up. Target: median
+   ratio HEAD / parent <= 1.05.
+2. **Re-render after ``imagespace.iterations``** (only ``trace`` and
+   ``shade`` re-run): median re-render time over the median full render.
+   Target <= 0.6.
+3. **Re-render after a camera-only change of the water scene**
+   (``data/levelmap_default.json``: only ``image`` re-runs). Target <= 1/3.
+
+Writes ``results/graph.json``. Run: ``python benchmarks/bench_graph.py
+[--parent REV] [--repeats N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import common as C
+
+rr = C.rr
+
+_WORKER = r"""
+import sys, time, json
+sys.path.insert(0, sys.argv[1])
+import refraction_ref as rr
+scene = rr.load_scene(None)
+for _ in range(4):
+    rr.render(scene)
+print("ready", flush=True)
+for line in sys.stdin:
+    if line.strip() != "go":
+        break
+    t0 = time.perf_counter()
+    rr.render(scene)
+    print(json.dumps((time.perf_counter() - t0) * 1e3), flush=True)
+"""
+
+
+def _worker(tree):
+    p = subprocess.Popen([sys.executable, "-c", _WORKER, tree], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         text=True, cwd=tree, env=dict(os.environ, PYTHONPATH=tree))
+    line = p.stdout.readline()
+    if line.strip() != "ready":
+        raise RuntimeError(f"worker for {tree} failed to start: {line!r}")
+    return p
+
+
+def _ask(p):
+    p.stdin.write("go\n")
+    p.stdin.flush()
+    return float(p.stdout.readline())
+
+
+def no_slowdown(parent, repeats):
+    tmp = tempfile.mkdtemp(prefix="rr_parent_")
+    subprocess.run(["git", "worktree", "add", "--detach", tmp, parent], cwd=C.REPO, check=True,
+                   capture_output=True)
+    try:
+        print(f"  starting workers (parent {parent} in {tmp}; the first start compiles its kernels)", flush=True)
+        old, new = _worker(tmp), _worker(C.REPO)
+        a, b = [], []
+        for _ in range(repeats):
+            a.append(_ask(old))
+            b.append(_ask(new))
+        for p in (old, new):
+            p.stdin.close()
+            p.wait()
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", tmp], cwd=C.REPO, capture_output=True)
+    ma, mb = statistics.median(a), statistics.median(b)
+    return {"parent": parent, "parent_ms": ma, "head_ms": mb, "ratio": mb / ma, "parent_samples": a,
+            "head_samples": b, "target": 1.05, "pass": mb / ma <= 1.05}
+
+
+def rerender(scene, method, change, repeats):
+    """Median full render and median re-render after alternating ``change`` values, in one run."""
+    key, values = change
+    s = rr.Session(scene)
+    for _ in range(C.WARMUP):
+        s.clear()
+        s.render(method)
+    full, again, ran = [], [], None
+    for k in range(repeats):
+        s.clear()
+        t0 = time.perf_counter()
+        s.render(method)
+        full.append((time.perf_counter() - t0) * 1e3)
+        s.update({key: values[(k + 1) % 2]})
+        t0 = time.perf_counter()
+        res = s.render(method)
+        again.append((time.perf_counter() - t0) * 1e3)
+        s.update({key: values[k % 2]})
+        ran = [p["stage"] for p in res.meta["plan"] if p["ran"]]
+    mf, ma = statistics.median(full), statistics.median(again)
+    return {"change": key, "full_ms": mf, "rerender_ms": ma, "ratio": ma / mf, "stages_rerun": ran,
+            "full_samples": full, "rerender_samples": again}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--parent", default="95a4a58", help="the commit before the stage graph")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--skip-parent", action="store_true", help="only the re-render ratios")
+    a = ap.parse_args(argv)
+    out = {"machine": C.machine_line(), "rev": C.git_rev()}
+    if not a.skip_parent:
+        out["no_slowdown"] = r = no_slowdown(a.parent, a.repeats)
+        print(f"bunny 512^2, image-space render: parent {r['parent_ms']:.1f} ms, HEAD {r['head_ms']:.1f} ms, "
+              f"ratio {r['ratio']:.3f} (target <= 1.05) {'PASS' if r['pass'] else 'MISS'}", flush=True)
+    r = rerender(rr.load_scene(None), "imagespace", ("imagespace.iterations", [5, 6]), a.repeats)
+    r.update(target=0.6, **{"pass": r["ratio"] <= 0.6})
+    out["iterations"] = r
+    print(f"bunny, imagespace.iterations changed: full {r['full_ms']:.1f} ms, re-render {r['rerender_ms']:.1f} ms, "
+          f"ratio {r['ratio']:.3f} (target <= 0.6) {'PASS' if r['pass'] else 'MISS'}; re-ran {r['stages_rerun']}",
+          flush=True)
+    from refraction_ref.levelmap.pipeline import DEFAULT_SCENE_PATH
+
+    sc = rr.load_scene(DEFAULT_SCENE_PATH)
+    eye = list(sc.data["camera"]["eye"])
+    r = rerender(sc, "levelmap", ("camera.eye", [eye, [eye[0] + 0.2, eye[1], eye[2]]]), a.repeats)
+    r.update(target=1 / 3, **{"pass": r["ratio"] <= 1 / 3})
+    out["water_camera"] = r
+    print(f"pool, camera-only change: full {r['full_ms']:.1f} ms, re-render {r['rerender_ms']:.1f} ms, "
+          f"ratio {r['ratio']:.3f} (target <= 0.333) {'PASS' if r['pass'] else 'MISS'}; re-ran {r['stages_rerun']}",
+          flush=True)
+    print("wrote " + C.write_json("graph.json", out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,439 @@
+"""Methods as registered graphs of stages, knob blocks owned by the code that reads them.
+
+Every method (``imagespace``, ``exact``, ``levelmap``, ``volumetric``) is a
+:class:`Method`: an ordered tuple of :class:`Stage` s, each declaring the
+scene keys and knobs it ``reads``, the upstream stages whose buffers it uses
+(``after``) and the buffers it ``makes``. :func:`run_graph` runs the graph
+with a cache: a stage re-runs when a key it reads changed or an upstream
+stage re-ran, and is reused otherwise. ``render`` is the graph run with an
+empty cache, :class:`~refraction_ref.session.Session` keeps one between
+renders. ``meta["plan"]`` records, per stage, whether it ran or was reused
+and why; ``keep`` returns the stages' buffers as ``stage.<stage>.<buffer>``.
+
+A stage sees only what it declares: its ``ctx.scene`` is the scene
+*projected* onto its ``reads`` (every other key raises
+:class:`UndeclaredRead`), so a stage cannot silently depend on a knob that
+is missing from its cache key.
+
+Knob blocks (``imagespace``, ``exact``, ``volumetric``, ``volume``,
+``levelmap``, ``water``) are :class:`KnobBlock` s registered by the
+method's ``knobs`` module, which holds the defaults (the seed's own
+settings) and the validation beside each other; each key has exactly one
+owning block. A key that moves keeps its old name as an alias
+(``KnobBlock.aliases``).
+
+Anchors: Mitsuba 3 registers plugins by name, each reading its own
+parameter block; build systems (make, Dask graphs) key work on its inputs.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import importlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["Stage", "Method", "KnobBlock", "Context", "UndeclaredRead", "register_method", "register_block",
+           "get_method", "method_names", "BLOCKS", "run_graph", "stage_inputs", "STAGE_PREFIX", "describe",
+           "file_stamp"]
+
+#: prefix of kept stage buffers in a result's arrays: ``stage.<stage>.<buffer>``
+STAGE_PREFIX = "stage."
+
+
+class UndeclaredRead(KeyError):
+    """A stage read a scene key it does not declare in ``Stage.reads`` (a bug of the stage)."""
+
+    def __str__(self):
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class KnobBlock:
+    """A method's parameter block: defaults, validation, documentation.
+
+    Attributes
+    ----------
+    name : str
+        Top-level scene key (``"imagespace"``).
+    defaults : dict or None
+        The seed's own settings; ``None`` for a block that is absent unless
+        given (``water``, ``volume``).
+    validate : callable
+        ``validate(data, base_dir)``: checks the block inside the merged
+        scene, raising :class:`~refraction_ref.scene.SceneError` naming the key.
+    owner : str
+        The method that reads it (documentation; ``docs/oracle.md``).
+    aliases : dict
+        Old key name -> new key name, for keys that moved.
+    merge : callable or None
+        ``merge(data)``: fill a block that is given (``water``) with its
+        defaults while the scene is resolved; None for plain blocks.
+    """
+
+    name: str
+    defaults: dict | None
+    validate: Callable
+    owner: str
+    aliases: dict = field(default_factory=dict)
+    merge: Callable | None = None
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One pass of a method.
+
+    Attributes
+    ----------
+    name : str
+        Unique within its method; the key in ``timings_ms`` and ``plan``.
+    run : callable
+        ``run(ctx) -> dict`` of named buffers (arrays or Python objects).
+    reads : tuple of str
+        Dotted scene keys it depends on (``"camera"``, ``"imagespace.layers"``,
+        ``"objects"``); a change to any re-runs it.
+    after : tuple of str
+        Upstream stages whose buffers it reads (``ctx.buf[name]``).
+    makes : tuple of str
+        Buffer names it returns; the arrays among them can be kept.
+    doc : str
+        One line: what the pass does and the paper's section.
+    diagnostic : bool
+        A stage that makes buffers for inspection only (e.g. per-layer
+        normal maps the trace computes on the fly): it runs only when kept.
+    """
+
+    name: str
+    run: Callable
+    reads: tuple = ()
+    after: tuple = ()
+    makes: tuple = ()
+    doc: str = ""
+    diagnostic: bool = False
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered method.
+
+    Attributes
+    ----------
+    name : str
+    blocks : tuple of str
+        The knob blocks it owns.
+    stages : callable
+        ``stages(scene) -> tuple of Stage`` in execution order: the graph
+        for this scene (e.g. caustic stages only when the scene has lights
+        and receivers); each stage's ``after`` names stages earlier in it.
+    assemble : callable
+        ``assemble(scene, buffers, stats) -> (arrays, info)``: the output
+        keys of ``docs/oracle.md`` from the stages' buffers.
+    skipped : callable
+        ``skipped(scene) -> list of {stage, ran: False, why}`` for stages the
+        scene does not need (said in ``meta.plan``).
+    warm : callable or None
+        Compile the method's kernels on a tiny scene (once per process), so
+        that ``timings_ms`` measure run time, not JIT time.
+    doc : str
+    """
+
+    name: str
+    blocks: tuple
+    stages: Callable
+    assemble: Callable
+    skipped: Callable = lambda scene: []
+    warm: Callable | None = None
+    doc: str = ""
+
+
+BLOCKS: dict = {}
+_METHODS: dict = {}
+#: where each built-in method registers itself (imported on first use: the kernels are heavy)
+_BUILTIN = {
+    "imagespace": "refraction_ref.imagespace.pipeline",
+    "exact": "refraction_ref.exact_render",
+    "levelmap": "refraction_ref.levelmap.pipeline",
+    "volumetric": "refraction_ref.volumetric.pipeline",
+}
+
+
+def register_block(block):
+    """Register a :class:`KnobBlock`; returns it."""
+    BLOCKS[block.name] = block
+    return block
+
+
+def register_method(method):
+    """Register a :class:`Method` by name; returns it."""
+    _METHODS[method.name] = method
+    return method
+
+
+def method_names():
+    """Names of the registered (and built-in) methods."""
+    return tuple(dict.fromkeys([*_BUILTIN, *_METHODS]))
+
+
+def get_method(name):
+    """The registered :class:`Method` called ``name`` (importing a built-in one on first use)."""
+    if name not in _METHODS and name in _BUILTIN:
+        importlib.import_module(_BUILTIN[name])
+    if name not in _METHODS:
+        from .scene import SceneError
+
+        raise SceneError(f"unknown method {name!r}; choose one of {', '.join(method_names())}")
+    return _METHODS[name]
+
+
+# --------------------------------------------------------------------- projection
+class _Projected(dict):
+    """A dict holding only a stage's declared keys; any other key is an :class:`UndeclaredRead`."""
+
+    __slots__ = ("_where", "_stage")
+
+    def __missing__(self, key):
+        raise UndeclaredRead(f"stage '{self._stage}' read '{self._where}{key}', which it does not declare "
+                             "in Stage.reads: add it there (or it would reuse a stale result)")
+
+    def get(self, key, default=None):
+        if key in self:
+            return dict.__getitem__(self, key)
+        return self.__missing__(key)
+
+
+def _proj(stage, where, d):
+    p = _Projected(d)
+    p._where = where
+    p._stage = stage
+    return p
+
+
+def _project(data, reads, stage):
+    out = _proj(stage, "", {})
+    for key in reads:
+        parts = key.split(".")
+        src, dst, where = data, out, ""
+        for depth, part in enumerate(parts):
+            if not isinstance(src, dict) or part not in src:
+                raise KeyError(f"stage '{stage}' declares '{key}', which the scene does not have")
+            if depth == len(parts) - 1 or src[part] is None or not isinstance(src[part], dict):
+                dict.__setitem__(dst, part, src[part])
+                break
+            where += part + "."
+            if not isinstance(dst.get(part) if part in dst else None, _Projected):
+                dict.__setitem__(dst, part, _proj(stage, where, {}))
+            src, dst = src[part], dict.__getitem__(dst, part)
+    return out
+
+
+# --------------------------------------------------------------------- cache keys
+def _lookup(data, key):
+    node = data
+    for part in key.split("."):
+        node = node[part]
+    return node
+
+
+def describe(x, base_dir="."):
+    """JSON-able stand-in of a scene value: arrays by hash, files by stat, callables by identity."""
+    if isinstance(x, str) and os.path.splitext(x)[1] and os.path.isfile(os.path.join(base_dir, x)):
+        return file_stamp(os.path.normpath(os.path.join(base_dir, x)))
+    if isinstance(x, np.ndarray):
+        a = np.ascontiguousarray(x)
+        return {"array": list(a.shape), "dtype": str(a.dtype), "sha1": hashlib.sha1(a.view(np.uint8)).hexdigest()}
+    if isinstance(x, dict):
+        return {str(k): describe(v, base_dir) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [describe(v, base_dir) for v in x]
+    if callable(x):
+        return f"<callable {id(x)}>"
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def stage_inputs(scene, stage):
+    """The values a stage's cache key is made of: ``{key: value}`` over its ``reads``."""
+    out = {}
+    for key in stage.reads:
+        v = describe(_lookup(scene.data, key), scene.base_dir)
+        if key == "objects" or key.startswith("objects."):
+            v = copy.deepcopy(v)
+            for (kind, k), fn in scene.callables.items():
+                if kind == "deform" and isinstance(v, list) and k < len(v):
+                    v[k]["deform"] = f"<callable {id(fn)}>"
+        out[key] = v
+    return json.loads(json.dumps(out, sort_keys=True, default=str))
+
+
+def _diff(old, new, prefix=""):
+    """Dotted names of the entries that differ between two JSON-like values."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for k in sorted(set(old) | set(new)):
+            name = f"{prefix}.{k}" if prefix else str(k)
+            out += [name] if (k not in old or k not in new) else _diff(old[k], new[k], name)
+        return out
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        out = []
+        for k, (a, b) in enumerate(zip(old, new)):
+            out += _diff(a, b, f"{prefix}.{k}" if prefix else str(k))
+        return out
+    return [] if old == new else [prefix or "(all)"]
+
+
+# --------------------------------------------------------------------- running
+class Context:
+    """What a stage's ``run`` receives.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene projected onto the stage's ``reads`` (``base_dir`` and the
+        Python callables of the objects are kept).
+    buf : dict
+        ``{upstream stage: its buffers}`` for the stages in ``after``.
+    notes : list of str
+        Appended to the stage's ``plan`` entry.
+    stats : dict
+        Statistics for ``meta`` (kept with the cached buffers, so a reused
+        stage reports them too).
+    timings : dict
+        Sub-stage times in ms (``timings_ms["<stage>.<part>"]``), optional.
+    progress : bool
+    """
+
+    def __init__(self, scene, buf, progress=False):
+        self.scene = scene
+        self.buf = buf
+        self.notes = []
+        self.stats = {}
+        self.timings = {}
+        self.progress = progress
+
+    def note(self, text):
+        self.notes.append(text)
+
+
+def _scene_view(scene, stage):
+    from .scene import Scene
+
+    return Scene(_project(scene.data, stage.reads, stage.name), scene.base_dir, scene.callables)
+
+
+def _keep_names(method_name, stages, keep):
+    """The stage names whose buffers to keep; a bad name raises naming it."""
+    if not keep:
+        return set()
+    names = [s.name for s in stages]
+    if keep in ("stages", "all", True):
+        return set(names)
+    asked = [k.strip() for k in (keep.split(",") if isinstance(keep, str) else keep) if k.strip()]
+    bad = [k for k in asked if k not in names]
+    if bad:
+        from .scene import SceneError
+
+        raise SceneError(f"keep: unknown stage {', '.join(repr(b) for b in bad)} for the {method_name} method "
+                         f"on this scene; its stages are {', '.join(names)} (or 'stages' for all)")
+    return set(asked)
+
+
+def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
+    """Run a method's stage graph on a scene, reusing cached stages whose inputs did not change.
+
+    Parameters
+    ----------
+    method : Method or str
+    scene : Scene
+        Validated.
+    cache : dict, optional
+        ``{(method, stage): {"inputs", "out", "notes", "stats"}}``, updated in place.
+    keep : None, 'stages', str or list of str
+        Stage names whose array buffers are added as ``stage.<stage>.<buffer>``.
+    progress : bool
+    warm : bool
+        Compile the method's kernels first (``Method.warm``).
+
+    Returns
+    -------
+    arrays : dict
+    info : dict
+        ``timings_ms`` (one entry per stage that ran, ms), ``plan``
+        (ran or reused, and why, per stage), ``stats`` and the method's own
+        statistics.
+    """
+    if isinstance(method, str):
+        method = get_method(method)
+    if cache is None:
+        cache = {}
+    stages = tuple(method.stages(scene))
+    kept = _keep_names(method.name, stages, keep)
+    if warm and method.warm is not None:
+        method.warm()
+    timings, plan, stats = {}, [], {}
+    bufs, ran = {}, {}
+    tic = time.perf_counter
+    for st in stages:
+        if st.diagnostic and st.name not in kept:
+            plan.append({"stage": st.name, "ran": False,
+                         "why": f"inspection buffers only: runs when kept (keep='{st.name}')"})
+            continue
+        inputs = stage_inputs(scene, st)
+        ck = (method.name, st.name)
+        prev = cache.get(ck)
+        up_ran = [u for u in st.after if ran.get(u)]
+        if prev is not None and prev["inputs"] == inputs and not up_ran:
+            bufs[st.name] = prev["out"]
+            ran[st.name] = False
+            stats.update(prev["stats"])
+            plan.append({"stage": st.name, "ran": False,
+                         "why": "reused: its inputs and upstream stages are unchanged"})
+            continue
+        if prev is None:
+            why = "no earlier result"
+        else:
+            changed = _diff(prev["inputs"], inputs)
+            why = ("changed: " + ", ".join(changed[:6]) + (" ..." if len(changed) > 6 else "")) if changed else ""
+            if up_ran:
+                why = (why + "; " if why else "") + "upstream re-ran: " + ", ".join(up_ran)
+        ctx = Context(_scene_view(scene, st), {u: bufs[u] for u in st.after}, progress)
+        t0 = tic()
+        out = st.run(ctx)
+        timings[st.name] = (tic() - t0) * 1e3
+        for k, v in ctx.timings.items():
+            timings[f"{st.name}.{k}"] = v
+        missing = [m for m in st.makes if m not in out]
+        if missing:
+            raise RuntimeError(f"stage '{st.name}' did not make {missing}")
+        cache[ck] = {"inputs": inputs, "out": out, "stats": dict(ctx.stats)}
+        bufs[st.name] = out
+        ran[st.name] = True
+        stats.update(ctx.stats)
+        parts = [] if (why == "no earlier result" and ctx.notes) else [why]
+        text = " | ".join(parts + (["; ".join(ctx.notes)] if ctx.notes else []))
+        plan.append({"stage": st.name, "ran": True, "why": text})
+    for s in method.skipped(scene):
+        plan.append(s)
+    arrays, info = method.assemble(scene, bufs, stats)
+    for name in kept:
+        for b in next(s for s in stages if s.name == name).makes:
+            v = bufs[name].get(b)
+            if isinstance(v, np.ndarray) and (v.size <= 1 or 0 not in v.strides):  # not a broadcast placeholder
+                arrays[f"{STAGE_PREFIX}{name}.{b}"] = v
+    info = dict(info)
+    info["timings_ms"] = timings
+    info["plan"] = plan
+    info["stages"] = [s.name for s in stages]
+    return arrays, info
+
+
+def file_stamp(path):
+    """``{path, mtime, size}`` of a file, for cache keys of stages that read it."""
+    st = os.stat(path) if os.path.exists(path) else None
+    return {"path": path, "mtime": st.st_mtime if st else None, "size": st.st_size if st else None}

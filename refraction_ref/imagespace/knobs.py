@@ -1,0 +1,92 @@
+"""The ``imagespace`` knob block (Chaudhari 2008): defaults and validation side by side.
+
+Defaults are the thesis's own settings where it states one (5 binary-search
+iterations, §3.6; 256 slices, §3.3; 32 layers, §3.4.2; a 256x256 MIP level
+for the search bounds, §3.7; perspective-corrected central differences,
+eq. 3.2). The caustic knobs (``photons``, ``gather``, ``receiver_hit``,
+``caustic_map``) are read by the caustic stages (§4.1) that the image-space
+method adds when a scene has lights and receivers.
+
+Importing this module is cheap (no kernels): scene loading reads it.
+"""
+
+from __future__ import annotations
+
+from ..graph import KnobBlock, register_block
+
+__all__ = ["IMAGESPACE_DEFAULTS", "CHOICES", "validate_imagespace", "BLOCK"]
+
+#: Every key is a knob; see the table in ``docs/oracle.md``.
+IMAGESPACE_DEFAULTS = {
+    "iterations": 5,          # binary-search iterations per interface (§3.6)
+    "layers": 32,             # depth layers peeled (§3.4.2)
+    "slices": 256,            # bitmask slices S (§3.3)
+    "bounds": "mip",          # search bound: 'mip' (256x256 MIP + margin, §3.7) | 'global' (exact max)
+    "mip_size": 256,          # MIP level used for the reduction (§3.7)
+    "bound_margin": 0.01,     # the "small constant", as a fraction of the object's depth range
+    "blend": "or",            # 'or' | 'add' (GPU additive blending with carry, §3.3)
+    "depth": "bitmask",       # 'bitmask' | 'float' (A-buffer of exact fragment depths)
+    "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
+    "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
+    "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4) | 'cross'
+    "delta": 2,               # pixel step of the central differences (eq. 3.2; smoother than 1, Fig. 3.4)
+    "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
+    "tir": False,             # follow total internal reflection back to preceding layers
+    "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)
+    "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
+    # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
+    "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
+    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
+    "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
+    "caustic_map": 512,       # texels per side of each receiver's caustic map (exact reference too)
+}
+
+CHOICES = {
+    "bounds": ("mip", "global"),
+    "blend": ("or", "add"),
+    "depth": ("bitmask", "float"),
+    "slicing": ("local", "global"),
+    "peeling": ("separate", "lut"),
+    "normals": ("forward", "central", "mesh3x3", "cross"),
+    "receiver_hit": ("eyespace", "exact"),
+}
+
+
+def validate_imagespace(data, base_dir="."):
+    """Check ``data['imagespace']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
+    from ..scene import SceneError, _num
+
+    im = data["imagespace"]
+    for key, choices in CHOICES.items():
+        if im[key] not in choices:
+            raise SceneError(f"scene: 'imagespace.{key}' is {im[key]!r}; choose one of {', '.join(choices)}")
+    _num(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
+    _num(im["layers"], "imagespace.layers", 1, 32, integer=True)
+    _num(im["slices"], "imagespace.slices", 32, 4096, integer=True)
+    if im["slices"] % 32:
+        raise SceneError(f"scene: imagespace.slices is {im['slices']}; it must be a multiple of 32 "
+                         "(slices are stored in 32-bit words)")
+    _num(im["mip_size"], "imagespace.mip_size", 1, integer=True)
+    _num(im["bound_margin"], "imagespace.bound_margin", 0.0)
+    _num(im["delta"], "imagespace.delta", 1, 8, integer=True)
+    _num(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
+    _num(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
+    _num(im["record"], "imagespace.record", 0, 64, integer=True)
+    if not isinstance(im["tir"], bool):
+        raise SceneError(f"scene: imagespace.tir must be true or false, got {im['tir']!r}")
+    _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
+    _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
+    if im["gather"] % 2 == 0:
+        raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
+                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
+    _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
+    c = data["camera"]
+    W, H = c["width"], c["height"]
+    need = W * H * (im["slices"] // 8 + 8 * (im["layers"] + 24))
+    if need > 16 * 2**30:
+        raise SceneError(f"scene: {W}x{H} with {im['slices']} slices and {im['layers']} layers needs "
+                         f"about {need / 2**30:.1f} GiB; lower the resolution")
+    return data
+
+
+BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace"))
