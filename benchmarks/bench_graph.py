@@ -87,20 +87,21 @@ def rerender(scene, method, change, repeats):
     """Median full render and median re-render after alternating ``change`` values, in one run."""
     key, values = change
     s = rr.Session(scene)
-    for _ in range(C.WARMUP):
+    for k in range(C.WARMUP):
         s.clear()
+        s.update({key: values[k % 2]})
         s.render(method)
     full, again, ran = [], [], None
-    for k in range(repeats):
+    for _ in range(repeats):
         s.clear()
+        s.update({key: values[0]})
         t0 = time.perf_counter()
         s.render(method)
         full.append((time.perf_counter() - t0) * 1e3)
-        s.update({key: values[(k + 1) % 2]})
+        s.update({key: values[1]})
         t0 = time.perf_counter()
         res = s.render(method)
         again.append((time.perf_counter() - t0) * 1e3)
-        s.update({key: values[k % 2]})
         ran = [p["stage"] for p in res.meta["plan"] if p["ran"]]
     mf, ma = statistics.median(full), statistics.median(again)
     return {"change": key, "full_ms": mf, "rerender_ms": ma, "ratio": ma / mf, "stages_rerun": ran,

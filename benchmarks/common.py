@@ -258,7 +258,7 @@ def _imagespace(layers=32, slices=256, iterations=5, **extra):
 
 
 def make_scene(objects, res=512, eye_z=2.6, **imagespace):
-    """A scene dict in the ORACLE.md format, validated by ``rr.load_scene``."""
+    """A scene dict in the docs/oracle.md format, validated by ``rr.load_scene``."""
     # no receivers: these benchmarks time the refraction pass alone (caustics: bench_caustics.py)
     return rr.load_scene({"camera": _camera(res, eye_z), "objects": objects, "receivers": [],
                           "imagespace": _imagespace(**imagespace)})

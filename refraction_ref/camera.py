@@ -3,7 +3,7 @@
 View space is right-handed and looks down -z (OpenGL); "depth" is the
 view-space distance along the view axis, ``d = -z_view > 0``. Pixel (row i,
 column j) is sampled at its centre, normalised screen coordinates
-``((j + 0.5) / W, (i + 0.5) / H)`` with row 0 at the top (ORACLE.md).
+``((j + 0.5) / W, (i + 0.5) / H)`` with row 0 at the top (docs/oracle.md).
 
 Screen coordinates used by the kernels are continuous pixel units:
 ``col = j + 0.5`` and ``row = i + 0.5`` at pixel centres. The projection of

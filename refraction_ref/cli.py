@@ -75,7 +75,7 @@ def main(argv=None):
                                 description="CPU reference renderer for refraction through transparent objects.")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene (default: the bundled glass bunny)")
-    r.add_argument("scene", nargs="?", default=None, help="scene JSON (ORACLE.md); omit for the default scene")
+    r.add_argument("scene", nargs="?", default=None, help="scene JSON (docs/oracle.md); omit for the default scene")
     from .graph import method_names
 
     r.add_argument("--method", default="imagespace", choices=list(method_names()),

@@ -22,7 +22,7 @@ def compare_arrays(a, b, mask=None):
     Parameters
     ----------
     a, b : dict
-        ORACLE.md arrays of two runs of the same scene and camera.
+        docs/oracle.md arrays of two runs of the same scene and camera.
     mask : (H, W) bool, optional
         Pixels to compare; default: pixels whose primary ray hit in ``b``.
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import optics
+from .embree import embree_scene
 from .status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
@@ -145,16 +146,6 @@ def _validate(vertices, faces, face_object, object_ior, object_absorption,
     if int(max_bounces) != max_bounces or not (0 <= max_bounces <= np.iinfo(np.int16).max):
         raise ValueError(f"max_bounces must be an integer in [0, 32767], got {max_bounces}")
     return v, f, fo, ior, ab, o, d, vn
-
-
-def _build_scene(v, f):
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
-    scene = rtcs.EmbreeScene()
-    TriangleMesh(scene, np.ascontiguousarray(v, dtype=np.float32),
-                 np.ascontiguousarray(f, dtype=np.int32))
-    return scene
 
 
 def _dot(a, b):
@@ -359,7 +350,7 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     if n == 0:
         scene = None
     else:
-        scene = _build_scene(v, f)
+        scene = embree_scene(v, f)
 
     bar = None
     if progress:

@@ -168,14 +168,9 @@ def _skipped(scene):
 
 def _assemble(scene, bufs, stats):
     if "water" in bufs:
-        R = len(bufs["level_map"]["pairs"])
-        arrays = {}
-        for r in range(R):
-            arrays[f"caustic_map_{r}"] = bufs["trace"][f"caustic_map_{r}"]
-            arrays[f"caustic_frame_{r}"] = bufs["trace"][f"caustic_frame_{r}"]
-        arrays["image"] = bufs["image"]["image"]
-        arrays["object_mask"] = bufs["image"]["object_mask"]
-        return arrays, {"stats": stats["water_stats"], "triangles": stats["triangles"]}
+        from .levelmap.pipeline import water_arrays
+
+        return water_arrays(bufs, "trace"), {"stats": stats["water_stats"], "triangles": stats["triangles"]}
     tr = bufs["trace"]
     arrays = {k: tr[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
                                  "path_length", "status")}
@@ -191,6 +186,7 @@ def _assemble(scene, bufs, stats):
 
 METHOD = register_method(Method(
     "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped,
+    results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final"),
     doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface"))
 
 

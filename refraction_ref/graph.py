@@ -140,6 +140,11 @@ class Method:
     warm : callable or None
         Compile the method's kernels on a tiny scene (once per process), so
         that ``timings_ms`` measure run time, not JIT time.
+    results : tuple of str
+        What ``assemble`` reads: ``"stage"`` (all its buffers) or
+        ``"stage.buffer"``. A render without a session frees every other
+        buffer once the last stage that reads it has run, so later stages
+        reuse that memory (fresh pages cost several times a write here).
     doc : str
     """
 
@@ -149,6 +154,7 @@ class Method:
     assemble: Callable
     skipped: Callable = lambda scene: []
     warm: Callable | None = None
+    results: tuple = ()
     doc: str = ""
 
 
@@ -370,10 +376,13 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
     """
     if isinstance(method, str):
         method = get_method(method)
-    if cache is None:
+    ephemeral = cache is None  # nothing outlives this call: free buffers after their last reader
+    if ephemeral:
         cache = {}
     stages = tuple(method.stages(scene))
     kept = _keep_names(method.name, stages, keep)
+    active = [st for st in stages if not st.diagnostic or st.name in kept]
+    last_reader = {u: st.name for st in active for u in st.after}
     if warm and method.warm is not None:
         method.warm()
     timings, plan, stats = {}, [], {}
@@ -411,13 +420,18 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
         missing = [m for m in st.makes if m not in out]
         if missing:
             raise RuntimeError(f"stage '{st.name}' did not make {missing}")
-        cache[ck] = {"inputs": inputs, "out": out, "stats": dict(ctx.stats)}
+        if not ephemeral:
+            cache[ck] = {"inputs": inputs, "out": out, "stats": dict(ctx.stats)}
         bufs[st.name] = out
         ran[st.name] = True
         stats.update(ctx.stats)
         parts = [] if (why == "no earlier result" and ctx.notes) else [why]
         text = " | ".join(parts + (["; ".join(ctx.notes)] if ctx.notes else []))
         plan.append({"stage": st.name, "ran": True, "why": text})
+        if ephemeral:
+            for u in st.after:
+                if last_reader.get(u) == st.name and u not in kept:
+                    bufs[u] = _results_only(bufs[u], u, method.results)
     for s in method.skipped(scene):
         plan.append(s)
     arrays, info = method.assemble(scene, bufs, stats)
@@ -431,6 +445,14 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
     info["plan"] = plan
     info["stages"] = [s.name for s in stages]
     return arrays, info
+
+
+def _results_only(buffers, stage, results):
+    """The buffers of ``stage`` that ``assemble`` reads (``Method.results``); the rest is dropped."""
+    if stage in results:
+        return buffers
+    keep = {r.split(".", 1)[1] for r in results if r.startswith(stage + ".")}
+    return {k: v for k, v in buffers.items() if k in keep}
 
 
 def file_stamp(path):

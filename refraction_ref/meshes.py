@@ -16,7 +16,7 @@ Built-in meshes:
 
 A mesh with ``fit: s`` is centred on its bounding-box centre and scaled so
 that its largest extent is ``s``; then its ``transform`` is applied (scale,
-rotate in degrees about x, y, z in that order, translate), as ORACLE.md says.
+rotate in degrees about x, y, z in that order, translate), as docs/oracle.md says.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Run results: the output half of ``ORACLE.md`` (one ``.npz`` plus a PNG)."""
+"""Run results: the output half of ``docs/oracle.md`` (one ``.npz`` plus a PNG)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def tonemap(image):
 
 @dataclass
 class Result:
-    """Arrays with the ORACLE.md names plus ``meta`` (scene, parameters, timings, plan)."""
+    """Arrays with the docs/oracle.md names plus ``meta`` (scene, parameters, timings, plan)."""
 
     arrays: dict
     meta: dict = field(default_factory=dict)

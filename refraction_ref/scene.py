@@ -1,4 +1,4 @@
-"""Scene loading and validation (the input half of ``ORACLE.md``).
+"""Scene loading and validation (the input half of ``docs/oracle.md``).
 
 A scene is a JSON file or a dict. :func:`load_scene` merges it over the
 documented defaults, refuses unknown keys and bad values with one message
@@ -326,7 +326,7 @@ def load_scene(src=None, overrides=None):
     Parameters
     ----------
     src : str, os.PathLike, dict, Scene or None
-        A JSON file, a dict in the ``ORACLE.md`` format, an existing scene,
+        A JSON file, a dict in the ``docs/oracle.md`` format, an existing scene,
         or None for the bundled default scene (a glass bunny, IOR 1.2, in a
         checker environment, 512x512).
     overrides : dict, optional
@@ -356,7 +356,7 @@ def load_scene(src=None, overrides=None):
         path = os.fspath(src)
         if not os.path.isfile(path):
             raise SceneError(f"scene file '{path}' does not exist; give the path of a JSON scene "
-                             "(see ORACLE.md) or omit it to render the default scene")
+                             "(see docs/oracle.md) or omit it to render the default scene")
         try:
             with open(path) as f:
                 raw = json.load(f)

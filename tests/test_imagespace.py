@@ -47,7 +47,7 @@ def _mesh_scene(mesh, W=64, ior=1.5, eye=(0.0, 0.0, 3.0), fov=30.0, rotate=(0, 0
 
 
 def _check_invariants(r):
-    """The ORACLE.md contract of every image-space result."""
+    """The docs/oracle.md contract of every image-space result."""
     a = r.arrays
     H, W = a["status"].shape
     for k in ("ray_origin", "ray_dir", "exit_pos", "exit_dir"):
@@ -66,7 +66,7 @@ def _check_invariants(r):
     ex = st_ == 1
     assert np.all(np.isfinite(a["exit_pos"][ex])) and np.all(np.isfinite(a["exit_dir"][ex]))
     np.testing.assert_allclose(np.linalg.norm(a["exit_dir"][ex], axis=-1), 1.0, atol=1e-9)
-    stuck = st_ >= 2  # did not leave: NaN, as ORACLE.md says
+    stuck = st_ >= 2  # did not leave: NaN, as docs/oracle.md says
     assert np.all(np.isnan(a["exit_pos"][stuck])) and np.all(np.isnan(a["exit_dir"][stuck]))
     miss = st_ == 0  # a missed ray leaves unchanged
     np.testing.assert_allclose(a["exit_dir"][miss], a["ray_dir"][miss], atol=1e-12)

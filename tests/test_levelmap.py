@@ -286,7 +286,7 @@ def test_default_scene_and_render_entry_point():
     assert res["image"].dtype == np.float32 and res["image"].shape == (32, 32, 3)
     f = res["caustic_frame_0"]
     box = prepare(sc)["pairs"][0][0].box
-    a, b = 10, 20  # texel (a, b) covers origin + (b + .5)/Wc u + (a + .5)/Hc v (ORACLE.md)
+    a, b = 10, 20  # texel (a, b) covers origin + (b + .5)/Wc u + (a + .5)/Hc v (docs/oracle.md)
     p = from_map(box, np.array([b + 0.5]), np.array([a + 0.5]), np.array([-box.h / 2]))[0]
     assert np.allclose(p, f[0] + (b + 0.5) / 64 * f[1] + (a + 0.5) / 64 * f[2], atol=1e-12)
     assert abs(np.linalg.norm(f[3]) - 1) < 1e-12 and abs(f[3] @ f[1]) < 1e-9 and abs(f[3] @ f[2]) < 1e-9

@@ -19,7 +19,7 @@ These are stages of the image-space and exact methods' graphs
 (:func:`imagespace_caustic_stages`, :func:`exact_caustic_stages`), added
 when the scene has lights and receivers.
 
-Outputs (ORACLE.md, per receiver ``r``): ``caustic_map_r`` (Hc, Wc) float32,
+Outputs (docs/oracle.md, per receiver ``r``): ``caustic_map_r`` (Hc, Wc) float32,
 the irradiance carried by photons that passed through a refractive object,
 for lights of unit strength (unit irradiance perpendicular to a directional
 light, unit intensity of a point light), averaged over the three colour
@@ -283,11 +283,12 @@ def _st_receiver_hit(ctx, eyespace):
     return out
 
 
-def _st_splat_is(ctx):
+def _st_splat(ctx, reference):
+    """Splat each light's photons into the receivers' maps; the reference also splats its two halves."""
     d = ctx.scene.data
     size = int(d["imagespace"]["caustic_map"])
     rs = ctx.buf["receivers"]["rs"]
-    maps, stats = [], []
+    maps, stats, halves = [], [], []
     for L, hit in zip(ctx.buf["photon_trace"]["lights"], ctx.buf["receiver_hit"]["hits"]):
         if L is None:
             maps.append([np.zeros(b.size + (3,)) for b in rs.boxes])
@@ -298,11 +299,34 @@ def _st_splat_is(ctx):
         maps.append(splat_maps(rs, P, face, flux, size))
         s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
         s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
-        s["photon_texture"] = [L["cam"].width, L["cam"].width]
-        s["projection"] = L["cam"].projection
+        if reference:
+            hv = L["half"]
+            halves.append((splat_maps(rs, P, np.where(hv == 0, face, -1), flux, size),
+                           splat_maps(rs, P, np.where(hv == 1, face, -1), flux, size)))
+            s["photons"] = [int(d["exact"]["photons"])] * 2
+        else:
+            s["photon_texture"] = [L["cam"].width, L["cam"].width]
+            s["projection"] = L["cam"].projection
         stats.append(s)
     ctx.stats["caustic_lights"] = stats
+    if reference:
+        noise = _reference_noise(rs, halves)
+        ctx.stats["reference_noise_rel_l1"] = noise
+        ctx.note("own noise (relative L1 of two interleaved halves, one-texel blur): "
+                 + ", ".join(f"{v:.3g}" for v in noise))
     return {"maps": maps, **_splat_buffers(maps, len(rs.boxes))}
+
+
+def _reference_noise(rs, halves):
+    """Half the relative L1 difference of the two interleaved halves' maps, per receiver."""
+    from ..levelmap.metrics import relative_l1
+
+    noise = []
+    for r in range(len(rs.boxes)):
+        a = sum(h[0][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
+        b = sum(h[1][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
+        noise.append(0.5 * relative_l1(a, b, blur=1.0) if np.abs(b).sum() > 0 else 0.0)
+    return noise
 
 
 def _splat_buffers(maps, R):
@@ -351,7 +375,7 @@ def imagespace_caustic_stages(scene):
               after=("receivers", "photon_trace") + (("receiver_depth",) if eyespace else ()),
               makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
               doc="where exiting photons meet the receivers (§4.1)"),
-        Stage("splat", _st_splat_is, reads=("imagespace.caustic_map",),
+        Stage("splat", lambda ctx: _st_splat(ctx, False), reads=("imagespace.caustic_map",),
               after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
               doc="bilinear splat of each photon's irradiance (§2.3.2)"),
         Stage("gather", lambda ctx: _st_gather(ctx, True), reads=("imagespace.gather", "lights"),
@@ -484,40 +508,6 @@ def _st_photon_trace_exact(ctx):
     return out
 
 
-def _st_splat_exact(ctx):
-    from ..levelmap.metrics import relative_l1
-
-    d = ctx.scene.data
-    size = int(d["imagespace"]["caustic_map"])
-    rs = ctx.buf["receivers"]["rs"]
-    maps, stats, halves = [], [], []
-    for L, hit in zip(ctx.buf["photon_trace"]["lights"], ctx.buf["receiver_hit"]["hits"]):
-        if L is None:
-            maps.append([np.zeros(b.size + (3,)) for b in rs.boxes])
-            stats.append({"photons": 0})
-            continue
-        P, face = hit
-        flux = L["flux0"][L["ex"], None] * L["trans"]
-        maps.append(splat_maps(rs, P, face, flux, size))
-        hv = L["half"]
-        halves.append((splat_maps(rs, P, np.where(hv == 0, face, -1), flux, size),
-                       splat_maps(rs, P, np.where(hv == 1, face, -1), flux, size)))
-        s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
-        s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
-        s["photons"] = [int(d["exact"]["photons"])] * 2
-        stats.append(s)
-    noise = []
-    for r in range(len(rs.boxes)):
-        a = sum(h[0][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
-        b = sum(h[1][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
-        noise.append(0.5 * relative_l1(a, b, blur=1.0) if np.abs(b).sum() > 0 else 0.0)
-    ctx.stats["caustic_lights"] = stats
-    ctx.stats["reference_noise_rel_l1"] = noise
-    ctx.note("own noise (relative L1 of two interleaved halves, one-texel blur): "
-             + ", ".join(f"{v:.3g}" for v in noise))
-    return {"maps": maps, **_splat_buffers(maps, len(rs.boxes))}
-
-
 def _st_final_exact(ctx):
     d = ctx.scene.data
     b = ctx.buf
@@ -574,7 +564,7 @@ def exact_caustic_stages(scene):
         Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, False), after=("receivers", "photon_trace"),
               makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
               doc="Embree on the receivers' triangles"),
-        Stage("splat", _st_splat_exact, reads=("imagespace.caustic_map", "exact.photons"),
+        Stage("splat", lambda ctx: _st_splat(ctx, True), reads=("imagespace.caustic_map", "exact.photons"),
               after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
               doc="bilinear splat; the reference's own noise from two interleaved halves"),
         Stage("gather", lambda ctx: _st_gather(ctx, False), reads=("lights",), after=("receivers", "splat"),

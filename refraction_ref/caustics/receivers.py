@@ -45,8 +45,9 @@ import numba as nb
 import numpy as np
 
 from ..camera import project_point
+from ..embree import soup_scene
 from ..levelmap.planes import frame_of, reference_box, to_map
-from ..meshes import object_mesh
+from ..receivers import receiver_soup
 from ..raster import clip_near, rasterize
 
 __all__ = ["ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position"]
@@ -71,7 +72,7 @@ class ReceiverSet(NamedTuple):
     boxes: list
 
     def frame(self, r):
-        """``caustic_frame_r`` (4, 3): origin, u, v, normal (ORACLE.md)."""
+        """``caustic_frame_r`` (4, 3): origin, u, v, normal (docs/oracle.md)."""
         return frame_of(self.boxes[r])
 
 
@@ -86,12 +87,9 @@ def receiver_set(scene, light, size):
     size : int
         Texels per side of each caustic map.
     """
-    tris, owner, alb, boxes = [], [], [], []
-    for k, rc in enumerate(scene.data["receivers"] or []):
-        v, f = object_mesh(rc, scene.base_dir)
-        tris.append(v[f])
-        owner.append(np.full(len(f), k, np.int64))
-        alb.append(np.asarray(rc["albedo"], dtype=np.float64))
+    soup = receiver_soup(scene, "caustics")
+    boxes = []
+    for v in soup.vertices:
         centre = (v.min(axis=0) + v.max(axis=0)) / 2.0
         if light["type"] == "directional":
             T0 = np.asarray(light["direction"], dtype=np.float64)
@@ -100,11 +98,7 @@ def receiver_set(scene, light, size):
             if not np.linalg.norm(T0) > 0:
                 T0 = np.array([0.0, -1.0, 0.0])
         boxes.append(reference_box(v, T0 / np.linalg.norm(T0), int(size)))
-    t = np.concatenate(tris)
-    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
-    return ReceiverSet(t, np.concatenate(owner), n, np.stack(alb), boxes)
+    return ReceiverSet(soup.tris, soup.owner, soup.normals, soup.albedo, boxes)
 
 
 def map_position(rs, r, points):
@@ -256,26 +250,6 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
     return t, pix
 
 
-_EMBREE = {}
-
-
-def _embree(tris):
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
-    key = (id(tris), tris.shape)
-    sc = _EMBREE.get(key)
-    if sc is not None and sc[0] is tris:
-        return sc[1]
-    scene = rtcs.EmbreeScene()
-    v = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
-    TriangleMesh(scene, v, np.arange(len(v), dtype=np.int32).reshape(-1, 3))
-    if len(_EMBREE) >= 4:  # a few scenes per render: receivers, objects
-        _EMBREE.pop(next(iter(_EMBREE)))
-    _EMBREE[key] = (tris, scene)
-    return scene
-
-
 def hit_exact(tris, origins, dirs):
     """Nearest hit of world rays with triangles (Embree), t recomputed in float64.
 
@@ -298,7 +272,7 @@ def hit_exact(tris, origins, dirs):
     face = np.full(n, -1, np.int64)
     if n == 0 or len(tris) == 0:
         return t, face
-    scene = _embree(tris)
+    scene = soup_scene(tris)
     ok = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(d), axis=1)
     idx = np.flatnonzero(ok)
     for c0 in range(0, len(idx), 1 << 18):

@@ -353,7 +353,7 @@ def _skipped(scene):
 
 
 def _assemble(scene, bufs, stats):
-    cam = bufs["minmax"]["cam"]
+    cam = Camera.from_dict(scene.data["camera"])
     tr = bufs["trace"]
     origin, rdir = cam.primary_rays()
     arrays = {
@@ -387,6 +387,7 @@ def _warm():
 
 METHOD = register_method(Method(
     "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
+    results=("trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 

@@ -28,7 +28,7 @@ Beyond the thesis: with ``tir`` enabled, a total internal reflection (and
 any ray turned back towards the viewer) is followed by a *backward*
 binary search against the preceding layer, bounded by that layer's minimum
 depth - the extension the thesis sketches in §4.3 - instead of giving up.
-Every way a ray can be lost gets a status code (ORACLE.md,
+Every way a ray can be lost gets a status code (docs/oracle.md,
 :mod:`refraction_ref.status`):
 
 === ========== =======================================================

@@ -27,31 +27,16 @@ References
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from ..camera import Camera
+from ..embree import soup_scene
 from ..optics import refract
-from .casting import shade_image
-from .pipeline import prepare
-from .planes import frame_of, to_map
+from .planes import to_map
 from .water import incident_directions, surface_normals, wave_gradient, wave_height
 
 __all__ = ["render_water_exact", "trace_water_photons"]
 
 _CHUNK = 1 << 18
-
-
-def _embree(tris):
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
-    scene = rtcs.EmbreeScene()
-    v = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
-    f = np.arange(len(v), dtype=np.int32).reshape(-1, 3)
-    TriangleMesh(scene, v, f)
-    return scene
 
 
 def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=False):
@@ -70,7 +55,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
     sx, sz = (float(s) for s in water["size"])
     M = int(samples)
     rng = np.random.default_rng([int(seed), int(light_index)])
-    emb = ctx.setdefault("_embree", _embree(rec.tris))
+    emb = soup_scene(rec.tris)
     dA = (sx / M) * (sz / M)
     n_hit = n_dep = 0
     rows_per = max(1, _CHUNK // M)

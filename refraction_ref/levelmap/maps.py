@@ -28,28 +28,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ..raster import ortho_setup, rasterize_ortho
+from ..receivers import Receivers  # the receivers' triangle soup, shared with the caustics
 from .planes import to_map
 
 __all__ = ["Receivers", "LevelMap", "level_map", "receiver_selection", "map_setup"]
-
-
-class Receivers(NamedTuple):
-    """Every receiver triangle of a scene in one soup.
-
-    Attributes
-    ----------
-    tris : (T, 3, 3) float64 world vertices
-    owner : (T,) int64 receiver index
-    normals : (T, 3) float64 unit face normals (zero for zero-area faces)
-    albedo : (R, 3) float64
-    vertices : list of (V_r, 3) per receiver (for the bounding boxes)
-    """
-
-    tris: np.ndarray
-    owner: np.ndarray
-    normals: np.ndarray
-    albedo: np.ndarray
-    vertices: list
 
 
 class LevelMap(NamedTuple):

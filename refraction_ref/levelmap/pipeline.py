@@ -36,13 +36,13 @@ import numpy as np
 
 from ..camera import Camera
 from ..graph import Method, Stage, register_method, run_graph
-from ..meshes import object_mesh
+from ..receivers import receiver_soup
 from ..scene import SceneError, load_scene
 from .caustics_map import beams_in_map, cull_beams, splat_plane
 from .casting import cast_between, shade_image
 from .illumination import illumination_volumes
 from .intersection import plane_index_map, plane_rects
-from .maps import Receivers, level_map
+from .maps import level_map
 from .per_ray import per_ray_caustics
 from .planes import frame_of, reference_box, refracted_axis, slice_planes
 from .smart_slicing import smart_planes
@@ -50,7 +50,7 @@ from .volumetric import volumetric_caustics
 from .water import water_mesh
 
 __all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAULT_SCENE_PATH", "METHOD",
-           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage"]
+           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage", "water_arrays"]
 
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
@@ -63,22 +63,8 @@ def default_scene(overrides=None):
 
 
 def receivers_of(scene):
-    """All receiver triangles of a scene (:class:`~.maps.Receivers`)."""
-    tris, owner, alb, verts = [], [], [], []
-    for k, rc in enumerate(scene.data["receivers"] or []):
-        v, f = object_mesh(rc, scene.base_dir)
-        tris.append(v[f])
-        owner.append(np.full(len(f), k, np.int64))
-        alb.append(np.asarray(rc["albedo"], dtype=np.float64))
-        verts.append(v)
-    if not tris:
-        raise SceneError("levelmap: the scene has no receivers; add at least one entry to 'receivers' "
-                         "(e.g. a pool floor: {\"mesh\": \"plane\", \"size\": [4, 4]})")
-    t = np.concatenate(tris)
-    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
-    return Receivers(t, np.concatenate(owner), n, np.stack(alb), verts)
+    """All receiver triangles of a scene (:class:`~refraction_ref.receivers.Receivers`)."""
+    return receiver_soup(scene, "levelmap")
 
 
 class _Pair:
@@ -375,15 +361,20 @@ def _stages(scene):
     )
 
 
-def _assemble(scene, bufs, stats):
-    p = scene.data["levelmap"]
-    R = len(bufs["level_map"]["pairs"])
+def water_arrays(bufs, maps_stage):
+    """The water outputs (``docs/oracle.md``): each receiver's map and frame from ``maps_stage``, the image."""
     arrays = {}
-    for r in range(R):
-        arrays[f"caustic_map_{r}"] = bufs["casting"][f"caustic_map_{r}"]
-        arrays[f"caustic_frame_{r}"] = bufs["casting"][f"caustic_frame_{r}"]
+    for r in range(len(bufs["level_map"]["pairs"])):
+        for k in ("caustic_map", "caustic_frame"):
+            arrays[f"{k}_{r}"] = bufs[maps_stage][f"{k}_{r}"]
     arrays["image"] = bufs["image"]["image"]
     arrays["object_mask"] = bufs["image"]["object_mask"]
+    return arrays
+
+
+def _assemble(scene, bufs, stats):
+    p = scene.data["levelmap"]
+    arrays = water_arrays(bufs, "casting")
     used = stats["planes_used_per_receiver"]
     info = {"planes_requested": int(p["planes"]), "planes_used": int(max(max(u) for u in used)),
             "planes_used_per_receiver": used, "variant": p["variant"],
@@ -394,6 +385,7 @@ def _assemble(scene, bufs, stats):
 
 METHOD = register_method(Method(
     "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble, warm=lambda: warm_up(),
+    results=("level_map.pairs", "casting", "image"),
     doc="Tipprasert (2006): water caustics by reference planes, position maps and a caustics map"))
 
 

@@ -203,7 +203,7 @@ def from_map(box, col, row, zeta):
 
 
 def frame_of(box):
-    """``caustic_frame`` (4, 3): origin, u axis, v axis (full edges), normal (ORACLE.md).
+    """``caustic_frame`` (4, 3): origin, u axis, v axis (full edges), normal (docs/oracle.md).
 
     The rectangle is the box face nearest the light; the normal is ``V``
     (towards the light); texel (a, b) holds the first receiver surface seen

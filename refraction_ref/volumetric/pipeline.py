@@ -338,6 +338,8 @@ def _assemble(scene, bufs, stats):
 
 METHOD = register_method(Method(
     "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=lambda: _warm(),
+    results=("voxelize.ior", "voxelize.bounds", "voxelize.triangles", "march.minfo", "smooth.radiance",
+             "smooth.direction", "view"),
     doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
 
 
