@@ -393,7 +393,7 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
             plan.append({"stage": st.name, "ran": False,
                          "why": f"inspection buffers only: runs when kept (keep='{st.name}')"})
             continue
-        inputs = stage_inputs(scene, st)
+        inputs = None if ephemeral else stage_inputs(scene, st)  # nothing to compare against
         ck = (method.name, st.name)
         prev = cache.get(ck)
         up_ran = [u for u in st.after if ran.get(u)]

@@ -266,6 +266,8 @@ def apply_overrides(data, overrides):
     data = copy.deepcopy(data)
     for key, value in (overrides or {}).items():
         parts = key.split(".")
+        if len(parts) == 2:
+            parts[1] = _alias(parts[0], parts[1])
         node = data
         for p in parts[:-1]:
             if isinstance(node, list):
@@ -295,7 +297,24 @@ def apply_overrides(data, overrides):
     return data
 
 
+def _alias(block, key):
+    """The current name of a knob that moved (``KnobBlock.aliases``), else ``key``."""
+    b = BLOCKS.get(block)
+    return b.aliases.get(key, key) if b is not None else key
+
+
+def _unalias(raw):
+    """Rename moved knobs in a scene's blocks to their current names (a key keeps its old name as an alias)."""
+    out = dict(raw)
+    for name, b in BLOCKS.items():
+        given = raw.get(name)
+        if b.aliases and isinstance(given, dict):
+            out[name] = {_alias(name, k): v for k, v in given.items()}
+    return out
+
+
 def _resolve(raw, base_dir, callables):
+    raw = _unalias(raw)
     data = _merge({k: v for k, v in DEFAULTS.items() if k not in ("objects", "receivers", "lights")},
                   {k: v for k, v in raw.items() if k not in ("objects", "receivers", "lights")}, "")
     for key, default in (("objects", DEFAULT_OBJECT), ("receivers", DEFAULT_RECEIVER), ("lights", DEFAULT_LIGHT)):

@@ -237,3 +237,16 @@ def test_meta_records_contract_and_versions():
         assert res.meta["versions"][lib]
     ran = [p["stage"] for p in res.meta["plan"] if p["ran"]]
     assert set(res.meta["timings_ms"]) == set(ran)
+
+
+def test_a_moved_knob_keeps_its_old_name(monkeypatch):
+    import dataclasses
+
+    from refraction_ref import graph
+
+    block = graph.BLOCKS["imagespace"]
+    monkeypatch.setitem(graph.BLOCKS, "imagespace", dataclasses.replace(block, aliases={"steps": "iterations"}))
+    assert load_scene({"imagespace": {"steps": 7}}).data["imagespace"]["iterations"] == 7
+    assert load_scene({}, {"imagespace.steps": 9}).data["imagespace"]["iterations"] == 9
+    with pytest.raises(SceneError, match="imagespace.stepz"):
+        load_scene({"imagespace": {"stepz": 7}})

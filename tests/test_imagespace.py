@@ -693,7 +693,7 @@ def test_outputs_meta_and_save(tmp_path):
     r = rr.render(_sphere_scene(32))
     _check_invariants(r)
     assert set(KEYS) <= set(r.arrays)
-    assert set(r.meta["timings_ms"]) == {"geometry", "minmax", "voxelize", "peel", "reduce", "trace", "shade"}
+    assert set(r.meta["timings_ms"]) == {"geometry", "minmax", "voxelize", "peel", "reduce", "trace", "shade", "rays"}
     assert all(v >= 0 for v in r.meta["timings_ms"].values())
     assert all({"stage", "ran", "why"} <= set(p) for p in r.meta["plan"])
     assert r.meta["params"]["iterations"] == 5 and r.meta["version"] == rr.__version__

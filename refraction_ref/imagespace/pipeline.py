@@ -12,6 +12,7 @@ stage (``timings_ms``)  pass                                          section
                         trace computes its normals on the fly)
 ``trace``               binary search + Snell at every interface      §3.6-3.7
 ``shade``               environment look-up, Beer-Lambert absorption  §3.8
+``rays``                the primary rays (the output keys)            §3.2
 ======================  ===========================================  =========
 
 With lights and receivers the caustic stages of §4.1 follow
@@ -300,6 +301,11 @@ def _st_trace(ctx):
     return out
 
 
+def _st_rays(ctx):
+    origin, rdir = Camera.from_dict(ctx.scene.data["camera"]).primary_rays()
+    return {"ray_origin": origin, "ray_dir": rdir}
+
+
 def _st_shade(ctx):
     g = ctx.buf["geometry"]
     tr = ctx.buf["trace"]
@@ -336,6 +342,8 @@ def eye_stages():
                      "path_dir"), doc="binary search + Snell at every interface (§3.6-3.7)"),
         Stage("shade", _st_shade, reads=("environment",), after=("geometry", "trace"), makes=("image",),
               doc="environment look-up, Beer-Lambert absorption (§3.8)"),
+        Stage("rays", _st_rays, reads=("camera",), makes=("ray_origin", "ray_dir"),
+              doc="every pixel's primary ray, world space (the output keys ray_origin, ray_dir)"),
     )
 
 
@@ -353,12 +361,10 @@ def _skipped(scene):
 
 
 def _assemble(scene, bufs, stats):
-    cam = Camera.from_dict(scene.data["camera"])
     tr = bufs["trace"]
-    origin, rdir = cam.primary_rays()
     arrays = {
-        "ray_origin": origin,
-        "ray_dir": rdir,
+        "ray_origin": bufs["rays"]["ray_origin"],
+        "ray_dir": bufs["rays"]["ray_dir"],
         "hit": tr["status"] != 0,
         "exit_pos": tr["exit_pos"],
         "exit_dir": tr["exit_dir"],
@@ -387,7 +393,7 @@ def _warm():
 
 METHOD = register_method(Method(
     "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
-    results=("trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
+    results=("rays", "trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 
