@@ -35,6 +35,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 import refraction_ref as rr  # noqa: E402
+from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.caustics.splat import gather_gaussian  # noqa: E402
 from refraction_ref.levelmap.metrics import relative_l1  # noqa: E402
 
@@ -122,7 +123,7 @@ def main(argv=None):
     print(f"faithful rel. L1 {rows[0]['rel_l1']:.3f} (target 0.15) {'PASS' if rows[0]['rel_l1'] <= 0.15 else 'MISS'}")
     os.makedirs(RESULTS, exist_ok=True)
     p = os.path.join(RESULTS, "bench_caustics_quick.json" if a.quick else "bench_caustics.json")
-    with open(p, "w") as f:
+    with atomic_open(p, "w") as f:
         json.dump(out, f, indent=1, default=float)
     print("wrote " + p)
 

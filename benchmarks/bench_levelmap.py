@@ -29,6 +29,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import refraction_ref as rr  # noqa: E402
+from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.levelmap import default_scene  # noqa: E402
 from refraction_ref.levelmap.metrics import luv_difference, relative_l1  # noqa: E402
 from refraction_ref.levelmap.pipeline import prepare, render_levelmap, warm_up  # noqa: E402
@@ -162,7 +163,7 @@ def main(argv=None):
            f"relative L1 {e_floor:.4f} on the pool floor alone (target <= 0.10); default scene: floor "
            f"{e_lm[0]:.4f}, teapot {e_lm[1]:.4f}")
     res["all_pass"] = bool(ok_all)
-    with open(os.path.join(a.out, "bench_levelmap.json"), "w") as f:
+    with atomic_open(os.path.join(a.out, "bench_levelmap.json"), "w") as f:
         json.dump(res, f, indent=1, default=float)
     print("wrote", os.path.join(a.out, "bench_levelmap.json"))
     return 0 if ok_all else 1

@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 import refraction_ref as rr
+from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.meshes import scene_geometry
 from refraction_ref.volumetric.gradient import gradient_field
 from refraction_ref.volumetric.march import STATUS, march_photons
@@ -169,9 +170,9 @@ def main(argv=None):
     txt = "\n".join(lines)
     print(txt)
     tag = "_quick" if a.quick else ""
-    with open(os.path.join(OUT, f"bench_volumetric{tag}.json"), "w") as f:
+    with atomic_open(os.path.join(OUT, f"bench_volumetric{tag}.json"), "w") as f:
         json.dump(res, f, indent=1, default=float)
-    with open(os.path.join(OUT, f"bench_volumetric{tag}.txt"), "w") as f:
+    with atomic_open(os.path.join(OUT, f"bench_volumetric{tag}.txt"), "w") as f:
         f.write(txt + "\n")
 
 

@@ -35,6 +35,7 @@ if REPO not in sys.path:  # run as `python benchmarks/x.py` without installing
     sys.path.insert(0, REPO)
 
 import refraction_ref as rr  # noqa: E402
+from refraction_ref.files import atomic_open  # noqa: E402
 
 STAGES = ("minmax", "voxelize", "peel", "reduce", "trace", "shade")
 SETUP_STAGES = ("geometry", "rays")  # scene set-up, outside the per-frame passes (pipeline_ms)
@@ -60,7 +61,7 @@ def results_path(name):
 
 def write_json(name, obj):
     p = results_path(name)
-    with open(p, "w") as f:
+    with atomic_open(p, "w") as f:
         json.dump(obj, f, indent=1, sort_keys=True, default=_json_default)
     return p
 

@@ -24,6 +24,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bench_levelmap import mesh_arg, model_scene, timed  # noqa: E402
+from refraction_ref.files import atomic_open, savefig_atomic  # noqa: E402
 
 from refraction_ref.levelmap.metrics import luv_difference  # noqa: E402
 from refraction_ref.levelmap.pipeline import warm_up  # noqa: E402
@@ -79,7 +80,7 @@ def main(argv=None):
     }
     for k, cols in tables.items():
         p = os.path.join(a.out, f"levelmap_table5_{k}.csv")
-        with open(p, "w", newline="") as f:
+        with atomic_open(p, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)
@@ -126,7 +127,7 @@ def plot(rows, out):
         fig.suptitle(f"Tipprasert (2006) Table 5-{k}, reproduced")
         fig.tight_layout()
         p = os.path.join(out, f"levelmap_table5_{k}.png")
-        fig.savefig(p, dpi=90)
+        savefig_atomic(fig, p, dpi=90)
         plt.close(fig)
         print("wrote", p)
 

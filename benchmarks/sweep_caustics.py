@@ -30,6 +30,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import numpy as np  # noqa: E402
 
 import refraction_ref as rr  # noqa: E402
+from refraction_ref.files import atomic_open, savefig_atomic  # noqa: E402
 from bench_caustics import RESULTS, caustics_scene, photon_ms  # noqa: E402
 from refraction_ref.levelmap.metrics import relative_l1  # noqa: E402
 
@@ -68,7 +69,7 @@ def main(argv=None):
     os.makedirs(RESULTS, exist_ok=True)
     stem = "sweep_caustics_quick" if a.quick else "sweep_caustics"
     p = os.path.join(RESULTS, stem + ".csv")
-    with open(p, "w", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -93,7 +94,7 @@ def main(argv=None):
     fig.suptitle("Image-space caustics of the glass bunny against the exact photon reference")
     fig.tight_layout()
     png = os.path.join(RESULTS, stem + ".png")
-    fig.savefig(png, dpi=90)
+    savefig_atomic(fig, png, dpi=90)
     print("wrote " + p + ", " + png)
 
 

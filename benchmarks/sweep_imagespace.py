@@ -44,6 +44,7 @@ import common as C  # noqa: E402
 from common import rr  # noqa: E402
 
 from refraction_ref.compare import compare_arrays  # noqa: E402
+from refraction_ref.files import atomic_open, savefig_atomic  # noqa: E402
 
 BASE = {"iterations": 5, "delta": 2, "slices": 256, "layers": 32, "depth": "bitmask", "normals": "central",
         "bounds": "mip", "slicing": "local"}
@@ -143,7 +144,7 @@ def plot(rows, fams_by_res, path):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    savefig_atomic(fig, path, dpi=90)
     plt.close(fig)
 
 
@@ -212,7 +213,7 @@ def main(argv=None):
             "err_p90", "err_p99", "err_mean", "frac_status1", "status_agree", "interfaces_agree", "both_exited",
             "hit_pixels", "other_load", "attempts"]
     csv_path = C.results_path(f"sweep_imagespace{suffix}.csv")
-    with open(csv_path, "w", newline="") as f:
+    with atomic_open(csv_path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
         for r in rows:

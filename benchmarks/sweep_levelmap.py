@@ -20,6 +20,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bench_levelmap import errors, exact_maps, timed  # noqa: E402
+from refraction_ref.files import atomic_open, savefig_atomic  # noqa: E402
 
 from refraction_ref.levelmap import default_scene  # noqa: E402
 from refraction_ref.levelmap.pipeline import warm_up  # noqa: E402
@@ -59,7 +60,7 @@ def main(argv=None):
         rows.append(row)
         print(", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()), flush=True)
     p = os.path.join(a.out, "levelmap_sweep.csv")
-    with open(p, "w", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -86,7 +87,7 @@ def main(argv=None):
     fig.suptitle("Level-map water caustics: error against time (labels: planes / map size / water resolution)")
     fig.tight_layout()
     p = os.path.join(a.out, "levelmap_sweep.png")
-    fig.savefig(p, dpi=90)
+    savefig_atomic(fig, p, dpi=90)
     print("wrote", p)
 
 

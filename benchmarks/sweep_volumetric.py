@@ -17,6 +17,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_volumetric import OUT, luneburg_miss  # noqa: E402
+from refraction_ref.files import atomic_open, savefig_atomic  # noqa: E402
 
 
 def main(argv=None):
@@ -41,7 +42,7 @@ def main(argv=None):
     os.makedirs(OUT, exist_ok=True)
     tag = "_quick" if a.quick else ""
     path = os.path.join(OUT, f"sweep_volumetric{tag}.csv")
-    with open(path, "w", newline="") as f:
+    with atomic_open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -67,7 +68,7 @@ def main(argv=None):
     axes[1].legend(fontsize=6, ncol=2)
     fig.suptitle(f"Luneburg lens: error vs cost (base N={base['N']}, {base['M']}^2 photons, ds_min=1, eps=0.005)")
     fig.tight_layout()
-    fig.savefig(os.path.join(OUT, f"sweep_volumetric{tag}.png"), dpi=120)
+    savefig_atomic(fig, os.path.join(OUT, f"sweep_volumetric{tag}.png"), dpi=120)
     print("wrote", path)
 
 

@@ -26,6 +26,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import common as C  # noqa: E402
+from refraction_ref.files import atomic_open  # noqa: E402
 
 # Table 4.1 (FPS, NVIDIA 8800 GTX): {model: (triangles, {(layers, res): fps})}
 THESIS_4_1 = {
@@ -185,7 +186,7 @@ def main(argv=None):
         cols = []
         for r in rows:
             cols += [k for k in r if k not in cols]
-        with open(C.results_path(fname), "w", newline="") as f:
+        with atomic_open(C.results_path(fname), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=cols)
             w.writeheader()
             w.writerows(rows)

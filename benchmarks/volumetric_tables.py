@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import refraction_ref as rr  # noqa: E402
+from refraction_ref.files import atomic_open  # noqa: E402
 from bench_volumetric import OUT, luneburg  # noqa: E402
 
 PAPER_T1 = [  # triangles, occupied, photons, Msteps, voxelization, tracing, total (ms)
@@ -89,7 +90,7 @@ def main(argv=None):
         print(lines[-1])
     os.makedirs(OUT, exist_ok=True)
     tag = "_quick" if a.quick else ""
-    with open(os.path.join(OUT, f"volumetric_tables{tag}.md"), "w") as f:
+    with atomic_open(os.path.join(OUT, f"volumetric_tables{tag}.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
 
 

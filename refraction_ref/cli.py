@@ -22,15 +22,25 @@ def _parse_sets(items):
 def _cmd_render(a):
     from . import load_scene, render
 
+    from .result import check_writable, output_paths
+
     scene = load_scene(a.scene, _parse_sets(a.set))
+    check_writable(output_paths(a.out), overwrite=a.force)  # before any work, not after it
+    from .render import kernels_cached
+
+    if not kernels_cached(a.method):
+        print(f"refraction-ref: compiling the {a.method} kernels with Numba (first run only: they are cached, "
+              "and later runs start in seconds) ...", file=sys.stderr, flush=True)
     res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
     paths = res.save(a.out, overwrite=a.force)
     import numpy as np
 
     t = res.meta["timings_ms"]
     print(f"{a.method}: {scene.data['camera']['width']}x{scene.data['camera']['height']}, "
-          f"{res.meta.get('triangles', 0)} triangles, {res.meta['total_ms']:.0f} ms in all")
-    print("stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items()))
+          f"{res.meta.get('triangles', 0)} triangles, {res.meta['total_ms']:.0f} ms to render"
+          + (f" (and {res.meta['jit_ms'] / 1e3:.1f} s compiling or loading the kernels)"
+             if res.meta.get("jit_ms", 0) > 500 else ""))
+    print("stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in t.items() if "." not in k))
     kept = sorted(k for k in res.arrays if k.startswith("stage."))
     if kept:
         print(f"kept {len(kept)} stage buffers: " + ", ".join(kept[:8]) + (" ..." if len(kept) > 8 else ""))
@@ -46,17 +56,21 @@ def _cmd_render(a):
 
 
 def _cmd_compare(a):
-    from .compare import compare_arrays, format_comparison
+    from .compare import check_comparable, compare_arrays, format_comparison
     from .result import load_result
 
     A = load_result(a.a)
     B = load_result(a.b)
+    diff = check_comparable(A.meta, B.meta, force=a.force)
+    if diff:
+        print(f"refraction-ref: warning: the runs are of different scenes ('{diff}' differs); compared anyway "
+              "(--force)", file=sys.stderr)
     c = compare_arrays(A.arrays, B.arrays)
     if a.json:
         print(json.dumps(c, indent=1))
     else:
         print(format_comparison(c, a.a, a.b))
-    if a.plot and "status" in A.arrays and "status" in B.arrays:
+    if a.plot:
         from .compare import plot_comparison
 
         print("wrote " + plot_comparison(A.arrays, B.arrays, a.plot, "A", "B"))
@@ -94,18 +108,23 @@ def main(argv=None):
     c.add_argument("a", help="run to test (.npz)")
     c.add_argument("b", help="reference run (.npz), e.g. --method exact")
     c.add_argument("--json", action="store_true", help="print the statistics as JSON")
-    c.add_argument("--plot", metavar="PNG", help="also write images, error map and status maps to PNG")
+    c.add_argument("--plot", metavar="PNG", help="also write images, error map and status maps to PNG "
+                   "(water runs: images and caustic maps)")
+    c.add_argument("--force", action="store_true",
+                   help="compare runs of different scenes anyway (by default refused, naming the first key that "
+                        "differs)")
     c.set_defaults(fn=_cmd_compare)
     s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
     s.add_argument("scene", nargs="?", default=None)
     s.add_argument("--set", action="append", metavar="KEY=VALUE")
     s.set_defaults(fn=_cmd_scene)
     a = p.parse_args(argv)
+    from .compare import CompareError
     from .scene import SceneError
 
     try:
         return a.fn(a)
-    except (SceneError, FileExistsError, FileNotFoundError) as e:
+    except (SceneError, CompareError, FileExistsError, FileNotFoundError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
 

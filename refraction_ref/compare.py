@@ -4,7 +4,75 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["angular_error_deg", "compare_arrays", "format_comparison", "plot_comparison"]
+__all__ = ["angular_error_deg", "compare_arrays", "format_comparison", "plot_comparison", "check_comparable",
+           "CompareError", "METHOD_BLOCKS"]
+
+#: the knob blocks of the methods: what may differ between two runs that are compared
+METHOD_BLOCKS = ("imagespace", "exact", "volumetric", "levelmap")
+
+
+class CompareError(ValueError):
+    """Two runs that cannot be compared (different scenes or resolutions), with the key that differs."""
+
+
+def _first_difference(a, b, prefix=""):
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b), key=str):
+            name = f"{prefix}.{k}" if prefix else str(k)
+            if k not in a or k not in b:
+                return name
+            d = _first_difference(a[k], b[k], name)
+            if d:
+                return d
+        return None
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return f"{prefix} (lengths {len(a)} and {len(b)})"
+        for k, (x, y) in enumerate(zip(a, b)):
+            d = _first_difference(x, y, f"{prefix}.{k}")
+            if d:
+                return d
+        return None
+    return None if a == b else prefix
+
+
+def check_comparable(meta_a, meta_b, force=False):
+    """Refuse to compare runs of different scenes: the method-independent inputs must agree.
+
+    Everything in the resolved scenes (``meta.scene``) but the methods' knob
+    blocks (:data:`METHOD_BLOCKS`) must be equal: the camera, objects,
+    materials, environment, lights, receivers, water and volume. The first
+    key that differs is named. With ``force`` a difference is returned
+    instead of raised (the caller warns); different image sizes are refused
+    even then, since pixels could not be paired.
+
+    Returns
+    -------
+    str or None
+        The first differing key (only with ``force``), or None.
+
+    Raises
+    ------
+    CompareError
+    """
+    sa, sb = meta_a.get("scene"), meta_b.get("scene")
+    if not isinstance(sa, dict) or not isinstance(sb, dict):
+        if force:
+            return "meta.scene (missing)"
+        raise CompareError("compare: a run has no resolved scene in its meta (not written by refraction-ref?); "
+                           "pass --force to compare the arrays anyway")
+    ca, cb = sa.get("camera", {}), sb.get("camera", {})
+    for k in ("width", "height"):
+        if ca.get(k) != cb.get(k):
+            raise CompareError(f"compare: the runs have different resolutions ({ca.get('width')}x{ca.get('height')} "
+                               f"and {cb.get('width')}x{cb.get('height')}); render both with the same camera.width "
+                               "and camera.height")
+    keep = sorted((set(sa) | set(sb)) - set(METHOD_BLOCKS))
+    diff = _first_difference({k: sa.get(k) for k in keep}, {k: sb.get(k) for k in keep})
+    if diff and not force:
+        raise CompareError(f"compare: the runs are of different scenes: '{diff}' differs; compare runs of one scene "
+                           "(only the methods' knob blocks may differ), or pass --force")
+    return diff
 
 
 def angular_error_deg(a, b):
@@ -50,8 +118,8 @@ def compare_arrays(a, b, mask=None):
                                                        - np.asarray(b["image"], np.float64)) ** 2)))
         return out
     if a["status"].shape != b["status"].shape:
-        raise ValueError(f"compare: image shapes differ {a['status'].shape} vs {b['status'].shape}; "
-                         "render both runs with the same camera")
+        raise CompareError(f"compare: image shapes differ {a['status'].shape} vs {b['status'].shape}; "
+                           "render both runs with the same camera.width and camera.height")
     if mask is None:
         mask = np.asarray(b["hit"], bool)
     both = mask & (a["status"] == 1) & (b["status"] == 1)
@@ -101,20 +169,36 @@ def format_comparison(c, name_a="A", name_b="B"):
     return "\n".join(lines + extra)
 
 
+def _figure(ncols, width=4.0, height=4.4):
+    """A figure and axes without pyplot, so the caller's matplotlib back-end is left alone."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width * ncols, height))
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(1, ncols)
+
+
 def plot_comparison(a, b, path, name_a="A", name_b="B"):
-    """Write a PNG: both images, the per-pixel exit-direction error map and both status maps."""
-    import matplotlib
+    """Write a PNG: both images, the per-pixel exit-direction error map and both status maps.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Runs without per-pixel keys (water caustics: the level map, the exact
+    water reference) get their images, each shared caustic map of both runs
+    and their difference instead. Returns the path, or raises
+    :class:`CompareError` when the runs share nothing to plot.
+    """
     from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Rectangle
 
+    from .files import savefig_atomic
     from .result import tonemap
 
+    if "status" not in a or "status" not in b:
+        return _plot_maps(a, b, path, name_a, name_b)
     err = angular_error_deg(a["exit_dir"], b["exit_dir"])
     err[~(np.asarray(b["hit"], bool) & (a["status"] == 1) & (b["status"] == 1))] = np.nan
     cmap = ListedColormap(["#ffffff", "#4caf50", "#2196f3", "#ff9800", "#e91e63"])
-    fig, ax = plt.subplots(1, 5, figsize=(20, 4.4))
+    fig, ax = _figure(5)
     ax[0].imshow(tonemap(a["image"]))
     ax[0].set_title(f"{name_a}: image")
     ax[1].imshow(tonemap(b["image"]))
@@ -127,12 +211,51 @@ def plot_comparison(a, b, path, name_a="A", name_b="B"):
     for k, (r, nm) in enumerate(((a, name_a), (b, name_b))):
         ax[3 + k].imshow(r["status"], cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")
         ax[3 + k].set_title(f"{nm}: status")
-    handles = [plt.Rectangle((0, 0), 1, 1, color=cmap(i)) for i in range(5)]
+    handles = [Rectangle((0, 0), 1, 1, color=cmap(i)) for i in range(5)]
     fig.legend(handles, ["0 missed", "1 exited", "2 limit", "3 TIR", "4 lost"], loc="lower center", ncol=5)
     for x in ax:
         x.set_xticks([])
         x.set_yticks([])
     fig.tight_layout(rect=(0, 0.07, 1, 1))
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return savefig_atomic(fig, path, dpi=80)
+
+
+def _plot_maps(a, b, path, name_a, name_b):
+    """Images and caustic maps of two water-caustics runs: A, B and A - B per map."""
+    from .files import savefig_atomic
+    from .result import tonemap
+
+    maps = [k for k in sorted(a) if k.startswith("caustic_map_") and k in b and np.shape(a[k]) == np.shape(b[k])]
+    has_img = "image" in a and "image" in b
+    if not maps and not has_img:
+        raise CompareError("compare --plot: the runs share no image and no caustic map of the same shape; "
+                           "nothing to plot")
+    rows = ([("image", None)] if has_img else []) + [(k, None) for k in maps]
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 4 * len(rows)))
+    FigureCanvasAgg(fig)
+    ax = np.atleast_2d(fig.subplots(len(rows), 3))
+    for i, (k, _) in enumerate(rows):
+        if k == "image":
+            ax[i, 0].imshow(tonemap(a["image"]))
+            ax[i, 1].imshow(tonemap(b["image"]))
+            d = np.abs(np.asarray(a["image"], np.float64) - np.asarray(b["image"], np.float64)).mean(axis=-1)
+            im = ax[i, 2].imshow(d, cmap="magma")
+        else:
+            hi = float(max(np.nanmax(a[k]), np.nanmax(b[k]), 1e-12))
+            ax[i, 0].imshow(a[k], cmap="inferno", vmin=0, vmax=hi)
+            ax[i, 1].imshow(b[k], cmap="inferno", vmin=0, vmax=hi)
+            d = np.asarray(a[k], np.float64) - np.asarray(b[k], np.float64)
+            lim = float(np.nanmax(np.abs(d))) or 1.0
+            im = ax[i, 2].imshow(d, cmap="coolwarm", vmin=-lim, vmax=lim)
+        fig.colorbar(im, ax=ax[i, 2], fraction=0.046)
+        ax[i, 0].set_title(f"{name_a}: {k}")
+        ax[i, 1].set_title(f"{name_b}: {k}")
+        ax[i, 2].set_title(f"{'|A - B| (mean over RGB)' if k == 'image' else 'A - B'}")
+        for x in ax[i]:
+            x.set_xticks([])
+            x.set_yticks([])
+    fig.tight_layout()
+    return savefig_atomic(fig, path, dpi=80)

@@ -12,7 +12,7 @@ from .graph import get_method, method_names, run_graph
 from .result import Result
 from .scene import Scene, SceneError, load_scene
 
-__all__ = ["render", "METHODS", "run_method"]
+__all__ = ["render", "METHODS", "run_method", "kernels_cached"]
 
 METHODS = method_names()
 
@@ -34,11 +34,25 @@ def _params_read(m, scene):
     return {b: scene.data[b] for b in sorted(names)}
 
 
+_KERNEL_DIRS = {"imagespace": "imagespace", "exact": ".", "levelmap": "levelmap", "volumetric": "volumetric"}
+
+
+def kernels_cached(method):
+    """Whether Numba's on-disk cache holds this method's kernels (else the first render compiles them)."""
+    import glob
+    import os
+
+    d = os.path.join(os.path.dirname(os.path.abspath(__file__)), _KERNEL_DIRS.get(method, "."), "__pycache__")
+    return bool(glob.glob(os.path.join(d, "*.nbi")))
+
+
 def run_method(scene, method, cache=None, keep=None, progress=False):
     """Run a method's stage graph and wrap the outputs as a :class:`Result` with the full ``meta``."""
     m = get_method(method)
+    t0 = time.perf_counter()
     if m.warm is not None:  # JIT compilation (or loading the cache) stays out of total_ms
         m.warm()
+    jit_ms = (time.perf_counter() - t0) * 1e3
     t0 = time.perf_counter()
     arrays, info = run_graph(m, scene, cache=cache, keep=keep, progress=progress, warm=False)
     total = (time.perf_counter() - t0) * 1e3
@@ -52,6 +66,7 @@ def run_method(scene, method, cache=None, keep=None, progress=False):
         "versions": software_versions(),
         "numba_threads": int(numba.get_num_threads()),
         "total_ms": total,
+        "jit_ms": jit_ms,
     }
     meta.update(info)
     meta["contract_version"] = CONTRACT_VERSION

@@ -8,7 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Result", "tonemap", "load_result"]
+from .files import atomic_path
+
+__all__ = ["Result", "tonemap", "load_result", "output_paths", "check_writable"]
 
 
 def tonemap(image):
@@ -32,27 +34,37 @@ class Result:
         """Write ``PREFIX.npz`` (arrays + ``meta`` as a JSON string) and ``PREFIX.png``.
 
         Refuses to overwrite existing files unless ``overwrite`` is true.
+        Each file is written under a temporary name and renamed into place
+        when complete, so an interrupted save leaves no partial file.
         Returns the paths written.
         """
-        prefix = os.fspath(prefix)
-        if prefix.endswith(".npz"):
-            prefix = prefix[:-4]
-        paths = [prefix + ".npz"] + ([prefix + ".png"] if png and "image" in self.arrays else [])
-        if not overwrite:
-            for p in paths:
-                if os.path.exists(p):
-                    raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite "
-                                          "(CLI: --force)")
-        d = os.path.dirname(prefix)
-        if d:
-            os.makedirs(d, exist_ok=True)
-        np.savez_compressed(paths[0], meta=np.array(json.dumps(self.meta, default=_json_default)),
-                            **self.arrays)
+        paths = output_paths(prefix, png and "image" in self.arrays)
+        check_writable(paths, overwrite)
+        with atomic_path(paths[0]) as tmp:
+            np.savez_compressed(tmp, meta=np.array(json.dumps(self.meta, default=_json_default)), **self.arrays)
         if len(paths) > 1:
             import imageio.v3 as iio
 
-            iio.imwrite(paths[1], tonemap(self.arrays["image"]))
+            with atomic_path(paths[1]) as tmp:
+                iio.imwrite(tmp, tonemap(self.arrays["image"]))
         return paths
+
+
+def output_paths(prefix, png=True):
+    """The files :meth:`Result.save` writes for ``prefix``: ``PREFIX.npz`` (and ``PREFIX.png``)."""
+    prefix = os.fspath(prefix)
+    if prefix.endswith(".npz"):
+        prefix = prefix[:-4]
+    return [prefix + ".npz"] + ([prefix + ".png"] if png else [])
+
+
+def check_writable(paths, overwrite=False):
+    """Refuse, before any work, to overwrite existing outputs unless asked (``FileExistsError``)."""
+    if overwrite:
+        return
+    for p in paths:
+        if os.path.exists(p):
+            raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite (CLI: --force)")
 
 
 def _json_default(o):

@@ -152,22 +152,28 @@ def test_point_light_finite_and_positive():
     assert E[own].max() < 1.0 / 2.0 ** 2 * 1.01
 
 
-def test_steep_folding_waves_stay_finite():
-    sc = load_scene({
-        "camera": {"width": 16, "height": 16, "eye": [0, 2, 2], "target": [0, -0.5, 0]},
-        "objects": [], "lights": [{"type": "directional", "direction": [0.4, -1, 0]}],
-        "receivers": [{"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, -0.5, 0]}}],
-        "water": {"size": [3, 3], "resolution": 32, "waves": [
-            {"amplitude": 0.15, "wavelength": 0.25, "direction": [1, 0]},   # slope up to 3.8: folds
-            {"amplitude": 0.1, "wavelength": 0.2, "direction": [0, 1]}]},
-        "levelmap": {"planes": 8, "map_size": 64}})
-    for v in ("levelmap", "per_ray"):
-        a, _ = render_levelmap(load_scene(sc, {"levelmap.variant": v}))
-        E = a["caustic_map_0"]
-        assert np.all(np.isfinite(E)) and E.min() >= 0
-        # documented bound: at most the flux of every beam over one texel, i.e. finite and moderate
-        assert E.max() < 1e4
-        assert np.all(np.isfinite(a["image"]))
+def test_water_that_cannot_be_meant_is_refused():
+    base = {"camera": {"width": 16, "height": 16, "eye": [0, 2, 2], "target": [0, -0.5, 0]},
+            "objects": [], "lights": [{"type": "directional", "direction": [0.4, -1, 0]}],
+            "receivers": [{"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, -0.5, 0]}}],
+            "water": {"size": [3, 3], "resolution": 16, "waves": [
+                {"amplitude": 0.15, "wavelength": 0.25, "direction": [1, 0]},   # slope up to 3.8: folds
+                {"amplitude": 0.1, "wavelength": 0.2, "direction": [0, 1]}]},
+            "levelmap": {"planes": 8, "map_size": 32}}
+    with pytest.raises(SceneError, match=r"too steep.*6\.9.*water\.waves"):
+        load_scene(base)
+    gentle = {"amplitude": 0.01, "wavelength": 0.5, "direction": [1, 0]}
+    with pytest.raises(SceneError, match="camera.eye is at y = -1.*not above the water"):
+        load_scene(base, {"water.waves": [gentle], "camera.eye": [0, -1, 2]})
+    # waves reaching the floor 0.5 below the surface: refused when the receivers are placed
+    deep = {"amplitude": 0.6, "wavelength": 20.0, "direction": [1, 0]}  # slope 0.19: no fold, but too deep
+    with pytest.raises(SceneError, match="reach down to the highest receiver below the surface"):
+        render_levelmap(load_scene(base, {"water.waves": [deep]}))
+    # steep but single-valued waves render, with the broken assumption named in the plan
+    steep = {"amplitude": 0.03, "wavelength": 0.4, "direction": [1, 0]}  # slope 0.47
+    a, info = render_levelmap(load_scene(base, {"water.waves": [steep]}))
+    assert np.all(np.isfinite(a["caustic_map_0"])) and a["caustic_map_0"].min() >= 0
+    assert "steep waves" in next(p["why"] for p in info["plan"] if p["stage"] == "water")
 
 
 def test_receiver_above_water_gets_nothing():

@@ -24,7 +24,7 @@ import numpy as np
 from ..graph import KnobBlock, register_block
 
 __all__ = ["merge_water", "validate_levelmap", "VARIANTS", "LEVELMAP_DEFAULTS", "WATER_DEFAULTS",
-           "WAVE_DEFAULTS"]
+           "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE"]
 
 VARIANTS = ("levelmap", "volumetric", "per_ray")
 
@@ -92,7 +92,49 @@ def validate_levelmap(data, base_dir="."):
         if not np.any(d != 0):
             raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
         _num(wave["phase"], f"water.waves[{k}].phase")
+    slope = max_slope(w)
+    if slope >= 1.0:
+        raise SceneError(f"scene: the water's waves are too steep: the sum of 2 pi amplitude / wavelength is "
+                         f"{slope:.3g} >= 1, where the surface folds over itself and is no height field; "
+                         "lower water.waves[k].amplitude or raise the wavelengths")
+    top = float(w["height"]) + amp
+    eye_y = float(data["camera"]["eye"][1])
+    if eye_y <= top:
+        raise SceneError(f"scene: camera.eye is at y = {eye_y:g}, not above the water (its crests reach "
+                         f"y = {top:g}); the water methods render a camera above the surface: raise camera.eye "
+                         "or lower water.height")
     return data
+
+
+#: above this slope (sum of 2 pi a / lambda) the level map's assumptions start to break: beams
+#: from neighbouring quads cross before reaching the receivers and the refracted axis of eq. 2-8
+#: (flat water) no longer bounds them (Tipprasert 2006, §4.2.1 assumes gentle waves)
+STEEP_SLOPE = 0.3
+
+
+def max_slope(water):
+    """The steepest slope the water's waves can reach together: sum of ``2 pi a / lambda`` (eq. 2-1)."""
+    return float(sum(2.0 * np.pi * abs(float(x["amplitude"])) / float(x["wavelength"]) for x in water["waves"]))
+
+
+def check_water_depth(water, receiver_vertices):
+    """Refuse waves that reach a receiver below the water plane (the beams would start inside it).
+
+    Raises
+    ------
+    SceneError
+        When the sum of the amplitudes is at least the depth from the water
+        plane to the highest receiver point below it.
+    """
+    from ..scene import SceneError
+
+    h = float(water["height"])
+    amp = sum(abs(float(x["amplitude"])) for x in water["waves"])
+    below = [float(v[:, 1].max()) for v in receiver_vertices if float(v[:, 1].max()) < h]
+    if below and amp > 0 and amp >= h - max(below):
+        raise SceneError(f"scene: the water's waves (amplitudes summing to {amp:g}) reach down to the highest "
+                         f"receiver below the surface (y = {max(below):g}, {h - max(below):g} below water.height "
+                         f"= {h:g}); lower water.waves[k].amplitude or the receivers")
 
 
 BLOCK = register_block(KnobBlock("levelmap", LEVELMAP_DEFAULTS, validate_levelmap, owner="levelmap"))

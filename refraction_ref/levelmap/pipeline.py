@@ -210,15 +210,25 @@ def warm_up():
 
 # --------------------------------------------------------------------- stages
 def _st_water(ctx):
+    from .knobs import STEEP_SLOPE, max_slope
+
     _check(ctx.scene)
     w = water_pass(ctx.scene)
     n = int(ctx.scene.data["water"]["resolution"])
     ctx.note(f"{n}x{n} quads, {len(w['mesh'].faces)} beams per light, {len(ctx.scene.data['lights'])} light(s)")
+    slope = max_slope(ctx.scene.data["water"])
+    if slope > STEEP_SLOPE:
+        ctx.note(f"warning: steep waves (slope up to {slope:.2f} > {STEEP_SLOPE}): beams of neighbouring quads "
+                 "cross before the receivers and the flat-water refracted axis no longer bounds them; the level "
+                 "map's planes and boxes assume gentle waves (§4.2.1)")
     return w
 
 
 def _st_planes(ctx):
+    from .knobs import check_water_depth
+
     pl = planes_pass(ctx.scene)
+    check_water_depth(ctx.scene.data["water"], pl["receivers"].vertices)
     ctx.stats["triangles"] = int(len(pl["receivers"].tris))
     out = dict(pl)
     for r, row in enumerate(pl["boxes"]):
