@@ -1,10 +1,12 @@
-"""Command line: ``refraction-ref render | compare | scene``."""
+"""Command line: ``refraction-ref render | compare | scene | golden build | check``."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 
 __all__ = ["main"]
 
@@ -84,6 +86,30 @@ def _cmd_scene(a):
     return 0
 
 
+def _cmd_golden_build(a):
+    from .golden.build import build
+
+    print(f"building the golden suite in {a.dir}" + (f" (cases {a.only})" if a.only else ""))
+    t0 = time.perf_counter()
+    m = build(a.dir, only=a.only, progress=not a.quiet and sys.stderr.isatty())
+    size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(a.dir) for f in fs)
+    print(f"{len(m['cases'])} cases in {a.dir} ({size / 2**20:.1f} MiB), {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _cmd_check(a):
+    from .golden.check import check
+
+    out = check(a.candidate, a.golden, require=a.require or (), report=a.report, panels=not a.no_panels,
+                cases=[c for c in a.cases.split(",") if c] if a.cases else None)
+    for name, c in out["cases"].items():
+        why = ("" if c["ok"] else f"  earliest failing stage: {c['earliest_failing_stage']}"
+               if c["earliest_failing_stage"] else "  " + "; ".join(c["problems"][:2]))
+        print(f"  {'pass' if c['ok'] else 'FAIL'}  {name}{why}")
+    print(f"{'PASS' if out['ok'] else 'FAIL'}: report in {out['report']} ({out['seconds']:.1f} s)")
+    return 0 if out["ok"] else 1
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="refraction-ref",
                                 description="CPU reference renderer for refraction through transparent objects.")
@@ -118,13 +144,29 @@ def main(argv=None):
     s.add_argument("scene", nargs="?", default=None)
     s.add_argument("--set", action="append", metavar="KEY=VALUE")
     s.set_defaults(fn=_cmd_scene)
+    g = sub.add_parser("golden", help="the conformance kit's golden suite")
+    gsub = g.add_subparsers(dest="golden_cmd", required=True)
+    gb = gsub.add_parser("build", help="render the catalogue with the oracle into DIR (arrays, manifest)")
+    gb.add_argument("dir")
+    gb.add_argument("--only", metavar="NAME,...", help="only these cases (the others in DIR are kept)")
+    gb.add_argument("--quiet", action="store_true")
+    gb.set_defaults(fn=_cmd_golden_build)
+    k = sub.add_parser("check", help="judge a backend's outputs against a golden suite; exit 1 on any failure")
+    k.add_argument("candidate", help="folder with <case>/result.npz per case")
+    k.add_argument("--golden", required=True, help="the golden suite (refraction-ref golden build)")
+    k.add_argument("--require", action="append", metavar="KEY", help="a key every case must supply (repeatable)")
+    k.add_argument("--report", help="folder for report.md, summary.json and panels (default CANDIDATE/report)")
+    k.add_argument("--cases", metavar="NAME,...", help="judge only these cases")
+    k.add_argument("--no-panels", action="store_true", help="no PNG panels for failures")
+    k.set_defaults(fn=_cmd_check)
     a = p.parse_args(argv)
     from .compare import CompareError
+    from .golden.check import CheckError
     from .scene import SceneError
 
     try:
         return a.fn(a)
-    except (SceneError, CompareError, FileExistsError, FileNotFoundError) as e:
+    except (SceneError, CompareError, CheckError, FileExistsError, FileNotFoundError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
 

@@ -104,7 +104,7 @@ def environment_lookup(env, dirs, base_dir="."):
     if t == "checker":  # the common case, in one pass
         flat = np.ascontiguousarray(d).reshape(-1, 3)
         out = np.empty(flat.shape, np.float32)
-        _checker_kernel(flat, int(env.get("tiles", 16)), colors, float(env.get("intensity", 1.0)), out)
+        _checker_kernel(flat, int(env.get("tiles", 48)), colors, float(env.get("intensity", 1.0)), out)
         return out.reshape(d.shape)
     bad = ~np.all(np.isfinite(d), axis=-1)
     d = np.where(bad[..., None], np.array([0.0, 0.0, -1.0]), d)

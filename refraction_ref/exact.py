@@ -88,7 +88,7 @@ def area_weighted_vertex_normals(vertices, faces):
 
 
 def _validate(vertices, faces, face_object, object_ior, object_absorption,
-              origins, dirs, vertex_normals, outside_ior, max_bounces):
+              origins, dirs, vertex_normals, outside_ior, max_bounces, normals_name="vertex_normals"):
     v = np.asarray(vertices, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3:
         raise ValueError(f"vertices must have shape (V, 3), got {v.shape}")
@@ -137,10 +137,11 @@ def _validate(vertices, faces, face_object, object_ior, object_absorption,
         raise ValueError("dirs must be unit vectors (|d| - 1 > 1e-6)")
     if vertex_normals is not None:
         vn = np.asarray(vertex_normals, dtype=np.float64)
-        if vn.shape != v.shape:
-            raise ValueError(f"vertex_normals must have shape {v.shape}, got {vn.shape}")
+        if vn.shape != v.shape and vn.shape != (len(f), 3, 3):
+            raise ValueError(f"{normals_name} must have shape {v.shape} (per vertex) or {(len(f), 3, 3)} "
+                             f"(per corner), got {vn.shape}")
         if not np.all(np.isfinite(vn)):
-            raise ValueError("vertex_normals contain non-finite values")
+            raise ValueError(f"{normals_name} contain non-finite values")
     else:
         vn = None
     if int(max_bounces) != max_bounces or not (0 <= max_bounces <= np.iinfo(np.int16).max):
@@ -161,7 +162,7 @@ def _unit(a):
 def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
                 origins, dirs, *, vertex_normals=None, smooth=True,
                 outside_ior=1.0, max_bounces=64, progress=False,
-                epsilon=None, chunk_size=_CHUNK, record=0) -> dict:
+                epsilon=None, chunk_size=_CHUNK, record=0, normals=None) -> dict:
     """Trace rays through a triangle scene, refracting at every interface.
 
     Each ray is intersected with the real triangles: Embree (float32) finds
@@ -193,11 +194,20 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         Absorption coefficient per colour channel of each object, >= 0.
     origins, dirs : (N, 3) array_like of float
         Ray origins (outside every object) and unit directions.
-    vertex_normals : (V, 3) array_like of float, optional
-        Shading normals; default: area-weighted vertex normals
-        (:func:`area_weighted_vertex_normals`). Only used when ``smooth``.
+    vertex_normals : (V, 3) or (F, 3, 3) array_like of float, optional
+        Shading normals, per vertex or per corner (row ``[f, k]`` belongs to
+        vertex ``faces[f, k]``; e.g. the crease normals of
+        :func:`refraction_ref.meshes.corner_normals`, which let a vertex on a
+        sharp edge carry one normal per side). Default: area-weighted vertex
+        normals (:func:`area_weighted_vertex_normals`). Only used when
+        ``smooth``. A zero normal (interpolated) means "use the face normal".
+    normals : (V, 3) or (F, 3, 3) array_like of float, optional
+        The same as ``vertex_normals`` under the name the exact reference's
+        ``geometry`` stage gives its buffer (``ctx.buf["geometry"]["normals"]``,
+        passed with ``smooth=ctx.buf["geometry"]["smooth"]``); give one of
+        the two.
     smooth : bool, default True
-        Refract with barycentrically interpolated vertex normals (``True``)
+        Refract with barycentrically interpolated shading normals (``True``)
         or with the face normals (``False``). The shading normal is flipped
         to the geometric normal's side when they disagree; if it would send
         the refracted / reflected ray to the wrong side of the triangle the
@@ -296,15 +306,19 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     .. [4] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
        Objects", M.S. thesis, UMBC, 2008.
     """
+    if normals is not None and vertex_normals is not None:
+        raise ValueError("give the shading normals as normals or as vertex_normals, not both")
+    name = "normals" if normals is not None else "vertex_normals"
     v, f, fo, ior, ab, o, d, vn = _validate(
         vertices, faces, face_object, object_ior, object_absorption,
-        origins, dirs, vertex_normals, outside_ior, max_bounces)
+        origins, dirs, vertex_normals if normals is None else normals, outside_ior, max_bounces, name)
     max_bounces = int(max_bounces)
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError("chunk_size must be >= 1")
     if smooth and vn is None:
         vn = area_weighted_vertex_normals(v, f)
+    per_corner = vn is not None and vn.ndim == 3
     if epsilon is None:
         lo, hi = v.min(axis=0), v.max(axis=0)
         scale = max(float(np.linalg.norm(hi - lo)), float(np.abs(v).max()), 1e-30)
@@ -447,9 +461,14 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
                 b0 = np.clip(1.0 - u - w2, 0.0, 1.0)
                 s = b0 + b1 + b2
                 s = np.where(s > 0, s, 1.0)
-                tf_ = f[fi]
-                ns = (b0[:, None] * vn[tf_[:, 0]] + b1[:, None] * vn[tf_[:, 1]]
-                      + b2[:, None] * vn[tf_[:, 2]]) / s[:, None]
+                if per_corner:  # the same sum, the corner normals of face fi
+                    cn = vn[fi]
+                    ns = (b0[:, None] * cn[:, 0] + b1[:, None] * cn[:, 1]
+                          + b2[:, None] * cn[:, 2]) / s[:, None]
+                else:
+                    tf_ = f[fi]
+                    ns = (b0[:, None] * vn[tf_[:, 0]] + b1[:, None] * vn[tf_[:, 1]]
+                          + b2[:, None] * vn[tf_[:, 2]]) / s[:, None]
                 ns = _unit(ns)
                 okn = np.all(np.isfinite(ns), axis=1)
                 ns = np.where(okn[:, None], ns, ng)

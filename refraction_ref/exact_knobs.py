@@ -1,7 +1,9 @@
 """The ``exact`` knob block (the exact Embree reference): defaults and validation side by side.
 
-``normals`` and ``max_bounces`` are read by the per-pixel trace; ``photons``
-and ``photon_seed`` by the exact photon reference of the caustic stages.
+``normals`` and ``crease_deg`` are read by the ``geometry`` stage (it makes
+the shading normals every tracing stage uses), ``max_bounces`` by the
+per-pixel trace and the photon trace; ``photons`` and ``photon_seed`` by the
+exact photon reference of the caustic stages.
 Water scenes (the exact water reference) read the ``levelmap`` block's
 ``exact_samples`` and ``exact_seed`` instead.
 
@@ -15,14 +17,35 @@ from .graph import KnobBlock, register_block
 __all__ = ["EXACT_DEFAULTS", "validate_exact", "BLOCK"]
 
 EXACT_DEFAULTS = {
-    "normals": "smooth",      # 'smooth' interpolated (area-weighted) vertex normals | 'face'
+    # shading normals (docs/oracle.md, Conventions):
+    #   'crease' per-corner normals from the triangles alone: smooth where two faces' normals differ by
+    #            less than crease_deg, face normals across sharper edges (meshes.corner_normals)
+    #   'file'   the vertex normals the mesh file stores (PLY nx/ny/nz, OBJ vn), turned with the object;
+    #            'crease' for an object whose mesh has none (generated, arrays, deformed, or a file without)
+    #   'smooth' area-weighted vertex normals across every edge (the old default:
+    #            it rounds a cube's edges into a lens) | 'face' flat facets
+    # 'crease' and not 'file' is the default: the truth must follow from the triangles any backend is
+    # given, and exporters write smooth normals across hard edges (trimesh's own OBJ export of a box
+    # stores (+-1, +-1, +-1)/sqrt(3) corner normals: the lens again); no built-in mesh stores normals
+    "normals": "crease",
+    # crease angle in degrees, (0, 180]; an edge at exactly this angle is sharp; 180 = 'smooth'.
+    # 60 from benchmarks/bench_normals.py (results/normals.md: 256x256 exact renders, IOR 1.5, fit 1):
+    # - CAD edges stay sharp: 700 of fandisk's 722 edges above 30 deg lie above 60 (its features sit at
+    #   80-120 deg); 30, 45 and 60 give nearly one render (19.5 / 20.7 / 20.8 % of its pixels differ from
+    #   face normals by > 1 deg, i.e. its smooth patches), 90 rounds the features (37.5 %, 20.1 % from
+    #   'smooth'); the cube is exact at any angle up to 90;
+    # - smooth surfaces stay smooth: against 'smooth', 60 changes 0.1 % of the teapot's pixels (its
+    #   tessellation reaches 45 deg, its lid-knob pole 45-60; 1.5 % at 45, 3.5 % at 30) and 3.0 % of the
+    #   bunny's (scan noise: 1,355 edges above 30, 110 above 60; 8.0 % at 45, 18.8 % at 30).
+    # three.js's toCreasedNormals defaults to 60 deg too.
+    "crease_deg": 60.0,
     "max_bounces": 64,        # events per ray (refractions and total internal reflections)
     "photons": 1024,          # caustics reference: jittered photons per side of the light's window
     "photon_seed": 0,         # seed of the jitter (the reference is deterministic)
     "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
 }
 
-NORMALS = ("smooth", "face")
+NORMALS = ("crease", "file", "smooth", "face")
 
 
 def validate_exact(data, base_dir="."):
@@ -32,6 +55,7 @@ def validate_exact(data, base_dir="."):
     p = data["exact"]
     if p["normals"] not in NORMALS:
         raise SceneError(f"scene: 'exact.normals' is {p['normals']!r}; choose one of {', '.join(NORMALS)}")
+    _num(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
     _num(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
     _num(p["photons"], "exact.photons", 1, 16384, integer=True)
     _num(p["photon_seed"], "exact.photon_seed", 0, integer=True)

@@ -3,7 +3,8 @@
 ==================  ===========================================================
 stage               pass
 ==================  ===========================================================
-``geometry``        the objects' triangles and area-weighted vertex normals
+``geometry``        the objects' triangles and their shading normals
+                    (``exact.normals``: crease, file, smooth or face)
 ``trace``           every pixel's ray through the real triangles (Embree hits,
                     float64 Möller-Trumbore, Snell / total internal reflection)
 ``shade``           environment look-up, Beer-Lambert per segment
@@ -24,18 +25,88 @@ import numpy as np
 from .camera import Camera
 from .environment import environment_lookup
 from .graph import Method, Stage, register_method, run_graph
-from .meshes import eye_inside, scene_geometry, vertex_normals
+from .meshes import (corner_normals, crease_edge_angles, eye_inside, file_vertex_normals, load_mesh,
+                     rotation_matrix, scene_geometry, vertex_normals)
 from .scene import SceneError
 from .status import MISSED
 
-__all__ = ["render_exact", "METHOD"]
+__all__ = ["render_exact", "shading_normals", "METHOD"]
+
+
+def _object_label(k, o):
+    m = o["mesh"]
+    return f"objects[{k}] ({m if isinstance(m, str) else 'arrays'})"
+
+
+def shading_normals(scene, geom, mode, crease_deg, vn=None):
+    """The shading normals of the merged objects for ``exact.normals = mode``.
+
+    Returns
+    -------
+    normals : (V, 3) or (F, 3, 3) ndarray or None
+        What :func:`~refraction_ref.exact.trace_exact` takes as ``normals``:
+        the area-weighted vertex normals (``smooth``; ``vn`` when given), per-corner normals
+        (``crease``, ``file``) or None (``face``).
+    smooth : bool
+        ``trace_exact``'s ``smooth``: interpolate ``normals`` (False: face normals).
+    rule : str
+        The rule applied, object by object, for the plan note.
+    """
+    f = geom.faces
+    if mode == "face":
+        return None, False, "face normals (flat facets)"
+    ang = crease_edge_angles(geom.vertices, f)
+    sharp = int(np.count_nonzero(ang > crease_deg - 1e-6))  # at the crease angle is sharp (corner_normals)
+    edges = f"{sharp:,} of the scene's {len(ang):,} edges at {crease_deg:g} deg or sharper"
+    if mode == "smooth":
+        vn = vertex_normals(geom.vertices, f) if vn is None else vn
+        warn = (f"; they round {edges} (exact.normals=crease keeps them sharp)" if sharp else "")
+        return vn, True, "smooth normals: area-weighted vertex normals across every edge" + warn
+    cn = corner_normals(geom.vertices, f, crease_deg)
+    crease = (f"crease normals (smooth where face normals differ by less than {crease_deg:g} deg, "
+              f"face normals across sharper edges; {edges})")
+    if mode == "crease":
+        return cn, True, crease + ", from the triangles alone (exact.normals=file uses a mesh file's own normals)"
+    # 'file': per object, the vertex normals its mesh file stores; crease where there are none
+    objs = scene.data["objects"]
+    used, fell = [], []
+    off = 0
+    for k, o in enumerate(objs):
+        nv = len(load_mesh(o["mesh"], o.get("size"), scene.base_dir)[0])
+        n_file = None
+        if o.get("deform") is not None:
+            why = "deformed: its file's normals describe the undeformed mesh"
+        else:
+            n_file = file_vertex_normals(o["mesh"], scene.base_dir)
+            why = ("its file stores no vertex normals" if isinstance(o["mesh"], str) and o["mesh"] not in
+                   ("sphere", "plane") else "generated or given as arrays: no mesh file")
+        if n_file is not None and len(n_file) == nv:
+            # fit and the uniform scale do not turn normals; the rotation does (p' = R s p + t)
+            nw = n_file @ rotation_matrix(o["transform"]["rotate"]).T
+            sel = np.flatnonzero(geom.face_object == k)
+            cn[sel] = nw[f[sel] - off]
+            used.append(_object_label(k, o))
+        else:
+            fell.append(f"{_object_label(k, o)}: {why}")
+        off += nv
+    parts = []
+    if used:
+        parts.append("file normals (the mesh file's vertex normals) for " + ", ".join(used))
+    if fell:
+        parts.append(crease + " for " + "; ".join(fell))
+    return cn, True, "; ".join(parts)
 
 
 def _st_geometry(ctx):
     geom = scene_geometry(ctx.scene)
     ctx.stats["triangles"] = int(len(geom.faces))
+    p = ctx.scene.data["exact"]
     vn = vertex_normals(geom.vertices, geom.faces) if len(geom.faces) else None
-    return {"geom": geom, "vertex_normals": vn}
+    if len(geom.faces):
+        normals, smooth, rule = shading_normals(ctx.scene, geom, p["normals"], float(p["crease_deg"]), vn)
+    else:
+        normals, smooth, rule = None, p["normals"] != "face", "no triangles"
+    return {"geom": geom, "vertex_normals": vn, "normals": normals, "smooth": smooth, "normals_rule": rule}
 
 
 def _st_trace(ctx):
@@ -43,7 +114,8 @@ def _st_trace(ctx):
 
     d = ctx.scene.data
     p = d["exact"]
-    geom, vn = ctx.buf["geometry"]["geom"], ctx.buf["geometry"]["vertex_normals"]
+    g = ctx.buf["geometry"]
+    geom = g["geom"]
     cam = Camera.from_dict(d["camera"])
     H, W = cam.shape
     if eye_inside(geom, cam.eye):
@@ -55,8 +127,8 @@ def _st_trace(ctx):
     if len(geom.faces):
         kw = {"record": K} if K else {}
         tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption,
-                         origin.reshape(n, 3), rdir.reshape(n, 3), vertex_normals=vn,
-                         smooth=p["normals"] == "smooth", outside_ior=float(d["outside_ior"]),
+                         origin.reshape(n, 3), rdir.reshape(n, 3), normals=g["normals"],
+                         smooth=g["smooth"], outside_ior=float(d["outside_ior"]),
                          max_bounces=int(p["max_bounces"]), progress=ctx.progress, **kw)
     else:
         tr = {"hit": np.zeros(n, bool), "exit_pos": np.full((n, 3), np.nan), "exit_dir": rdir.reshape(n, 3).copy(),
@@ -65,7 +137,7 @@ def _st_trace(ctx):
         if K:
             tr["path_pos"] = np.full((n, K, 3), np.nan)
             tr["path_dir"] = np.full((n, K, 3), np.nan)
-    ctx.note(f"Embree, {p['normals']} normals, up to {p['max_bounces']} bounces")
+    ctx.note(f"Embree, up to {p['max_bounces']} bounces; exact.normals={p['normals']}: {g['normals_rule']}")
     out = {"flat": tr, "ray_origin": origin, "ray_dir": rdir,
            "hit": tr["hit"].reshape(H, W),
            "exit_pos": tr["exit_pos"].reshape(H, W, 3),
@@ -95,8 +167,9 @@ def _st_shade(ctx):
 
 def _mesh_stages():
     return (
-        Stage("geometry", _st_geometry, reads=("objects", "outside_ior"), makes=("geom", "vertex_normals"),
-              doc="the objects' triangles and area-weighted vertex normals"),
+        Stage("geometry", _st_geometry, reads=("objects", "outside_ior", "exact.normals", "exact.crease_deg"),
+              makes=("geom", "vertex_normals", "normals", "smooth", "normals_rule"),
+              doc="the objects' triangles and shading normals (crease, file, smooth or face)"),
         Stage("trace", _st_trace, reads=("camera", "outside_ior", "exact.normals", "exact.max_bounces",
                                          "exact.record"), after=("geometry",),
               makes=("hit", "exit_pos", "exit_dir", "interfaces", "path_length", "status", "path_pos", "path_dir"),
@@ -184,8 +257,19 @@ def _assemble(scene, bufs, stats):
     return arrays, info
 
 
+def check_memory(scene):
+    """The exact reference keeps about 60 float64 words per pixel (rays, hits, outputs): refuse what cannot fit."""
+    c = scene.data["camera"]
+    W, H = c["width"], c["height"]
+    K = int(scene.data["exact"]["record"])
+    need = W * H * 8 * (60 + 6 * K)
+    if need > 16 * 2**30:
+        raise SceneError(f"exact: {W}x{H} pixels need about {need / 2**30:.1f} GiB for the exact trace; lower "
+                         "camera.width and camera.height" + (" or exact.record" if K else ""))
+
+
 METHOD = register_method(Method(
-    "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped,
+    "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped, check=check_memory,
     results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final"),
     doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface"))
 

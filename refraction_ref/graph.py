@@ -140,6 +140,10 @@ class Method:
     warm : callable or None
         Compile the method's kernels on a tiny scene (once per process), so
         that ``timings_ms`` measure run time, not JIT time.
+    check : callable or None
+        ``check(scene)``: the method's preconditions on a loaded scene
+        (e.g. the memory its buffers need), raising
+        :class:`~refraction_ref.scene.SceneError` before any stage runs.
     results : tuple of str
         What ``assemble`` reads: ``"stage"`` (all its buffers) or
         ``"stage.buffer"``. A render without a session frees every other
@@ -154,6 +158,7 @@ class Method:
     assemble: Callable
     skipped: Callable = lambda scene: []
     warm: Callable | None = None
+    check: Callable | None = None
     results: tuple = ()
     doc: str = ""
 
@@ -379,6 +384,8 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
     ephemeral = cache is None  # nothing outlives this call: free buffers after their last reader
     if ephemeral:
         cache = {}
+    if method.check is not None:
+        method.check(scene)
     stages = tuple(method.stages(scene))
     kept = _keep_names(method.name, stages, keep)
     active = [st for st in stages if not st.diagnostic or st.name in kept]

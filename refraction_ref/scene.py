@@ -42,7 +42,9 @@ DEFAULT_RECEIVER = {"mesh": "plane", "fit": None, "size": [4.0, 4.0],
                     "transform": {"scale": 1.0, "rotate": [0.0, 0.0, 0.0], "translate": [0.0, 0.0, 0.0]},
                     "albedo": [0.8, 0.8, 0.8], "name": None}
 
-DEFAULT_ENVIRONMENT = {"type": "checker", "tiles": 16, "colors": [[0.9, 0.9, 0.9], [0.1, 0.1, 0.1]],
+#: 48 squares around the horizon (7.5 degrees each): at the default 30-degree field of view about
+#: four squares span the image, so the refraction through an object is visible (16 showed one or two)
+DEFAULT_ENVIRONMENT = {"type": "checker", "tiles": 48, "colors": [[0.9, 0.9, 0.9], [0.1, 0.1, 0.1]],
                        "path": None, "intensity": 1.0}
 
 DEFAULT_LIGHT = {"type": "directional", "direction": [0.0, -1.0, 0.0], "position": None,

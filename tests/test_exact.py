@@ -447,3 +447,32 @@ def test_smooth_normals_never_break_the_geometry():
     assert np.all(np.sum(r["first_dir"] * ng, axis=1) < 0)  # went inside
     # the shading normals were really used (not the face normals everywhere)
     assert np.mean(np.sum(r["first_normal"] * ng / np.linalg.norm(ng, axis=1, keepdims=True), axis=1) < 0.999) > 0.5
+
+
+@pytest.mark.parametrize("mode", ["crease", "file", "smooth", "face"])
+def test_geometry_stage_normals_feed_trace_exact(mode):
+    """The ``geometry`` stage's ``normals`` and ``smooth`` buffers are what trace_exact takes
+    (the photon trace of the exact caustics passes them the same way)."""
+    import refraction_ref as rr
+    from refraction_ref.meshes import scene_geometry
+    from refraction_ref.scene import load_scene
+
+    scene = load_scene({"camera": {"width": 24, "height": 24},
+                        "objects": [{"mesh": "fandisk", "fit": 1.0, "material": {"ior": 1.5}}],
+                        "exact": {"normals": mode}})
+    res = rr.render(scene, method="exact", keep="geometry")
+    geom = scene_geometry(scene)
+    nrm = res.arrays.get("stage.geometry.normals")
+    if mode == "face":
+        assert nrm is None
+    elif mode == "smooth":
+        np.testing.assert_array_equal(nrm, res.arrays["stage.geometry.vertex_normals"])
+    else:
+        assert nrm.shape == (len(geom.faces), 3, 3)
+    o = res.arrays["ray_origin"].reshape(-1, 3)
+    d = res.arrays["ray_dir"].reshape(-1, 3)
+    tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, d,
+                     normals=nrm, smooth=mode != "face")
+    np.testing.assert_array_equal(tr["exit_dir"], res.arrays["exit_dir"].reshape(-1, 3))
+    note = next(p["why"] for p in res.meta["plan"] if p["stage"] == "trace")
+    assert f"exact.normals={mode}" in note

@@ -204,6 +204,11 @@ def _per_light_names(prefix, n):
     return tuple(f"{prefix}_{l}" for l in range(n))
 
 
+def _gather_names(nr):
+    """The gather stage's outputs per receiver: the map, its frame and the per-channel map."""
+    return tuple(nm for k in ("caustic_map", "caustic_frame", "caustic_rgb") for nm in _per_light_names(k, nr))
+
+
 def _photon_buffer_names(n, with_ldi):
     """Per-light buffers of ``photon_trace`` (None for a light whose photons meet no object)."""
     names = ("camera", "ldi", "exit_pos", "exit_dir") if with_ldi else ("camera", "exit_pos", "exit_dir")
@@ -218,8 +223,7 @@ def _st_gather(ctx, gather_key):
     arrays = {}
     rgb_maps = _collect(d["lights"], rs, per_light, arrays, g)
     ctx.note(f"Gaussian gathering, window {g} texels (Wyman & Davis 2006)" if g > 1 else "no gathering")
-    return {"arrays": arrays, "rgb_maps": rgb_maps,
-            **{f"caustic_map_{r}": arrays[f"caustic_map_{r}"] for r in range(len(rs.boxes))}}
+    return {"arrays": arrays, "rgb_maps": rgb_maps, **arrays}
 
 
 # ---------------------------------------------------------------------------
@@ -379,7 +383,7 @@ def imagespace_caustic_stages(scene):
               after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
               doc="bilinear splat of each photon's irradiance (§2.3.2)"),
         Stage("gather", lambda ctx: _st_gather(ctx, True), reads=("imagespace.gather", "lights"),
-              after=("receivers", "splat"), makes=_per_light_names("caustic_map", nr),
+              after=("receivers", "splat"), makes=_gather_names(nr),
               doc="Gaussian gathering (Wyman & Davis 2006)"),
         Stage("caustic_final", _st_final_is,
               reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
@@ -485,7 +489,7 @@ def _st_photon_trace_exact(ctx):
     d = ctx.scene.data
     pe = d["exact"]
     g = ctx.buf["geometry"]
-    geom, vn = g["geom"], g["vertex_normals"]
+    geom = g["geom"]
     n = int(pe["photons"])
     out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), False))}
     for l, light in enumerate(d["lights"]):
@@ -495,7 +499,7 @@ def _st_photon_trace_exact(ctx):
         lcam = light_camera(light, geom.vertices, n)
         o, dd, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
         tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, dd,
-                         vertex_normals=vn, smooth=pe["normals"] == "smooth",
+                         normals=g["normals"], smooth=g["smooth"],
                          outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
         st = tr["status"].astype(np.int8)
         ex = np.flatnonzero(st == EXITED)
@@ -556,8 +560,7 @@ def exact_caustic_stages(scene):
     nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
     return _receiver_stages(nr)[:1] + (
         Stage("photon_trace", _st_photon_trace_exact,
-              reads=("lights", "outside_ior", "exact.photons", "exact.photon_seed", "exact.normals",
-                     "exact.max_bounces"),
+              reads=("lights", "outside_ior", "exact.photons", "exact.photon_seed", "exact.max_bounces"),
               after=("geometry",),
               makes=_photon_buffer_names(nl, False),
               doc="exact photons through the triangles (Embree)"),
@@ -568,7 +571,7 @@ def exact_caustic_stages(scene):
               after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
               doc="bilinear splat; the reference's own noise from two interleaved halves"),
         Stage("gather", lambda ctx: _st_gather(ctx, False), reads=("lights",), after=("receivers", "splat"),
-              makes=_per_light_names("caustic_map", nr), doc="sum over lights, no gathering"),
+              makes=_gather_names(nr), doc="sum over lights, no gathering"),
         Stage("caustic_final", _st_final_exact, reads=("environment", "lights"),
               after=("geometry", "trace", "receivers", "gather"), makes=("image_caustics",),
               doc="receivers lit directly and by caustics, the object traced exactly"),

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from ..graph import KnobBlock, register_block
 
-__all__ = ["IMAGESPACE_DEFAULTS", "CHOICES", "validate_imagespace", "BLOCK"]
+__all__ = ["IMAGESPACE_DEFAULTS", "CHOICES", "validate_imagespace", "check_memory", "BLOCK"]
 
 #: Every key is a knob; see the table in ``docs/oracle.md``.
 IMAGESPACE_DEFAULTS = {
@@ -80,13 +80,25 @@ def validate_imagespace(data, base_dir="."):
         raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
                          "(a centred square of texels, e.g. 7), or 1 for no gathering")
     _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
-    c = data["camera"]
+    return data
+
+
+def check_memory(scene):
+    """The image-space method's buffers must fit: refuse before any work (a method precondition).
+
+    Per pixel: S/8 bytes of bitmask, 8 bytes per layer of the LDI and the
+    trace's outputs and temporaries (about 24 more 8-byte words).
+    """
+    from ..scene import SceneError
+
+    im = scene.data["imagespace"]
+    c = scene.data["camera"]
     W, H = c["width"], c["height"]
     need = W * H * (im["slices"] // 8 + 8 * (im["layers"] + 24))
     if need > 16 * 2**30:
-        raise SceneError(f"scene: {W}x{H} with {im['slices']} slices and {im['layers']} layers needs "
-                         f"about {need / 2**30:.1f} GiB; lower the resolution")
-    return data
+        raise SceneError(f"imagespace: {W}x{H} pixels with {im['slices']} slices and {im['layers']} layers need "
+                         f"about {need / 2**30:.1f} GiB; lower camera.width and camera.height, imagespace.slices "
+                         "or imagespace.layers")
 
 
 BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace"))

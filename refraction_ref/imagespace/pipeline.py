@@ -34,6 +34,7 @@ from ..optics import beer_lambert
 from ..raster import raster_setup
 from ..scene import SceneError
 from .depth_bounds import depth_bounds, global_bounds
+from .knobs import check_memory
 from .normals import layer_normals
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
 from .search_bounds import search_bounds
@@ -394,6 +395,7 @@ def _warm():
 METHOD = register_method(Method(
     "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
     results=("rays", "trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
+    check=check_memory,
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 
