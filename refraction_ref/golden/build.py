@@ -1,0 +1,220 @@
+"""``refraction-ref golden build DIR``: render the catalogue with the oracle into a golden suite.
+
+Layout of a suite (``docs/oracle.md``, "Conformance")::
+
+    DIR/manifest.json            contract and software versions, CPU, per case and key:
+                                 sha256, shape, dtype, stage, tolerance
+    DIR/<case>/scene.json        the resolved scene (volume arrays beside it as .npy)
+    DIR/<case>/golden.npz        the method under test: final keys and every stage buffer
+    DIR/<case>/reference.npz     the exact reference's result, for information (not judged)
+    DIR/<case>/batches.npz       K independent photon batches of noisy maps (exact methods)
+
+Deterministic: two builds on one machine and one set of versions give
+identical hashes (results are bit-identical whatever the thread count);
+across machines only the tolerances are promised.
+"""
+
+from __future__ import annotations
+
+import copy
+import glob
+import hashlib
+import json
+import os
+import time
+
+import numpy as np
+
+from ..contract import CONTRACT_VERSION, software_versions
+from ..files import atomic_open, atomic_path
+from .tolerances import tolerance_for
+
+__all__ = ["catalogue", "build", "case_scene", "array_sha256", "key_stage", "CATALOGUE_DIR"]
+
+CATALOGUE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "golden")
+
+
+def catalogue(only=None):
+    """The cases shipped in ``refraction_ref/data/golden`` (sorted by name), optionally a subset.
+
+    Raises
+    ------
+    SceneError
+        For a name in ``only`` that is not a case (naming the known ones).
+    """
+    from ..scene import SceneError
+
+    cases = {}
+    for p in sorted(glob.glob(os.path.join(CATALOGUE_DIR, "*.json"))):
+        with open(p) as f:
+            c = json.load(f)
+        c["name"] = os.path.splitext(os.path.basename(p))[0]
+        cases[c["name"]] = c
+    if only:
+        names = [n.strip() for n in (only.split(",") if isinstance(only, str) else only) if n.strip()]
+        bad = [n for n in names if n not in cases]
+        if bad:
+            raise SceneError(f"golden: unknown case {', '.join(repr(b) for b in bad)}; the catalogue has "
+                             f"{', '.join(cases)}")
+        return [cases[n] for n in names]
+    return list(cases.values())
+
+
+def _centres(n):
+    x = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    return np.meshgrid(x, x, x, indexing="ij")
+
+
+def _generate_volume(spec):
+    """Index volumes the catalogue names instead of storing arrays in JSON (bounds [-1, 1]^3)."""
+    n = int(spec["n"])
+    X, Y, Z = _centres(n)
+    if spec["generator"] == "luneburg":  # n = sqrt(2 - r^2 / R^2) inside radius R (Luneburg 1944)
+        R = float(spec.get("radius", 0.8))
+        r2 = (X ** 2 + Y ** 2 + Z ** 2) / R ** 2
+        return np.where(r2 < 1, np.sqrt(np.maximum(2 - r2, 1.0)), 1.0)
+    if spec["generator"] == "step":  # a cube of constant index with sharp faces
+        h = float(spec.get("half", 0.45))
+        inside = (np.abs(X) < h) & (np.abs(Y) < h) & (np.abs(Z) < h)
+        return np.where(inside, float(spec["ior"]), 1.0)
+    raise ValueError(f"unknown volume generator {spec['generator']!r}")
+
+
+def case_scene(case, folder, overrides=None):
+    """Write the case's scene (and generated volume) into ``folder`` and load it from there."""
+    from ..scene import load_scene
+
+    os.makedirs(folder, exist_ok=True)
+    raw = copy.deepcopy(case["scene"])
+    vol = raw.get("volume")
+    if isinstance(vol, dict) and "generator" in vol:
+        a = _generate_volume(vol)
+        with atomic_path(os.path.join(folder, "volume_ior.npy")) as tmp:
+            np.save(tmp, a)
+        raw["volume"] = {"ior": "volume_ior.npy", "bounds": [[-1, -1, -1], [1, 1, 1]]}
+    path = os.path.join(folder, "scene.json")
+    with atomic_open(path, "w") as f:
+        json.dump(raw, f, indent=1)
+    return load_scene(path, overrides)
+
+
+def array_sha256(a):
+    """sha256 of an array's dtype, shape and bytes (C order)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.view(np.uint8).tobytes() if a.size else b"")
+    return h.hexdigest()
+
+
+def key_stage(key, stages):
+    """The stage that makes an array key: ``stage.<s>.<b>`` -> s; a final key -> the last stage making it."""
+    if key.startswith("stage."):
+        return key.split(".")[1]
+    owner = "output"
+    for st in stages:
+        if key in st.makes:
+            owner = st.name
+    return owner
+
+
+def _seed_key(scene):
+    return "levelmap.exact_seed" if scene.data.get("water") is not None else "exact.photon_seed"
+
+
+def photon_quantum(scene, method):
+    """The irradiance one photon of the exact references deposits in one texel (flux / texel area).
+
+    For the exact photon reference: the largest photon flux of the light's
+    window (:func:`~refraction_ref.caustics.light.window_samples`) over the
+    smallest texel area of the receivers' maps; for the exact water
+    reference: one water sample's area over the texel area. Per unit light
+    (the maps are for lights of unit strength) times the largest radiance.
+    """
+    d = scene.data
+    rad = max([float(np.max(lt["radiance"])) for lt in d["lights"]] + [1.0])
+    if d.get("water") is not None:
+        from ..levelmap.pipeline import planes_pass
+
+        boxes = [b for row in planes_pass(scene)["boxes"] for b in row]
+        sx, sz = (float(v) for v in d["water"]["size"])
+        M = int(d["levelmap"]["exact_samples"])
+        return rad * (sx / M) * (sz / M) / min(b.texel_area for b in boxes)
+    from ..caustics.light import window_samples
+    from ..caustics.receivers import receiver_set
+    from ..lights import light_camera
+    from ..meshes import scene_geometry
+
+    geom = scene_geometry(scene)
+    n = int(d["exact"]["photons"])
+    rs = receiver_set(scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    flux = max(float(window_samples(light_camera(lt, geom.vertices, n), n, 0)[2].max()) for lt in d["lights"])
+    return rad * flux / min(b.texel_area for b in rs.boxes)
+
+
+def _save_npz(path, arrays):
+    with atomic_path(path) as tmp:
+        np.savez_compressed(tmp, **arrays)
+
+
+def build(folder, only=None, progress=False, log=print):
+    """Render the catalogue (or ``only`` those cases) into a golden suite in ``folder``.
+
+    Returns
+    -------
+    dict
+        The manifest written to ``folder/manifest.json``.
+    """
+    import refraction_ref as rr
+
+    from ..graph import get_method
+
+    cases = catalogue(only)
+    os.makedirs(folder, exist_ok=True)
+    mpath = os.path.join(folder, "manifest.json")
+    manifest = {"contract_version": CONTRACT_VERSION, "versions": software_versions(), "cases": {}}
+    if os.path.exists(mpath):  # a partial rebuild (--only) keeps the other cases
+        with open(mpath) as f:
+            old = json.load(f)
+        if old.get("contract_version") == CONTRACT_VERSION:
+            manifest["cases"] = old.get("cases", {})
+    for case in cases:
+        t0 = time.perf_counter()
+        d = os.path.join(folder, case["name"])
+        scene = case_scene(case, d)
+        method = case["method"]
+        res = rr.render(scene, method=method, keep="stages", progress=progress)
+        stages = get_method(method).stages(scene)
+        noisy = bool(case.get("batches"))
+        keys = {}
+        for k, a in sorted(res.arrays.items()):
+            keys[k] = {"sha256": array_sha256(a), "shape": list(a.shape), "dtype": a.dtype.str,
+                       "stage": key_stage(k, stages), "tolerance": tolerance_for(k, noisy=noisy)}
+        _save_npz(os.path.join(d, "golden.npz"), res.arrays)
+        entry = {"method": method, "purpose": case["purpose"], "stages": [s.name for s in stages] + ["output"],
+                 "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
+        if noisy:
+            K = int(case["batches"])
+            sk = _seed_key(scene)
+            maps = {}
+            for b in range(K):
+                r = rr.render(scene, method=method, overrides={sk: b})
+                for k, a in r.arrays.items():
+                    if k.startswith("caustic_map_"):
+                        maps.setdefault(k, []).append(a)
+            _save_npz(os.path.join(d, "batches.npz"), {k: np.stack(v) for k, v in maps.items()})
+            q = photon_quantum(scene, method)
+            for k in maps:
+                keys[k]["tolerance"]["quantum"] = q
+            entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
+            entry["files"].append("batches.npz")
+        if case.get("reference"):
+            ref = rr.render(scene, method=case["reference"])
+            _save_npz(os.path.join(d, "reference.npz"), ref.arrays)
+            entry["reference"] = case["reference"]
+            entry["files"].append("reference.npz")
+        entry["build_s"] = time.perf_counter() - t0
+        manifest["cases"][case["name"]] = entry
+        log(f"  {case['name']}: {method}, {len(keys)} arrays, {entry['build_s']:.1f} s")
+        with atomic_open(mpath, "w") as f:  # after every case: an interrupted build keeps what it made
+            json.dump(manifest, f, indent=1, sort_keys=True)
+    return manifest
