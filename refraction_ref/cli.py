@@ -1,4 +1,4 @@
-"""Command line: ``refraction-ref render | compare | scene | golden build | check``."""
+"""Command line: ``refraction-ref render | compare | scene | golden build | check | sweep``."""
 
 from __future__ import annotations
 
@@ -110,6 +110,22 @@ def _cmd_check(a):
     return 0 if out["ok"] else 1
 
 
+def _cmd_sweep(a):
+    from .sweep import load_spec, sweep
+
+    spec = load_spec(a.spec)
+    n = len(spec["scenes"]) * len(spec["methods"]) * max(1, __import__("math").prod(len(v) for v in spec["grid"].values()))
+    where = a.scheduler or f"a LocalCluster of {a.workers} worker process(es) x {a.threads_per_worker} thread(s)"
+    print(f"sweep {spec['name']}: {n} tasks on {where}", flush=True)
+    rows, paths, wall = sweep(spec, out=a.out, scheduler=a.scheduler, workers=a.workers,
+                              threads_per_worker=a.threads_per_worker, progress=not a.quiet and sys.stderr.isatty())
+    failed = [r for r in rows if r.get("status") != "ok"]
+    print(f"{len(rows) - len(failed)} tasks ok, {len(failed)} failed, {wall:.1f} s; wrote " + ", ".join(paths))
+    for r in failed[:5]:
+        print(f"  failed: {r.get('scene')} {r.get('method')}: {r['status']}")
+    return 0 if not failed else 1
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="refraction-ref",
                                 description="CPU reference renderer for refraction through transparent objects.")
@@ -159,14 +175,23 @@ def main(argv=None):
     k.add_argument("--cases", metavar="NAME,...", help="judge only these cases")
     k.add_argument("--no-panels", action="store_true", help="no PNG panels for failures")
     k.set_defaults(fn=_cmd_check)
+    w = sub.add_parser("sweep", help="run a grid of scenes x methods x knobs on dask.distributed (error vs time)")
+    w.add_argument("spec", help="sweep spec (JSON; see refraction_ref/sweep.py)")
+    w.add_argument("--out", default="out/sweep", help="folder for NAME.csv, NAME.parquet, NAME.png")
+    w.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing dask cluster (default: a LocalCluster)")
+    w.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    w.add_argument("--threads-per-worker", type=int, default=1, help="threads per LocalCluster worker (default 1)")
+    w.add_argument("--quiet", action="store_true")
+    w.set_defaults(fn=_cmd_sweep)
     a = p.parse_args(argv)
     from .compare import CompareError
     from .golden.check import CheckError
     from .scene import SceneError
+    from .sweep import SweepError
 
     try:
         return a.fn(a)
-    except (SceneError, CompareError, CheckError, FileExistsError, FileNotFoundError) as e:
+    except (SceneError, CompareError, CheckError, SweepError, FileExistsError, FileNotFoundError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
 

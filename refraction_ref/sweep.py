@@ -1,0 +1,295 @@
+"""``refraction-ref sweep SPEC.json``: error against run time over a grid of knobs, on ``dask.distributed``.
+
+A spec (JSON) names scenes, methods, a grid of dotted overrides and a
+number of repeats; every combination is one task. Tasks run on a
+``LocalCluster`` by default (worker processes and threads per worker
+settable) or on an existing cluster (``--scheduler tcp://HOST:PORT``). Each
+task pins its Numba thread count (``threads``, default 1), so timings stay
+comparable whatever the worker, renders once to warm up and ``repeats``
+times, and measures its error against the exact reference of the same scene
+and camera (rendered once per scene and camera, as a task of its own). A
+task that fails is reported in its row; the sweep goes on.
+
+Spec::
+
+    {"name": "iterations",
+     "scenes": {"bunny": null, "pool": "refraction_ref/data/levelmap_default.json"},
+     "methods": ["imagespace"],
+     "grid": {"imagespace.iterations": [1, 5, 10], "camera.width": [128]},
+     "base": {"camera.height": 128},
+     "repeats": 3, "threads": 1, "reference": "exact"}
+
+``scenes`` maps a name to a scene file (relative to the spec), a scene dict,
+or null for the bundled default. ``grid`` keys are dotted overrides whose
+values are listed; ``base`` overrides apply to every task. A ``camera.*``
+key in the grid changes the reference too.
+
+Output (``--out DIR``): ``NAME.csv`` (one row per task: scene, method, the
+grid's values, error statistics, median stage timings, total, worker, thread
+count, status), ``NAME.parquet`` where pyarrow is installed, and
+``NAME.png`` (error against time per method).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import os
+import time
+
+__all__ = ["load_spec", "tasks_of", "run_task", "run_reference", "sweep", "SweepError"]
+
+
+class SweepError(ValueError):
+    """A spec that cannot be run, with the key to fix."""
+
+
+def load_spec(src):
+    """Read and check a sweep spec (a path or a dict); relative scene paths resolve against the spec's folder."""
+    base_dir = "."
+    if isinstance(src, (str, os.PathLike)):
+        path = os.fspath(src)
+        if not os.path.isfile(path):
+            raise SweepError(f"sweep: spec file '{path}' does not exist")
+        try:
+            with open(path) as f:
+                spec = json.load(f)
+        except json.JSONDecodeError as e:
+            raise SweepError(f"sweep: spec file '{path}' is not valid JSON: {e}") from None
+        base_dir = os.path.dirname(os.path.abspath(path))
+    else:
+        spec = dict(src)
+    known = {"name", "scenes", "methods", "grid", "base", "repeats", "threads", "reference"}
+    bad = sorted(set(spec) - known)
+    if bad:
+        raise SweepError(f"sweep: unknown spec key {', '.join(repr(b) for b in bad)}; known: {', '.join(sorted(known))}")
+    from .graph import method_names
+
+    spec.setdefault("name", "sweep")
+    spec.setdefault("scenes", {"default": None})
+    spec.setdefault("methods", ["imagespace"])
+    spec.setdefault("grid", {})
+    spec.setdefault("base", {})
+    spec.setdefault("repeats", 3)
+    spec.setdefault("threads", 1)
+    spec.setdefault("reference", "exact")
+    for m in spec["methods"]:
+        if m not in method_names():
+            raise SweepError(f"sweep: methods lists {m!r}; choose from {', '.join(method_names())}")
+    if not isinstance(spec["grid"], dict) or not all(isinstance(v, list) and v for v in spec["grid"].values()):
+        raise SweepError("sweep: 'grid' must map dotted keys to non-empty lists of values")
+    if int(spec["repeats"]) < 1 or int(spec["threads"]) < 1:
+        raise SweepError("sweep: 'repeats' and 'threads' must be at least 1")
+    scenes = {}
+    for name, s in spec["scenes"].items():
+        if isinstance(s, str) and not os.path.isabs(s):
+            s = os.path.join(base_dir, s)
+        scenes[name] = s
+    spec["scenes"] = scenes
+    from .scene import SceneError, load_scene
+
+    for name, s in scenes.items():  # refuse a bad scene or override before any task is sent
+        for combo in _combos(spec["grid"]):
+            try:
+                load_scene(s, {**spec["base"], **combo})
+            except SceneError as e:
+                raise SweepError(f"sweep: scene '{name}' with {combo}: {e}") from None
+    return spec
+
+
+def _combos(grid):
+    keys = list(grid)
+    return [dict(zip(keys, vals)) for vals in itertools.product(*(grid[k] for k in keys))] or [{}]
+
+
+def _ref_key(combo):
+    return json.dumps({k: v for k, v in sorted(combo.items()) if k.startswith("camera.")}, sort_keys=True)
+
+
+def tasks_of(spec):
+    """Every (scene, method, overrides) of the grid, in a fixed order."""
+    return [{"scene_name": sn, "scene": s, "method": m, "overrides": combo}
+            for sn, s in spec["scenes"].items() for m in spec["methods"] for combo in _combos(spec["grid"])]
+
+
+def _pin_threads(n):
+    import numba
+
+    n = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(n)
+    return n
+
+
+def run_reference(scene, method, overrides, threads=1):
+    """The exact reference's arrays of a scene at the task's camera (a task of its own)."""
+    import refraction_ref as rr
+
+    _pin_threads(threads)
+    res = rr.render(scene, method=method, overrides=overrides)
+    keep = ("status", "hit", "exit_dir", "interfaces", "image")
+    return {k: v for k, v in res.arrays.items() if k in keep or k.startswith("caustic_map_")}
+
+
+def run_task(task, base, repeats, threads, reference=None):
+    """Render one grid point ``repeats`` times after a warm-up; the row of the CSV.
+
+    A failure becomes the row's ``status`` (``failed: <message>``); nothing is raised.
+    """
+    import statistics
+
+    import refraction_ref as rr
+
+    from .compare import compare_arrays
+
+    row = {"scene": task["scene_name"], "method": task["method"], **task["overrides"], "status": "ok"}
+    try:
+        import distributed
+
+        row["worker"] = distributed.get_worker().address
+    except (ImportError, ValueError):
+        row["worker"] = "local"
+    try:
+        row["threads"] = _pin_threads(threads)
+        sc = rr.load_scene(task["scene"], {**base, **task["overrides"]})
+        rr.render(sc, method=task["method"])  # warm-up: kernels, caches, first touch of memory
+        per, totals, res = {}, [], None
+        for _ in range(int(repeats)):
+            res = rr.render(sc, method=task["method"])
+            totals.append(res.meta["total_ms"])
+            for k, v in res.meta["timings_ms"].items():
+                if "." not in k:
+                    per.setdefault(k, []).append(v)
+        row["total_ms"] = statistics.median(totals)
+        for k, v in per.items():
+            row[f"t_{k}"] = statistics.median(v)
+        if reference is not None:
+            c = compare_arrays(res.arrays, reference)
+            if "exit_dir_deg" in c:
+                row["exit_dir_median_deg"] = c["exit_dir_deg"]["median"]
+                row["exit_dir_p90_deg"] = c["exit_dir_deg"]["p90"]
+                row["status_agree"] = c["status_agree"]
+            for k, v in c.get("caustic_rel_l1", {}).items():
+                row[f"{k}_rel_l1"] = v
+            if "image_rmse" in c:
+                row["image_rmse"] = c["image_rmse"]
+    except Exception as e:  # a failed task is a row, not the end of the sweep
+        row["status"] = f"failed: {type(e).__name__}: {e}"
+    return row
+
+
+def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progress=False, client=None):
+    """Run a spec on dask.distributed; returns (rows, paths written).
+
+    Parameters
+    ----------
+    spec : dict or str
+        A spec or its path (:func:`load_spec`).
+    out : str
+        Folder of the CSV (Parquet) and PNG.
+    scheduler : str, optional
+        Address of an existing cluster (``tcp://HOST:PORT``); default: a
+        ``LocalCluster`` of ``workers`` processes with ``threads_per_worker``
+        threads each.
+    client : distributed.Client, optional
+        Use this client (tests).
+    """
+    from distributed import Client, LocalCluster, as_completed
+
+    spec = load_spec(spec) if not isinstance(spec, dict) or "scenes" not in spec or "name" not in spec else spec
+    tasks = tasks_of(spec)
+    own = client is None
+    cluster = None
+    t0 = time.perf_counter()
+    if own:
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=int(threads_per_worker),
+                                   processes=True, dashboard_address=None)
+            client = Client(cluster)
+    try:
+        refs = {}
+        futures = []
+        for t in tasks:
+            ref = None
+            if spec["reference"] and t["method"] != spec["reference"]:
+                rk = (t["scene_name"], _ref_key(t["overrides"]))
+                if rk not in refs:
+                    cam = {k: v for k, v in t["overrides"].items() if k.startswith("camera.")}
+                    refs[rk] = client.submit(run_reference, t["scene"], spec["reference"], {**spec["base"], **cam},
+                                             spec["threads"], pure=False)
+                ref = refs[rk]
+            futures.append(client.submit(run_task, t, spec["base"], spec["repeats"], spec["threads"], ref,
+                                         pure=False))
+        rows = []
+        it = as_completed(futures)
+        if progress:
+            from tqdm.auto import tqdm
+
+            it = tqdm(it, total=len(futures), desc=f"sweep {spec['name']}", unit="task")
+        for f in it:
+            try:
+                rows.append(f.result())
+            except Exception as e:  # the reference task failed: its dependants land here
+                rows.append({"status": f"failed: {type(e).__name__}: {e}"})
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    order = {json.dumps([t["scene_name"], t["method"], t["overrides"]], sort_keys=True): i
+             for i, t in enumerate(tasks)}
+    rows.sort(key=lambda r: order.get(json.dumps([r.get("scene"), r.get("method"),
+                                                  {k: r[k] for k in spec["grid"] if k in r}], sort_keys=True), 1e9))
+    wall = time.perf_counter() - t0
+    paths = write_rows(rows, out, spec["name"])
+    return rows, paths, wall
+
+
+def write_rows(rows, out, name):
+    """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot."""
+    from .files import atomic_open, savefig_atomic
+
+    os.makedirs(out, exist_ok=True)
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    paths = []
+    p = os.path.join(out, f"{name}.csv")
+    with atomic_open(p, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+    paths.append(p)
+    try:
+        import pyarrow  # noqa: F401
+        import pyarrow.csv
+        import pyarrow.parquet
+
+        p = os.path.join(out, f"{name}.parquet")
+        pyarrow.parquet.write_table(pyarrow.csv.read_csv(paths[0]), p)
+        paths.append(p)
+    except ImportError:
+        pass
+    ok = [r for r in rows if r.get("status") == "ok" and "total_ms" in r]
+    err_key = next((k for k in ("exit_dir_median_deg", "image_rmse") if any(k in r for r in ok)), None)
+    if not err_key:
+        err_key = next((k for r in ok for k in r if k.endswith("_rel_l1")), None)
+    if ok and err_key:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(7, 4.5))
+        FigureCanvasAgg(fig)
+        ax = fig.subplots()
+        for m in sorted({r["method"] for r in ok}):
+            pts = [(r["total_ms"], r[err_key]) for r in ok if r["method"] == m and err_key in r]
+            if pts:
+                ax.scatter(*zip(*pts), label=m)
+        ax.set_xlabel("median render time (ms)")
+        ax.set_ylabel(err_key.replace("_", " "))
+        ax.set_title(f"sweep {name}: error against the exact reference versus run time")
+        ax.legend()
+        fig.tight_layout()
+        paths.append(savefig_atomic(fig, os.path.join(out, f"{name}.png"), dpi=90))
+    return paths
