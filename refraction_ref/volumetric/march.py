@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import math
 import threading
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -120,11 +121,16 @@ def sample_field(field, lo, ih, x, y, z):
 
 
 @nb.njit(cache=True, inline="always")
-def advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds):
+def advance(field, lo, ih, integ, p, v, g, ds):
     """One step of eqs. 4-5 (``integ`` 0) or of RK4 on eqs. 2-3 (``integ`` 1).
 
-    ``n, g*`` are the field at (x, y, z), already sampled by the caller.
+    ``p = (x, y, z)``, ``v = (vx, vy, vz)``; ``g = (n, dn/dx, dn/dy, dn/dz)``
+    is the field at p, already sampled by the caller. Returns
+    ``(x, y, z, vx, vy, vz)`` after the step ``ds``.
     """
+    x, y, z = p
+    vx, vy, vz = v
+    n, gx, gy, gz = g
     if integ == 0:
         s = ds / n
         return x + s * vx, y + s * vy, z + s * vz, vx + ds * gx, vy + ds * gy, vz + ds * gz
@@ -203,18 +209,100 @@ def segment_exit(lo, hi, x, y, z, x1, y1, z1):
     return max(s, 0.0)
 
 
+class _Box(NamedTuple):
+    """Where the voxel grid lies in the world (:func:`_geometry`)."""
+
+    lo: np.ndarray  # (3,) float64 lower corner
+    hi: np.ndarray  # (3,) float64 upper corner
+    h: np.ndarray  # (3,) float64 voxel size
+    ih: np.ndarray  # (3,) float64 1 / h
+    shape_n: np.ndarray  # (3,) int64 voxels per axis
+    hmin: float  # smallest voxel side
+
+
+class _Grid(NamedTuple):
+    """The volume the photons march through: index field, media, octree, and its box (flat:
+    numba's parallel loops pass the fields of a tuple, not of a tuple inside a tuple)."""
+
+    field: np.ndarray  # (nx, ny, nz, 4) float32: n and grad n
+    ext: np.ndarray  # (nx, ny, nz, 3) float32: extinction kappa per scene unit
+    level: np.ndarray  # (nx, ny, nz): level of the octree leaf holding each voxel
+    smax: np.ndarray  # (nx, ny, nz) float32: maximum step in voxels (inf: constant node)
+    lo: np.ndarray  # the fields of _Box
+    hi: np.ndarray
+    h: np.ndarray
+    ih: np.ndarray
+    shape_n: np.ndarray
+    hmin: float
+
+
+class _Photons(NamedTuple):
+    """The photons' start states, (P, 3) float64 each (:func:`~.photons.generate_photons`)."""
+
+    pos: np.ndarray
+    dirs: np.ndarray
+    rad: np.ndarray
+
+
+class _Knobs(NamedTuple):
+    """Step control and termination of one march (module docstring)."""
+
+    ds_min: float  # minimum step, world units
+    stiff: float  # stiffness bound
+    integ: int  # INTEG_EULER or INTEG_RK4
+    max_steps: int
+    min_rad: float  # a photon dies below this fraction of its start radiance
+    record: int  # steps kept per photon in the path (0: none)
+
+
+class _Deposits(NamedTuple):
+    """Where and how the steps deposit (fixed point, module docstring)."""
+
+    rows: np.ndarray  # (buffers * nx * py * pz, 6) int64 view of the (buffers, nx, py, pz, 6) deposits
+    buffers: int
+    nx: int  # the volume's voxels
+    ny: int
+    nz: int
+    py: int  # padded rows (>= ny, >= nz)
+    pz: int
+    sr: float  # fixed-point scale of radiance
+    sd: float  # and of direction
+    start: int  # the first step of a photon that deposits
+    sign: int  # +1 adds the deposits, -1 removes them again
+
+
+class _Outputs(NamedTuple):
+    """Per-photon arrays the march fills (see :func:`march_photons`, Returns)."""
+
+    steps: np.ndarray  # (P,) int32
+    status: np.ndarray  # (P,) int8
+    drift: np.ndarray  # (P,) float64
+    exit_pos: np.ndarray  # (P, 3)
+    exit_dir: np.ndarray  # (P, 3)
+    paths: np.ndarray  # (P, record + 1, 3); (1, 1, 3) unused when record is 0
+
+
 @nb.njit(cache=True)
-def deposit_segment(accr, nx, ny, nz, py, pz, g, lo, ih, ax, ay, az, bx, by, bz, l0r, l0g, l0b, l1r, l1g, l1b,
-                    dx, dy, dz, sr, sd, sgn):
+def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
     """Add radiance and radiance-weighted direction to every voxel of segment a -> b (3D DDA).
 
-    ``accr`` is a (records, 6) view of the (buffers, nx, py, pz, 6) int64
-    deposits (py >= ny, pz >= nz: padded rows), written in buffer ``g``.
+    ``dep`` (:class:`_Deposits`) holds the (records, 6) view of the
+    (buffers, nx, py, pz, 6) int64 deposits (py >= ny, pz >= nz: padded
+    rows), written in buffer ``g``; ``lo`` and ``ih`` place the volume
+    (:class:`_Box`). ``a``, ``b`` are the end points, ``l0``,
+    ``l1`` the RGB radiance there and ``d`` the unit direction, 3-tuples.
     The radiance is interpolated linearly along the segment and weighted by
     the length of the segment inside each voxel (in voxels); values are
-    converted to fixed point with scale ``sr`` (radiance) and ``sd``
-    (direction) by truncation, and added with sign ``sgn``.
+    converted to fixed point with scale ``dep.sr`` (radiance) and ``dep.sd``
+    (direction) by truncation, and added with sign ``dep.sign``.
     """
+    accr, nx, ny, nz, py, pz = dep.rows, dep.nx, dep.ny, dep.nz, dep.py, dep.pz
+    sr, sd, sgn = dep.sr, dep.sd, dep.sign
+    ax, ay, az = a
+    bx, by, bz = b
+    l0r, l0g, l0b = l0
+    l1r, l1g, l1b = l1
+    dx, dy, dz = d
     u0 = (ax - lo[0]) * ih[0]
     w0 = (ay - lo[1]) * ih[1]
     t0 = (az - lo[2]) * ih[2]
@@ -288,10 +376,22 @@ def deposit_segment(accr, nx, ny, nz, py, pz, g, lo, ih, ax, ay, az, bx, by, bz,
 
 
 @nb.njit(cache=True)
-def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
-               ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, accr, g, py, pz, sr, sd,
-               exit_pos, exit_dir, record, path, path_n):
-    """Trace photon p to its end; returns (steps, status, max relative |v|-n drift)."""
+def _trace_one(p, grid, photons, knobs, dep, g, out, path):
+    """Trace photon p to its end; returns (steps, status, max relative |v|-n drift).
+
+    Deposits into buffer ``g`` of ``dep``, writes ``out.exit_pos`` /
+    ``out.exit_dir`` of an exiting photon, and, when ``knobs.record`` is
+    K > 0, the start point and the end points of the first K steps into
+    ``path`` ((K + 1, 3); rows of steps not taken are left as they are).
+    """
+    # the named tuples unpacked by name (a reordered field cannot swap two arguments)
+    field, ext, level, smax = grid.field, grid.ext, grid.level, grid.smax
+    lo, hi, h, ih, shape_n, hmin = grid.lo, grid.hi, grid.h, grid.ih, grid.shape_n, grid.hmin
+    pos, dirs, rad = photons.pos, photons.dirs, photons.rad
+    ds_min, stiff, integ, max_steps = knobs.ds_min, knobs.stiff, knobs.integ, knobs.max_steps
+    min_rad, record = knobs.min_rad, knobs.record
+    dep_from = dep.start
+    exit_pos, exit_dir = out.exit_pos, out.exit_dir
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     x, y, z = pos[p, 0], pos[p, 1], pos[p, 2]
     n = sample_field(field, lo, ih, x, y, z)[0]
@@ -305,11 +405,10 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
     nudge = 1e-4 * hmin
     carried = False
     cn, cgx, cgy, cgz = 0.0, 0.0, 0.0, 0.0
-    if record:
+    if record > 0:
         path[0, 0] = x
         path[0, 1] = y
         path[0, 2] = z
-        path_n[0] = 1
     while True:
         if steps >= max_steps:
             status = LIMIT
@@ -345,7 +444,8 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
                 ds = stiff * n / gn
             # stiffness: a step across an index jump that the local gradient does not predict is halved
             for _ in range(8):
-                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds)
+                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz),
+                                                    (n, gx, gy, gz), ds)
                 cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
                 dn = cn - n
                 if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
@@ -372,18 +472,17 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
             ng = lg * math.exp(-kg * seg)
             nb_ = lb * math.exp(-kb * seg)
         if steps >= dep_from and seg > 0.0:
-            deposit_segment(accr, nx, ny, nz, py, pz, g, lo, ih, x, y, z, ex, ey, ez, lr, lg, lb, nr, ng, nb_,
-                            sx / seg, sy / seg, sz / seg, sr, sd, sgn)
+            deposit_segment(dep, g, lo, ih, (x, y, z), (ex, ey, ez), (lr, lg, lb), (nr, ng, nb_),
+                            (sx / seg, sy / seg, sz / seg))
         steps += 1
-        if record and path_n[0] < path.shape[0]:
-            path[path_n[0], 0] = ex
-            path[path_n[0], 1] = ey
-            path[path_n[0], 2] = ez
-            path_n[0] += 1
+        if steps <= record:
+            path[steps, 0] = ex
+            path[steps, 1] = ey
+            path[steps, 2] = ez
         if s < 1.0:
             status = EXITED
             if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
-                vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, s * ds)[3:]
+                vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), s * ds)[3:]
             v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
             exit_pos[p, 0] = ex
             exit_pos[p, 1] = ey
@@ -401,24 +500,23 @@ def _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, di
 
 
 @nb.njit(cache=True, parallel=True)
-def _march_kernel(field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad, sel,
-                  ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, acc, sr, sd,
-                  out_steps, out_status, out_drift, exit_pos, exit_dir):
-    nbuf = acc.shape[0]
-    accr = acc.reshape(-1, 6)
-    py, pz = acc.shape[2], acc.shape[3]
+def _march_kernel(grid, photons, sel, knobs, dep, out):
+    """Trace the photons ``sel`` (indices into ``photons``), chunks of 256 spread over the deposit buffers."""
+    nbuf = dep.buffers
+    # one output array per statement (see view._view_kernel: numba's dead-code elimination)
+    out_steps = out.steps
+    out_status = out.status
+    out_drift = out.drift
+    paths = out.paths
+    rec = knobs.record > 0
     dummy_path = np.zeros((1, 3))
-    dummy_n = np.zeros(1, np.int64)
     chunk = 256
-    nchunks = (sel.shape[0] + chunk - 1) // chunk
     for g in nb.prange(nbuf):
         for q in range(sel.shape[0]):
             if (q // chunk) % nbuf != g:
                 continue
             p = sel[q]
-            st, ss, dr = _trace_one(p, field, ext, level, smax, lo, hi, h, ih, shape_n, hmin, pos, dirs, rad,
-                                    ds_min, stiff, integ, max_steps, min_rad, dep_from, sgn, accr, g, py, pz, sr, sd,
-                                    exit_pos, exit_dir, False, dummy_path, dummy_n)
+            st, ss, dr = _trace_one(p, grid, photons, knobs, dep, g, out, paths[p] if rec else dummy_path)
             out_steps[p] = st
             out_status[p] = ss
             out_drift[p] = dr
@@ -512,18 +610,25 @@ def release_workspace():
 
 
 def _geometry(bounds, shape):
+    """The :class:`_Box` of a volume of ``shape`` spanning ``bounds``."""
     b = np.asarray(bounds, dtype=np.float64)
     shape_n = np.asarray(shape[:3], dtype=np.int64)
     h = (b[1] - b[0]) / shape_n
-    return b[0].copy(), b[1].copy(), h, 1.0 / h, shape_n, float(h.min())
+    return _Box(b[0].copy(), b[1].copy(), h, 1.0 / h, shape_n, float(h.min()))
 
 
 def _integ_code(integrator):
     return {"euler": INTEG_EULER, "rk4": INTEG_RK4}[integrator]
 
 
+def _grid(field, extinction, level, smax, bounds):
+    return _Grid(np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
+                 np.ascontiguousarray(level), np.ascontiguousarray(smax), *_geometry(bounds, field.shape))
+
+
 def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_min=1.0, stiff=0.25,
-                  integrator="euler", max_steps=0, min_radiance=1e-3, stop_fraction=1e-3, buffers=None):
+                  integrator="euler", max_steps=0, min_radiance=1e-3, stop_fraction=1e-3, buffers=None,
+                  record=0):
     """Trace photons through the volume and deposit their radiance (§4.4).
 
     Parameters
@@ -544,10 +649,14 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     max_steps : int
         Per-photon limit; 0 = ``8 * max(shape) / ds_min``.
     min_radiance, stop_fraction : float
-        Termination thresholds (§4.4).
+        Termination thresholds (§4.4). ``stop_fraction=None`` applies no
+        stopping rule (every photon runs to its own end).
     buffers : int, optional
         Deposit buffers (default: the numba thread count, fewer if memory
         is short). Does not change the result.
+    record : int
+        K >= 0: keep the first K steps of every photon's path (``paths``).
+        Does not change any other result; 0 allocates nothing.
 
     Returns
     -------
@@ -558,13 +667,21 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
         (P,) int8 (:data:`STATUS`), ``steps`` (P,) int32 (after the
         stopping rule), ``total_steps``, ``truncated`` (photons cut by the
         stopping rule), ``drift_max`` / ``drift_median`` / ``drift_p99`` (relative
-        ``||v| - n| / n``), ``max_steps``.
+        ``||v| - n| / n``), ``max_steps``; with ``record`` K > 0 also
+        ``paths`` (P, K + 1, 3) float64: the start point, then the position
+        after each of the first K steps (world; a step that leaves the
+        volume ends on its face), NaN after the photon stopped (after
+        ``steps``, so a photon cut by the stopping rule ends at the cut).
 
     References
     ----------
     Sun et al. (2008), §4.4, eqs. 4-6.
     """
-    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
+    record = int(record)
+    if record < 0:
+        raise ValueError(f"record must be >= 0, got {record}")
+    grid = _grid(field, extinction, level, smax, bounds)
+    hmin = grid.hmin
     P = len(pos)
     nx, ny, nz = (int(s) for s in field.shape[:3])
     if max_steps <= 0:
@@ -575,43 +692,41 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     # one voxel of padding on the two inner axes: the rows of a buffer are then not a power of two
     # bytes apart, so a photon walking along y or x does not keep hitting the same cache sets
     acc = _take_workspace((int(buffers), nx, ny + 1, nz + 1, 6))
-    lmax = float(np.max(rad)) if P else 1.0
     total = max(float(np.sum(np.max(rad, axis=1))) if P else 1.0, 1e-300)
     sr = 2.0 ** 58 / (16.0 * total)  # 16 = generous bound on one photon's length per voxel
     sd = sr / 3.0
-    steps = np.zeros(P, np.int32)
-    status = np.full(P, PHOTON_ACTIVE, np.int8)
-    drift = np.zeros(P, np.float64)
-    exit_pos = np.full((P, 3), np.nan)
-    exit_dir = np.full((P, 3), np.nan)
-    integ = _integ_code(integrator)
-    args = (np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
-            np.ascontiguousarray(level), np.ascontiguousarray(smax), lo, hi, h, ih, shape_n, hmin,
-            np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(dirs, dtype=np.float64),
-            np.ascontiguousarray(rad, dtype=np.float64))
-    ds_w = float(ds_min) * hmin
+    paths = np.full((P, record + 1, 3), np.nan) if record else np.zeros((1, 1, 3))
+    out = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
+                   np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths)
+    steps, status, drift, exit_pos, exit_dir = out.steps, out.status, out.drift, out.exit_pos, out.exit_dir
+    photons = _Photons(np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(dirs, dtype=np.float64),
+                       np.ascontiguousarray(rad, dtype=np.float64))
+    knobs = _Knobs(float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
+                   float(min_radiance), record)
+    rows = acc.reshape(-1, 6)
+    py, pz = acc.shape[2], acc.shape[3]
     if P:
-        _march_kernel(*args, locality_order(pos, bounds, field.shape), ds_w, float(stiff), integ, int(max_steps),
-                      float(min_radiance), 0, 1, acc, sr, sd, steps, status, drift, exit_pos, exit_dir)
+        _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs,
+                      _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, 0, 1), out)
     # the paper's stopping rule: iterate until fewer than stop_fraction * P photons are active
     truncated = 0
-    if P:
+    if P and stop_fraction is not None:
         k = int(math.ceil(stop_fraction * P)) - 1
         if k < P:
             cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
             late = np.flatnonzero(steps > cut)
             if len(late):
-                s2 = np.zeros(P, np.int32)
-                st2 = np.full(P, PHOTON_ACTIVE, np.int8)
-                d2 = np.zeros(P)
-                e2p = np.full((P, 3), np.nan)
-                e2d = np.full((P, 3), np.nan)
-                _march_kernel(*args, late.astype(np.int64), ds_w, float(stiff), integ, int(max_steps),
-                              float(min_radiance), cut, -1, acc, sr, sd, s2, st2, d2, e2p, e2d)
+                # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
+                redo = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P),
+                                np.full((P, 3), np.nan), np.full((P, 3), np.nan), np.zeros((1, 1, 3)))
+                _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
+                              _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, cut, -1), redo)
                 steps[late] = cut
                 status[late] = LIMIT
                 exit_pos[late] = np.nan
                 exit_dir[late] = np.nan
+                if record:
+                    paths[late, cut + 1:] = np.nan
                 truncated = int(len(late))
     sums = np.empty((nx, ny, nz, 6))
     _merge_buffers(acc, sr, sd, sums)
@@ -624,6 +739,8 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
         "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
         "max_steps": int(max_steps), "buffers": int(buffers),
     }
+    if record:
+        info["paths"] = paths
     return sums, info
 
 
@@ -636,26 +753,26 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
     list of (k, 3) float64
         Start point and the end point of every step (clipped at the volume).
     """
-    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
+    grid = _grid(field, extinction, level, smax, bounds)
     nx, ny, nz = (int(s) for s in field.shape[:3])
     if max_steps <= 0:
         max_steps = int(math.ceil(8 * max(nx, ny, nz) / max(ds_min, 1e-3))) + 16
     pos = np.ascontiguousarray(pos, dtype=np.float64)
     dirs = np.ascontiguousarray(dirs, dtype=np.float64)
-    rad = np.ones_like(pos)
-    acc = np.zeros((1, 6), np.int64)
-    ep = np.full(pos.shape, np.nan)
-    ed = np.full(pos.shape, np.nan)
-    out = []
+    photons = _Photons(pos, dirs, np.ones_like(pos))
+    K = max(min(max_points, max_steps + 1), 1) - 1  # steps kept after the start point
+    if K == 0:
+        return [pos[p:p + 1].copy() for p in range(len(pos))]
+    knobs = _Knobs(float(ds_min) * grid.hmin, float(stiff), _integ_code(integrator), int(max_steps), 0.0, K)
+    dep = _Deposits(np.zeros((1, 6), np.int64), 1, nx, ny, nz, 1, 1, 1.0, 1.0, 1 << 62, 0)  # never deposits
+    out = _Outputs(np.zeros(len(pos), np.int32), np.zeros(len(pos), np.int8), np.zeros(len(pos)),
+                   np.full(pos.shape, np.nan), np.full(pos.shape, np.nan), np.zeros((1, 1, 3)))
+    paths = []
     for p in range(len(pos)):
-        path = np.empty((min(max_points, max_steps + 1), 3))
-        pn = np.zeros(1, np.int64)
-        _trace_one(p, np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
-                   np.ascontiguousarray(level), np.ascontiguousarray(smax), lo, hi, h, ih, shape_n, hmin,
-                   pos, dirs, rad, float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
-                   0.0, 1 << 62, 0, acc, 0, 1, 1, 1.0, 1.0, ep, ed, True, path, pn)
-        out.append(path[: pn[0]].copy())
-    return out
+        path = np.empty((K + 1, 3))
+        steps = _trace_one(p, grid, photons, knobs, dep, 0, out, path)[0]
+        paths.append(path[: min(steps, K) + 1].copy())
+    return paths
 
 
 def smooth_radiance(sums):

@@ -4,24 +4,26 @@ Stages, in order, with what each one depends on (its *inputs*; a stage
 re-runs when its inputs or an upstream stage changed, and is otherwise
 reused from ``cache``):
 
-==============  ===================================================  ===============
-stage           inputs                                               section
-==============  ===================================================  ===============
-``voxelize``    objects (meshes, transforms, materials), outside      §4.1
-                ior, ``volume`` block, resolution, padding,
-                supersample, blur, bounds
-``gradient``    voxelize                                             §3, eq. 3
-``octree``      voxelize; eps, eps2, ds_max                          §4.2, §5.3
-``photons``     voxelize (bounds); lights; photons                   §4.3
-``march``       gradient, octree, photons; ds_min, stiff,            §4.4, eqs. 4-6
-                integrator, max_steps, min_radiance, stop_fraction,
-                scattering, absorption
-``smooth``      march (and, for the viewing pass, the source volume  §4.4
-                sigma L, direction, kappa, which no camera change
-                alters)
-``view``        gradient, octree, smooth; camera, environment,       §4.5
-                phase_g, integrator, scattering, absorption
-==============  ===================================================  ===============
+================  ===================================================  ===============
+stage             inputs                                               section
+================  ===================================================  ===============
+``voxelize``      objects (meshes, transforms, materials), outside      §4.1
+                  ior, ``volume`` block, resolution, padding,
+                  supersample, blur, bounds
+``gradient``      voxelize                                             §3, eq. 3
+``octree``        voxelize; eps, eps2, ds_max                          §4.2, §5.3
+``photons``       voxelize (bounds); lights; photons                   §4.3
+``march``         gradient, octree, photons; ds_min, stiff,            §4.4, eqs. 4-6
+                  integrator, max_steps, min_radiance, stop_fraction,
+                  scattering, absorption
+``photon_paths``  the march's inputs; only when kept: a fixed sample   §4.4
+                  of photon paths, step by step, for inspection
+``smooth``        march (and, for the viewing pass, the source volume  §4.4
+                  sigma L, direction, kappa, which no camera change
+                  alters)
+``view``          gradient, octree, smooth; camera, environment,       §4.5
+                  phase_g, integrator, scattering, absorption
+================  ===================================================  ===============
 
 So a camera change re-runs ``view`` only, a light change ``photons``,
 ``march``, ``smooth`` and ``view``, and a geometry or material change
@@ -237,16 +239,31 @@ def _st_photons(ctx):
     return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2]}
 
 
+#: the knobs the ``march`` stage reads (``photon_paths`` reads the same)
+MARCH_KNOBS = ("ds_min", "stiff", "integrator", "max_steps", "min_radiance", "stop_fraction", "scattering",
+               "absorption")
+
+
+def _march_volume(ctx):
+    """What the march reads beside the photons: (field, kappa, level, step_max, bounds)."""
+    b = ctx.buf
+    vox, octv = b["voxelize"], b["octree"]
+    kappa = _media(vox, ctx.scene.data["volumetric"])[1]
+    return b["gradient"]["field"], kappa, octv["level"], octv["step_max"], vox["bounds"]
+
+
+def _march_settings(v):
+    """The march's keyword arguments from the ``volumetric`` block (``stop_fraction`` apart)."""
+    return dict(ds_min=float(v["ds_min"]), stiff=float(v["stiff"]), integrator=v["integrator"],
+                max_steps=int(v["max_steps"]), min_radiance=float(v["min_radiance"]))
+
+
 def _st_march(ctx):
     v = ctx.scene.data["volumetric"]
-    b = ctx.buf
-    vox, octv, ph = b["voxelize"], b["octree"], b["photons"]["ph"]
-    kappa = _media(vox, v)[1]
+    ph = ctx.buf["photons"]["ph"]
     pos, dirs, rad = ph[0], ph[1], ph[2]
-    sums, minfo = march_photons(b["gradient"]["field"], kappa, octv["level"], octv["step_max"], vox["bounds"],
-                                pos, dirs, rad, ds_min=float(v["ds_min"]), stiff=float(v["stiff"]),
-                                integrator=v["integrator"], max_steps=int(v["max_steps"]),
-                                min_radiance=float(v["min_radiance"]), stop_fraction=float(v["stop_fraction"]))
+    sums, minfo = march_photons(*_march_volume(ctx), pos, dirs, rad, **_march_settings(v),
+                                stop_fraction=float(v["stop_fraction"]))
     ctx.note(f"{len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
              f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
              f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
@@ -256,6 +273,48 @@ def _st_march(ctx):
                           "deposit_buffers": minfo["buffers"]}
     return {"sums": sums, "minfo": minfo, "exit_pos": minfo["exit_pos"], "exit_dir": minfo["exit_dir"],
             "photon_status": minfo["status"]}
+
+
+#: photons in the ``photon_paths`` sample, and the steps recorded of each
+PATH_SAMPLE = 64
+PATH_STEPS = 256
+
+
+def path_sample(P, count=PATH_SAMPLE):
+    """Indices of the photons whose paths ``photon_paths`` records: evenly spaced, all when P < count."""
+    if P <= count:
+        return np.arange(P, dtype=np.int64)
+    return np.unique(np.linspace(0, P - 1, count).round().astype(np.int64))
+
+
+def _st_photon_paths(ctx):
+    """A fixed sample of photon paths, step by step, for diffing a port's march pass by pass (§4.4).
+
+    The sample is :data:`PATH_SAMPLE` photons of the ``photons`` stage at
+    evenly spaced indices (:func:`path_sample`; all of them when there are
+    fewer), marched with the ``march`` stage's knobs, recording their first
+    :data:`PATH_STEPS` steps. Photons do not interact, so each path is the
+    one the photon follows in the full march, with one difference: the
+    sample is marched alone, so the ensemble stopping rule
+    (``stop_fraction``, which cuts the photons still active when too few
+    of *all* photons are) does not cut it; a photon the full march cut
+    goes on here to its own end. The sample's deposits are discarded.
+
+    Buffers: ``paths`` (S, PATH_STEPS + 1, 3) float64, world: the start
+    point, then the position after each step (a step leaving the volume
+    ends on its face), NaN after the photon stopped; ``path_index`` (S,)
+    int64, the photons' indices in ``stage.photons.start_pos`` (and
+    ``photon_exit_pos``, ``photon_status``).
+    """
+    v = ctx.scene.data["volumetric"]
+    ph = ctx.buf["photons"]["ph"]
+    idx = path_sample(len(ph[0]))
+    _, info = march_photons(*_march_volume(ctx), ph[0][idx], ph[1][idx], ph[2][idx], **_march_settings(v),
+                            stop_fraction=None, record=PATH_STEPS)
+    longer = int(np.count_nonzero(info["steps"] > PATH_STEPS))
+    ctx.note(f"{len(idx)} of {len(ph[0])} photons, their first {PATH_STEPS} steps ({longer} take more), "
+             "marched alone (no stopping rule), deposits discarded")
+    return {"paths": info["paths"], "path_index": idx}
 
 
 def _st_smooth(ctx):
@@ -304,11 +363,13 @@ def _stages(scene):
               makes=("level", "step_max"), doc="min/max pyramid, leaf levels, step-size map (§4.2, §5.3)"),
         Stage("photons", _st_photons, reads=("lights", _V + "photons"), after=("voxelize",),
               makes=("start_pos", "start_dir", "start_radiance"), doc="one photon per covered light texel (§4.3)"),
-        Stage("march", _st_march, reads=tuple(_V + k for k in ("ds_min", "stiff", "integrator", "max_steps",
-                                                                 "min_radiance", "stop_fraction", "scattering",
-                                                                 "absorption")),
+        Stage("march", _st_march, reads=tuple(_V + k for k in MARCH_KNOBS),
               after=("voxelize", "gradient", "octree", "photons"), makes=("exit_pos", "exit_dir", "photon_status"),
               doc="adaptive marching and deposition (§4.4, eqs. 4-6)"),
+        Stage("photon_paths", _st_photon_paths, reads=tuple(_V + k for k in MARCH_KNOBS),
+              after=("voxelize", "gradient", "octree", "photons"), makes=("paths", "path_index"), diagnostic=True,
+              doc=f"the first {PATH_STEPS} steps of {PATH_SAMPLE} evenly spaced photons, marched alone (§4.4); "
+                  "only when kept"),
         Stage("smooth", _st_smooth, reads=(_V + "scattering", _V + "absorption"), after=("voxelize", "march"),
               makes=("radiance", "direction"), doc="3x3x3 smoothing of the radiance (§4.4)"),
         Stage("view", _st_view, reads=("camera", "environment", "outside_ior") + tuple(

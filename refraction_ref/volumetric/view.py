@@ -40,12 +40,13 @@ References
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 from ..status import EXITED, LIMIT, LOST, MISSED
-from .march import _geometry, _integ_code, advance, sample_field, segment_exit, voxel_of
+from .march import _geometry, _integ_code, advance, sample_field, segment_exit
 
 __all__ = ["view_volume", "hg_phase", "source_volume"]
 
@@ -102,9 +103,77 @@ def box_entry_one(lo, hi, ox, oy, oz, dx, dy, dz):
     return t_in
 
 
+class _Volume(NamedTuple):
+    """What a viewing ray reads: the index field, the source volume, the octree steps, the box."""
+
+    field: np.ndarray  # (nx, ny, nz, 4) float32: n and grad n
+    src: np.ndarray  # (nx, ny, nz, 9) float32: :func:`source_volume`
+    smax: np.ndarray  # (nx, ny, nz) float32: maximum step in voxels (inf: constant node)
+    lo: np.ndarray  # (3,) the box (march._Box)
+    hi: np.ndarray  # (3,)
+    ih: np.ndarray  # (3,) 1 / voxel size
+    hmin: float  # smallest voxel side: the step
+
+
+class _Rays(NamedTuple):
+    """Primary rays, (R, 3) float64 each."""
+
+    org: np.ndarray
+    dirs: np.ndarray
+
+
+class _Knobs(NamedTuple):
+    """Integration, phase function and the material level set of one viewing pass."""
+
+    integ: int  # INTEG_EULER or INTEG_RK4
+    g: float  # Henyey-Greenstein asymmetry
+    n_half: float  # the half-contrast index level that counts as material (module docstring)
+    side: float  # +1: material has n above n_half, -1: below
+    max_steps: int
+
+
+class _Outputs(NamedTuple):
+    """Per-ray arrays the kernel fills (see :func:`view_volume`, Returns)."""
+
+    color: np.ndarray  # (R, 3) in-scattered radiance
+    trans: np.ndarray  # (R, 3) transmittance
+    exit_pos: np.ndarray  # (R, 3)
+    exit_dir: np.ndarray  # (R, 3)
+    hit: np.ndarray  # (R,) bool
+    interfaces: np.ndarray  # (R,) int16
+    path_len: np.ndarray  # (R,)
+    status: np.ndarray  # (R,) int8
+
+
 @nb.njit(cache=True, parallel=True)
-def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_out, n_half, side,
-                 max_steps, color, trans, exit_pos, exit_dir, hit, interfaces, path_len, status):
+def _view_kernel(vol, rays, knobs, out):
+    # the named tuples unpacked by name (a reordered field cannot swap two arguments), one field per
+    # statement: numba's alias analysis follows ``a = out.a`` to the argument, but not
+    # ``a, b, c, d = out.a, out.b, out.c, out.d`` (a tuple built and unpacked), and its dead-code
+    # elimination would then drop the writes to such arrays inside the parallel loop; plain
+    # names also keep the parallel loop's arguments as they were with positional arguments
+    field = vol.field
+    src = vol.src
+    smax = vol.smax
+    lo = vol.lo
+    hi = vol.hi
+    ih = vol.ih
+    hmin = vol.hmin
+    org = rays.org
+    dirs = rays.dirs
+    integ = knobs.integ
+    g = knobs.g
+    n_half = knobs.n_half
+    side = knobs.side
+    max_steps = knobs.max_steps
+    color = out.color
+    trans = out.trans
+    exit_pos = out.exit_pos
+    exit_dir = out.exit_dir
+    hit = out.hit
+    interfaces = out.interfaces
+    path_len = out.path_len
+    status = out.status
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     lo0, lo1, lo2 = lo[0], lo[1], lo[2]
     ih0, ih1, ih2 = ih[0], ih[1], ih[2]
@@ -165,7 +234,7 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
                 vx1, vy1, vz1 = vx + ds * gx, vy + ds * gy, vz + ds * gz
                 u_ok = False
             else:
-                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, ds)
+                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
                 u_ok = False
                 if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                         and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
@@ -207,7 +276,8 @@ def _view_kernel(field, src, smax, lo, hi, h, ih, hmin, org, dirs, integ, g, n_o
             if s < 1.0:
                 st = EXITED
                 if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
-                    vx1, vy1, vz1 = advance(field, lo, ih, integ, x, y, z, vx, vy, vz, n, gx, gy, gz, s * ds)[3:]
+                    vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz),
+                                            s * ds)[3:]
                 v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
                 exit_pos[r, 0] = x + s * (x1 - x)
                 exit_pos[r, 1] = y + s * (y1 - y)
@@ -262,7 +332,7 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
         the ray missed the box), ``hit``, ``interfaces``, ``path_length``,
         ``status``.
     """
-    lo, hi, h, ih, shape_n, hmin = _geometry(bounds, field.shape)
+    box = _geometry(bounds, field.shape)
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     R = len(org)
@@ -283,9 +353,10 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     inter = np.zeros(R, np.int16)
     plen = np.zeros(R)
     status = np.full(R, MISSED, np.int8)  # rays that miss the box keep it
-    _view_kernel(np.ascontiguousarray(field), np.ascontiguousarray(src), np.ascontiguousarray(smax),
-                 lo, hi, h, ih, hmin, org, d, _integ_code(integrator), float(phase_g), float(outside_ior),
-                 float(n_half), side, int(max_steps), color, trans, exit_pos, exit_dir, hit, inter, plen, status)
+    _view_kernel(_Volume(np.ascontiguousarray(field), np.ascontiguousarray(src), np.ascontiguousarray(smax),
+                         box.lo, box.hi, box.ih, box.hmin),
+                 _Rays(org, d), _Knobs(_integ_code(integrator), float(phase_g), float(n_half), side, int(max_steps)),
+                 _Outputs(color, trans, exit_pos, exit_dir, hit, inter, plen, status))
     # the direction the environment is seen along (NaN, i.e. black, where the ray did not get out)
     last_dir = exit_dir.copy()
     stuck = (status == LIMIT) | (status == LOST)
