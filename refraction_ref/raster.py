@@ -449,21 +449,81 @@ def _set_slice_bit(bits, i, j, d, lo, hi, slices, add):
         bits[i, j, w] = bits[i, j, w] | m
 
 
-@nb.njit(cache=True, inline="always")
-def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
-                 fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
-                 frag_off, frag_pix, frag_d, frag_n, frag_s):
+class _Tris(NamedTuple):
+    """Snapped triangles binned into bands of rows (the kernel half of a :class:`RasterSetup`)."""
+
+    X: np.ndarray  # (T, 3) int64 vertex columns, 1/256-pixel fixed point
+    Y: np.ndarray  # (T, 3) int64 vertex rows
+    D: np.ndarray  # (T, 3) float64 attribute: 1/depth (perspective) or depth (orthographic)
+    rows: np.ndarray  # (T, 2) int64 rows each triangle may cover
+    counts: np.ndarray  # (nbands + 1,) CSR offsets of the band lists (bin_bands)
+    tris: np.ndarray  # triangle indices, band by band
+
+
+class _Grid(NamedTuple):
+    """The image rasterized into: size, rows per band, how depth interpolates."""
+
+    W: int
+    H: int
+    band: int
+    perspective: bool  # 1/depth linear on screen; depth itself when False (orthographic)
+
+
+class _Blend(NamedTuple):
+    """Settings of the blend operations (the op itself is an argument of its own, see :func:`_raster_band`)."""
+
+    zlo: np.ndarray  # (H, W) slice range of ops 'or' / 'add' ((1, 1) unused)
+    zhi: np.ndarray
+    slices: int
+    slab: np.ndarray  # (4,) (z0, s, klo, khi) of op 'nearest'; s <= 0: no restriction
+
+
+class _Targets(NamedTuple):
+    """The per-pixel buffers blended into ((1, 1[, 1]) placeholders for those an op does not use)."""
+
+    fbuf: np.ndarray  # (H, W) float64: 'min', 'max', 'nearest'
+    ibuf: np.ndarray  # (H, W) int32: 'count', 'collect'
+    bits: np.ndarray  # (H, W, S // 32) uint32: 'or', 'add'
+    layers: np.ndarray  # (2, H, W) 'minmax' / (capacity, H, W) 'collect' float64
+    ids: np.ndarray  # (H, W) int64: 'nearest'
+
+
+class _Record(NamedTuple):
+    """Fragment record of op 'minmax' (:class:`Fragments`); length-1 arrays: none kept."""
+
+    off: np.ndarray  # (nbands + 1,) first slot of each band
+    pix: np.ndarray  # int32 pixel index i * W + j
+    depth: np.ndarray  # float64
+    n: np.ndarray  # (nbands,) fragments written per band
+    facing: np.ndarray  # int8 -1 / +1
+
+
+@nb.njit(cache=True)
+def _raster_band(b, op, tri, grid, blend, out, rec):
     """Rasterize the binned triangles of band ``b`` with blend ``op`` (see ``OPS``).
 
     Depth is interpolated perspective-correctly (1/d linear on screen) when
-    ``perspective``, linearly otherwise (orthographic maps). ``slab`` =
+    ``grid.perspective``, linearly otherwise (orthographic maps). ``slab`` =
     (z0, s, klo, khi) restricts op 'nearest' to fragments whose slab index
     ``floor((d - z0) / s)`` lies in [klo, khi] (no restriction when s <= 0).
-    With op 'minmax' and ``frag_pix`` longer than 1, every fragment is also
-    recorded, band by band from ``frag_off[b]`` (``frag_n[b]`` of them), for
-    passes that blend the same fragments again; ``frag_s`` gets the
+    With op 'minmax' and ``rec.pix`` longer than 1, every fragment is also
+    recorded, band by band from ``rec.off[b]`` (``rec.n[b]`` of them), for
+    passes that blend the same fragments again; ``rec.facing`` gets the
     triangle's screen orientation (-1 as given, +1 when it was flipped).
+
+    Not inlined into the kernels' ``prange`` loops: there Numba drops
+    stores into arrays taken from a named tuple (numba#7135; the writes to
+    ``rec.n`` went missing), here the tuples are ordinary arguments. A
+    constant ``op`` (:func:`_minmax_kernel`) gets a specialisation of its
+    own (``op`` typed as that literal), whose other blend branches Numba
+    prunes, as inlining did before.
     """
+    # the named tuples unpacked by name (a reordered field cannot swap two arguments)
+    X, Y, D, rows, counts, tris = tri.X, tri.Y, tri.D, tri.rows, tri.counts, tri.tris
+    W, H, band, perspective = grid.W, grid.H, grid.band, grid.perspective
+    zlo, zhi, slices, slab = blend.zlo, blend.zhi, blend.slices, blend.slab
+    fbuf, ibuf, bits, layers, ids = out.fbuf, out.ibuf, out.bits, out.layers, out.ids
+    frag_off, frag_pix, frag_d, frag_n, frag_s = rec.off, rec.pix, rec.depth, rec.n, rec.facing
     keep = frag_pix.shape[0] > 1
     r0 = b * band
     r1 = min(r0 + band, H) - 1
@@ -543,22 +603,17 @@ def _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
 
 
 @nb.njit(cache=True, parallel=True)
-def _raster_kernel(X, Y, D, rows, counts, tris, W, H, band, op, perspective,
-                   fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
-                   frag_off, frag_pix, frag_d, frag_n, frag_s):
+def _raster_kernel(op, tri, grid, blend, out, rec):
     """All bands in parallel, any blend ``op`` (see :func:`_raster_band`)."""
-    nbands = counts.shape[0] - 1
+    nbands = tri.counts.shape[0] - 1
     step = coprime_stride(nbands)
     for k in nb.prange(nbands):
         b = strided(k, step, nbands)  # bands spread over the threads (see .schedule)
-        _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, op, perspective,
-                     fbuf, ibuf, bits, zlo, zhi, slices, layers, ids, slab,
-                     frag_off, frag_pix, frag_d, frag_n, frag_s)
+        _raster_band(b, op, tri, grid, blend, out, rec)
 
 
 @nb.njit(cache=True, parallel=True)
-def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
-                   frag_off, frag_pix, frag_d, frag_n, frag_s):
+def _minmax_kernel(tri, grid, layers, rec):
     """All bands in parallel, op 'minmax' (the hot min/max pass of Chaudhari §3.3).
 
     The same band traversal as :func:`_raster_kernel`, compiled with the
@@ -570,8 +625,10 @@ def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
     i1 = np.zeros((1, 1), np.int32)
     b1 = np.zeros((1, 1, 1), np.uint32)
     t1 = np.zeros((1, 1), np.int64)
-    slab = np.zeros(4)
-    nbands = counts.shape[0] - 1
+    blend = _Blend(f1, f1, 256, np.zeros(4))
+    out = _Targets(f1, i1, b1, layers, t1)
+    W, H, band = grid.W, grid.H, grid.band
+    nbands = tri.counts.shape[0] - 1
     step = coprime_stride(nbands)
     for k in nb.prange(nbands):
         b = strided(k, step, nbands)  # bands spread over the threads (see .schedule)
@@ -579,9 +636,7 @@ def _minmax_kernel(X, Y, D, rows, counts, tris, W, H, band, perspective, layers,
             for j in range(W):
                 layers[0, i, j] = np.inf
                 layers[1, i, j] = -np.inf
-        _raster_band(b, X, Y, D, rows, counts, tris, W, H, band, 6, perspective,
-                     f1, i1, b1, f1, f1, 256, layers, t1, slab,
-                     frag_off, frag_pix, frag_d, frag_n, frag_s)
+        _raster_band(b, 6, tri, grid, blend, out, rec)
 
 
 class RasterSetup(NamedTuple):
@@ -659,8 +714,18 @@ class Fragments(NamedTuple):
 
 
 _FRAGMENT_LIMIT = 64 * 2**20  # recorded fragments at most (~0.8 GiB); beyond, passes re-rasterize
-_NO_FRAGMENTS = (np.zeros(1, np.int64), np.zeros(1, np.int32), np.zeros(1), np.zeros(1, np.int64),
-                 np.zeros(1, np.int8))
+_NO_FRAGMENTS = _Record(np.zeros(1, np.int64), np.zeros(1, np.int32), np.zeros(1), np.zeros(1, np.int64),
+                        np.zeros(1, np.int8))
+
+
+def _tris(rs):
+    """The kernel arrays of a :class:`RasterSetup`."""
+    return _Tris(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris)
+
+
+def _record(fr):
+    """The kernel arrays of a :class:`Fragments` being recorded."""
+    return _Record(fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
 
 
 def _fragment_buffers(rs, W):
@@ -825,14 +890,15 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         fbuf = np.full((H, W), np.inf)
         ids = np.full((H, W), -1, np.int64)
     fr = _fragment_buffers(rs, W) if keep_fragments and code == 6 else None
-    frag_args = _NO_FRAGMENTS if fr is None else (fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
+    rec = _NO_FRAGMENTS if fr is None else _record(fr)
     # depth is interpolated linearly on screen for an orthographic camera
-    perspective = not getattr(camera, "ortho", False)
+    grid = _Grid(W, H, BAND, not getattr(camera, "ortho", False))
+    tri = _Tris(X, Y, D, rows, counts, tris)
     if code == 6:
-        _minmax_kernel(X, Y, D, rows, counts, tris, W, H, BAND, perspective, layers, *frag_args)
+        _minmax_kernel(tri, grid, layers, rec)
     else:
-        _raster_kernel(X, Y, D, rows, counts, tris, W, H, BAND, code, perspective,
-                       fbuf, ibuf, bits, lo, hi, int(slices), layers, ids, _NO_SLAB, *frag_args)
+        _raster_kernel(code, tri, grid, _Blend(lo, hi, int(slices), _NO_SLAB),
+                       _Targets(fbuf, ibuf, bits, layers, ids), rec)
     if code in (0, 1):
         res = fbuf
     elif code == 7:
@@ -946,9 +1012,10 @@ def rasterize_ortho(tri_tex, shape, slab=None):
     depth = np.full((H, W), np.inf)
     ids = np.full((H, W), -1, np.int64)
     d1 = np.zeros((1, 1))
-    _raster_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, OPS["nearest"], False,
-                   depth, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), d1, d1, 256,
-                   np.zeros((1, 1, 1)), ids, np.array([z0, s, klo, khi], dtype=np.float64), *_NO_FRAGMENTS)
+    _raster_kernel(OPS["nearest"], _tris(rs), _Grid(W, H, BAND, False),
+                   _Blend(d1, d1, 256, np.array([z0, s, klo, khi], dtype=np.float64)),
+                   _Targets(depth, np.zeros((1, 1), np.int32), np.zeros((1, 1, 1), np.uint32), np.zeros((1, 1, 1)),
+                            ids), _NO_FRAGMENTS)
     return depth, ids
 
 
@@ -980,6 +1047,5 @@ def ortho_fragments(tri_tex, shape):
     if fr is None:
         raise MemoryError(f"ortho_fragments: more than {_FRAGMENT_LIMIT} fragments; lower the resolution")
     layers = np.empty((2, H, W))
-    _minmax_kernel(rs.X, rs.Y, rs.D, rs.rows, rs.counts, rs.tris, W, H, BAND, False, layers,
-                   fr.offsets, fr.pix, fr.depth, fr.counts, fr.facing)
+    _minmax_kernel(_tris(rs), _Grid(W, H, BAND, False), layers, _record(fr))
     return fr

@@ -297,3 +297,12 @@ def test_default_scene_and_render_entry_point():
     assert np.allclose(p, f[0] + (b + 0.5) / 64 * f[1] + (a + 0.5) / 64 * f[2], atol=1e-12)
     assert abs(np.linalg.norm(f[3]) - 1) < 1e-12 and abs(f[3] @ f[1]) < 1e-9 and abs(f[3] @ f[2]) < 1e-9
     assert f[3][1] > 0  # the normal points towards the light
+
+
+def test_every_variant_keeps_its_stage_buffers():
+    sc = default_scene({"camera.width": 16, "camera.height": 16, "levelmap.map_size": 16, "water.resolution": 8,
+                        "levelmap.planes": 4})
+    for v in ("levelmap", "volumetric", "per_ray"):
+        res = rr.render(sc, method="levelmap", overrides={"levelmap.variant": v}, keep="stages")
+        assert "stage.level_map.position_0_0" in res.arrays
+        assert ("stage.plane_maps.plane_maps_0_0" in res.arrays) == (v == "levelmap")

@@ -153,8 +153,47 @@ def _clip_plane(a0, a1, t0, t1):
     return max(t0, tc), t1
 
 
+class _Rays(NamedTuple):
+    """Rays in the camera's view space."""
+
+    O: np.ndarray  # (N, 3) origins
+    D: np.ndarray  # (N, 3) directions
+
+
+class _View(NamedTuple):
+    """The camera the depth image was rendered with: image grid, projection, depth range."""
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+    near: float
+    far: float
+
+
+class _Knobs(NamedTuple):
+    """Settings of the march."""
+
+    rel_thick: float  # surface thickness as a fraction of its depth
+    max_samples: int  # samples per ray at most
+
+
+class _Hits(NamedTuple):
+    """What the march finds, per ray."""
+
+    t: np.ndarray  # (N,) ray parameter of the hit, NaN where none
+    pix: np.ndarray  # (N, 2) int64 pixel (row, column), -1 where none
+
+
 @nb.njit(cache=True, parallel=True)
-def _march_kernel(O, D, depth, W, H, sx, sy, ortho, near, far, rel_thick, max_samples, t_hit, pix):
+def _march_kernel(rays, depth, view, knobs, hits):
+    # the named tuples unpacked by name, outside the prange loop (inside it, Numba
+    # drops stores into arrays taken from a tuple: numba#7135)
+    O, D = rays.O, rays.D
+    W, H, sx, sy, ortho, near, far = view.W, view.H, view.sx, view.sy, view.ortho, view.near, view.far
+    rel_thick, max_samples = knobs.rel_thick, knobs.max_samples
+    t_hit, pix = hits.t, hits.pix
     for k0 in nb.prange(O.shape[0]):
         k = np.int64(k0)
         t_hit[k] = np.nan
@@ -245,8 +284,9 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
     pix = np.empty((len(O), 2), np.int64)
     if len(O):
         W, H, sx, sy = cam.kernel_args()
-        _march_kernel(O, D, np.ascontiguousarray(depth, dtype=np.float64), W, H, sx, sy, bool(cam.ortho),
-                      float(cam.near), float(cam.far), float(rel_thick), int(max_samples), t, pix)
+        _march_kernel(_Rays(O, D), np.ascontiguousarray(depth, dtype=np.float64),
+                      _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
+                      _Knobs(float(rel_thick), int(max_samples)), _Hits(t, pix))
     return t, pix
 
 

@@ -43,6 +43,7 @@ References
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -51,6 +52,61 @@ from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values, orient
 from .planes import dir_to_map, to_map
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane"]
+
+
+class _Beams(NamedTuple):
+    """A :class:`BeamSet`'s arrays as the kernels take them (:attr:`BeamSet.arrays`)."""
+
+    O: np.ndarray  # (F, 3, 3) edge-ray origins (col, row, zeta)
+    D: np.ndarray  # (F, 3, 3) edge-ray rates per unit length
+    flux: np.ndarray  # (F,)
+    inv_tv: np.ndarray  # (F,) 1 / |T . V|
+    tbar: np.ndarray  # (F, 3) world beam axis
+    tdz: np.ndarray  # (F,) T . T0
+
+
+class _Grid(NamedTuple):
+    """The caustics map drawn into: size, rows per band, scissor rectangle."""
+
+    W: int
+    H: int
+    band: int
+    rect: np.ndarray  # (4,) int64 (row0, row1, col0, col1)
+
+
+class _Plane(NamedTuple):
+    """The reference plane drawn and the water's absorption."""
+
+    zp: float  # plane depth
+    K: float  # absorption coefficient
+    texel_area: float
+
+
+class _Sections(NamedTuple):
+    """Intersection triangles of the candidate beams with the plane (filled by :func:`_sections`)."""
+
+    cand: np.ndarray  # (M,) beam of each section
+    X: np.ndarray  # (M, 3) int64 snapped columns, 1/256 texel
+    Y: np.ndarray  # (M, 3) int64 snapped rows
+    C: np.ndarray  # (M, 3) edge-ray lengths from the water to the plane
+    B: np.ndarray  # (M,) irradiance factor flux / (|T . V| area)
+    rows: np.ndarray  # (M, 2) rows each may cover, (1, 0) when none
+
+
+class _Bins(NamedTuple):
+    """The sections binned into bands of rows (:func:`~refraction_ref.raster.bin_bands`)."""
+
+    counts: np.ndarray
+    tris: np.ndarray
+
+
+class _Receiver(NamedTuple):
+    """Where fragments land: the depth test and the receiving surface."""
+
+    accept: np.ndarray  # (Hc, Wc) a fragment is kept where accept == key
+    key: int
+    zeta: np.ndarray  # (Hc, Wc) receiver depth
+    normal: np.ndarray  # (Hc, Wc, 3) receiver unit normal
 
 
 class BeamSet:
@@ -73,6 +129,11 @@ class BeamSet:
         self.tdz = np.ascontiguousarray(-(vols.mean_dir @ box.V))
         with np.errstate(divide="ignore"):
             self.inv_tv = np.where(self.tdz > 1e-12, 1.0 / np.maximum(self.tdz, 1e-12), 0.0)
+
+    @property
+    def arrays(self):
+        """The arrays as one :class:`_Beams` named tuple (what the kernels take)."""
+        return _Beams(self.O, self.D, self.flux, self.inv_tv, self.tbar, self.tdz)
 
 
 def beams_in_map(vols, box):
@@ -111,8 +172,13 @@ def cull_beams(beams, box, zmin, zmax):
 
 
 @nb.njit(cache=True, parallel=True)
-def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, rows):
-    """Intersection triangles of the candidate beams with the plane ``zeta = zp``."""
+def _sections(beams, grid, plane, sec):
+    """Intersection triangles of the candidate beams ``sec.cand`` with the plane ``zeta = plane.zp``."""
+    # the named tuples unpacked by name, outside the prange loop (inside it, Numba
+    # drops stores into arrays taken from a tuple: numba#7135)
+    O, D, flux, inv_tv = beams.O, beams.D, beams.flux, beams.inv_tv
+    zp, texel_area, rect = plane.zp, plane.texel_area, grid.rect
+    cand, X, Y, C, B, rows = sec.cand, sec.X, sec.Y, sec.C, sec.B, sec.rows
     for m in nb.prange(cand.shape[0]):
         t = cand[m]
         ok = flux[t] > 0.0
@@ -168,9 +234,15 @@ def _sections(O, D, flux, inv_tv, cand, zp, W, H, texel_area, rect, X, Y, C, B, 
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat(X, Y, C, B, rows, counts, tris, cand, tbar, tdz, W, H, band, rect,
-           accept, key, zeta, normal, zp, K, out):
-    """Additive blending of intersection triangles; fragments pass where ``accept == key``."""
+def _splat(beams, sec, bins, grid, recv, plane, out):
+    """Additive blending of intersection triangles; fragments pass where ``recv.accept == recv.key``."""
+    # unpacked by name, outside the prange loop (see _sections)
+    tbar, tdz = beams.tbar, beams.tdz
+    cand, X, Y, C, B, rows = sec.cand, sec.X, sec.Y, sec.C, sec.B, sec.rows
+    counts, tris = bins.counts, bins.tris
+    H, band, rect = grid.H, grid.band, grid.rect
+    accept, key, zeta, normal = recv.accept, recv.key, recv.zeta, recv.normal
+    zp, K = plane.zp, plane.K
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         r0 = b * band
@@ -245,15 +317,12 @@ def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
     M = len(cand)
     if M == 0 or rect[0] > rect[1]:
         return 0
-    X = np.empty((M, 3), np.int64)
-    Y = np.empty((M, 3), np.int64)
-    C = np.empty((M, 3), np.float64)
-    B = np.zeros(M, np.float64)
-    rows = np.empty((M, 2), np.int64)
-    rect = np.ascontiguousarray(rect, dtype=np.int64)
-    _sections(beams.O, beams.D, beams.flux, beams.inv_tv, cand, float(zp), Wc, Hc,
-              float(box.texel_area), rect, X, Y, C, B, rows)
-    counts, tris = bin_bands(rows, Hc, BAND)
-    _splat(X, Y, C, B, rows, counts, tris, cand, beams.tbar, beams.tdz, Wc, Hc, BAND, rect,
-           accept, int(key), zeta, normal, float(zp), float(K), out)
-    return int(np.count_nonzero(rows[:, 0] <= rows[:, 1]))
+    sec = _Sections(cand, np.empty((M, 3), np.int64), np.empty((M, 3), np.int64), np.empty((M, 3), np.float64),
+                    np.zeros(M, np.float64), np.empty((M, 2), np.int64))
+    grid = _Grid(Wc, Hc, BAND, np.ascontiguousarray(rect, dtype=np.int64))
+    plane = _Plane(float(zp), float(K), float(box.texel_area))
+    arrays = beams.arrays
+    _sections(arrays, grid, plane, sec)
+    bins = _Bins(*bin_bands(sec.rows, Hc, BAND))
+    _splat(arrays, sec, bins, grid, _Receiver(accept, int(key), zeta, normal), plane, out)
+    return int(np.count_nonzero(sec.rows[:, 0] <= sec.rows[:, 1]))

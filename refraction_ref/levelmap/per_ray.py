@@ -29,6 +29,7 @@ References
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -36,6 +37,39 @@ import numpy as np
 from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values
 
 __all__ = ["search_hits", "per_ray_caustics"]
+
+
+class _Regions(NamedTuple):
+    """Each candidate beam's texel rectangle, binned into bands of rows."""
+
+    cand: np.ndarray  # (M,) beam index
+    rows: np.ndarray  # (M, 2) first and last row, (1, 0) when none
+    cols: np.ndarray  # (M, 2) first and last column
+    counts: np.ndarray  # band lists (bin_bands of rows)
+    tris: np.ndarray
+
+
+class _Grid(NamedTuple):
+    """The caustics map: size and rows per band."""
+
+    W: int
+    H: int
+    band: int
+
+
+class _Receiver(NamedTuple):
+    """The receiving surface, texel by texel."""
+
+    accept: np.ndarray  # (Hc, Wc) bool: texels of this receiver inside the box
+    depth: np.ndarray  # (Hc, Wc) position-map depth
+    normal: np.ndarray  # (Hc, Wc, 3) unit normal
+
+
+class _Knobs(NamedTuple):
+    """Absorption and texel size."""
+
+    K: float
+    texel_area: float
 
 
 @nb.njit(cache=True, parallel=True)
@@ -119,8 +153,15 @@ def _regions(O, D, cand, hit, zlo_own, zhi_own, W, H, rows, cols):
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat_own_depth(O, D, flux, inv_tv, tbar, tdz, cand, rows, cols, counts, tris, W, H, band,
-                     accept, depth, normal, K, texel_area, out):
+def _splat_own_depth(beams, reg, grid, recv, knobs, out):
+    """Each beam drawn over its region, every texel at its own depth (step 2)."""
+    # the named tuples unpacked by name, outside the prange loop (inside it, Numba
+    # drops stores into arrays taken from a tuple: numba#7135)
+    O, D, flux, inv_tv, tbar = beams.O, beams.D, beams.flux, beams.inv_tv, beams.tbar
+    cand, rows, cols, counts, tris = reg.cand, reg.rows, reg.cols, reg.counts, reg.tris
+    H, band = grid.H, grid.band
+    accept, depth, normal = recv.accept, recv.depth, recv.normal
+    K, texel_area = knobs.K, knobs.texel_area
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         X = np.empty(3, np.int64)
@@ -233,8 +274,7 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
     _regions(beams.O, beams.D, cand, hit, zlo, zhi, Wc, Hc, rows, cols)
     counts, tris = bin_bands(rows, Hc, BAND)
     accept = lm.own & (lm.depth >= -box.h / 2.0) & (lm.depth <= box.h / 2.0)
-    _splat_own_depth(beams.O, beams.D, beams.flux, beams.inv_tv, beams.tbar, beams.tdz, cand, rows, cols,
-                     counts, tris, Wc, Hc, BAND, accept, lm.depth, lm.normal, float(K),
-                     float(box.texel_area), out)
+    _splat_own_depth(beams.arrays, _Regions(cand, rows, cols, counts, tris), _Grid(Wc, Hc, BAND),
+                     _Receiver(accept, lm.depth, lm.normal), _Knobs(float(K), float(box.texel_area)), out)
     return {"rays_hit": int(np.count_nonzero(np.isfinite(hit))),
             "beams_drawn": int(np.count_nonzero(rows[:, 0] <= rows[:, 1]))}

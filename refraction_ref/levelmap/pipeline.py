@@ -291,9 +291,10 @@ def _st_plane_maps(ctx):
     p = d["levelmap"]
     ctx_ = {"vols": ctx.buf["water"]["vols"], "K": ctx.buf["water"]["K"], "pairs": ctx.buf["level_map"]["pairs"],
             "receivers": ctx.buf["planes"]["receivers"]}
-    out = {}
-    for r in range(len(ctx_["pairs"])):
-        for l in range(len(ctx_["vols"])):
+    R, L = len(ctx_["pairs"]), len(ctx_["vols"])
+    out = {f"{k}_{r}_{l}": None for r in range(R) for l in range(L) for k in ("plane_maps", "plane_index")}
+    for r in range(R):
+        for l in range(L):
             planes = []
             _caustics_pair(ctx_, r, l, p, p["variant"], {}, [], per_plane=planes)
             if planes:
