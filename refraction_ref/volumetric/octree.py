@@ -32,19 +32,71 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
-from scipy import ndimage
 
 __all__ = ["minmax_pyramid", "leaf_levels", "build_octree"]
 
 
-def _reduce(a, fn):
-    """2x2x2 reduction with edge replication for odd sizes."""
-    pad = [(0, s % 2) for s in a.shape]
-    if any(p[1] for p in pad):
-        a = np.pad(a, pad, mode="edge")
-    s = a.shape
-    return fn(a.reshape(s[0] // 2, 2, s[1] // 2, 2, s[2] // 2, 2), axis=(1, 3, 5))
+@nb.njit(cache=True, parallel=True)
+def _dilate_minmax(n, mn, mx):
+    """Min and max of every voxel's 3x3x3 neighbourhood (edges clamped); parallel over x slabs."""
+    nx, ny, nz = n.shape
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                a = n[i, j, k]
+                b = a
+                for ii in range(max(i - 1, 0), min(i + 2, nx)):
+                    for jj in range(max(j - 1, 0), min(j + 2, ny)):
+                        for kk in range(max(k - 1, 0), min(k + 2, nz)):
+                            v = n[ii, jj, kk]
+                            if v < a:
+                                a = v
+                            if v > b:
+                                b = v
+                mn[i, j, k] = a
+                mx[i, j, k] = b
+
+
+@nb.njit(cache=True, parallel=True)
+def _reduce_minmax(mn, mx, omn, omx):
+    """2x2x2 min / max reduction, odd sizes by edge replication; parallel over the coarse x slabs."""
+    nx, ny, nz = mn.shape
+    ox, oy, oz = omn.shape
+    for a in nb.prange(ox):
+        for b in range(oy):
+            for c in range(oz):
+                lo = mn[2 * a, 2 * b, 2 * c]
+                hi = mx[2 * a, 2 * b, 2 * c]
+                for i in range(2 * a, min(2 * a + 2, nx)):
+                    for j in range(2 * b, min(2 * b + 2, ny)):
+                        for k in range(2 * c, min(2 * c + 2, nz)):
+                            if mn[i, j, k] < lo:
+                                lo = mn[i, j, k]
+                            if mx[i, j, k] > hi:
+                                hi = mx[i, j, k]
+                omn[a, b, c] = lo
+                omx[a, b, c] = hi
+
+
+def _pyramid_flat(n):
+    """The pyramid in two flat buffers (min, max), with per-level offsets and shapes."""
+    K = max(1, math.ceil(math.log2(max(n.shape))))
+    shapes = [tuple(n.shape)]
+    for _ in range(K):
+        shapes.append(tuple((s + 1) // 2 for s in shapes[-1]))
+    sizes = [int(np.prod(s)) for s in shapes]
+    off = np.zeros(len(shapes) + 1, np.int64)
+    np.cumsum(sizes, out=off[1:])
+    fmn = np.empty(off[-1])
+    fmx = np.empty(off[-1])
+    lv = [(fmn[off[k]:off[k + 1]].reshape(shapes[k]), fmx[off[k]:off[k + 1]].reshape(shapes[k]))
+          for k in range(len(shapes))]
+    _dilate_minmax(n, *lv[0])
+    for k in range(K):
+        _reduce_minmax(*lv[k], *lv[k + 1])
+    return lv, fmn, fmx, off, np.array(shapes, np.int64)
 
 
 def minmax_pyramid(ior):
@@ -55,22 +107,30 @@ def minmax_pyramid(ior):
     list of (nmin, nmax)
         Level k arrays have shape ``ceil(shape / 2^k)``; K = ceil(log2(max shape)).
     """
-    n = np.asarray(ior, dtype=np.float64)
-    mn = ndimage.minimum_filter(n, size=3, mode="nearest")
-    mx = ndimage.maximum_filter(n, size=3, mode="nearest")
-    K = max(1, math.ceil(math.log2(max(n.shape))))
-    pyr = [(mn, mx)]
-    for _ in range(K):
-        mn, mx = _reduce(mn, np.min), _reduce(mx, np.max)
-        pyr.append((mn, mx))
-    return pyr
+    n = np.ascontiguousarray(ior, dtype=np.float64)
+    return _pyramid_flat(n)[0]
 
 
-def _expand(a, k, shape):
-    """Node values of level k broadcast to every voxel."""
-    for ax in range(3):
-        a = np.repeat(a, 2 ** k, axis=ax)
-    return a[: shape[0], : shape[1], : shape[2]]
+@nb.njit(cache=True, parallel=True)
+def _leaf_kernel(fmn, fmx, off, shapes, eps, eps2, ds_max, level, smax):
+    """Per voxel: the coarsest level whose node range is < eps2, and inf step if < eps (parallel over x)."""
+    nx, ny, nz = level.shape
+    K = shapes.shape[0] - 1
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                lev = 0
+                sm = np.float32(ds_max)
+                for L in range(K, -1, -1):
+                    q = off[L] + ((i >> L) * shapes[L, 1] + (j >> L)) * shapes[L, 2] + (k >> L)
+                    rng = fmx[q] - fmn[q]
+                    if rng < eps2:
+                        lev = L
+                        if rng < eps:
+                            sm = np.float32(np.inf)
+                        break
+                level[i, j, k] = lev
+                smax[i, j, k] = sm
 
 
 def leaf_levels(pyr, shape, eps, eps2, ds_max):
@@ -92,20 +152,18 @@ def leaf_levels(pyr, shape, eps, eps2, ds_max):
     smax : (nx, ny, nz) float32
         Maximum step in voxels (``inf`` inside constant nodes).
     """
-    level = np.full(shape, -1, np.int8)
-    smax = np.full(shape, np.float32(ds_max), np.float32)
-    for k in range(len(pyr) - 1, -1, -1):
-        mn, mx = pyr[k]
-        rng = mx - mn
-        ok2 = rng < eps2
-        if not ok2.any():
-            continue
-        ok2v = _expand(ok2, k, shape)
-        okv = _expand(rng < eps, k, shape)
-        new = (level < 0) & ok2v
-        level[new] = k
-        smax[new & okv] = np.inf
-    level[level < 0] = 0  # a single voxel is always a node (its range is not constant: ds_min decides)
+    shapes = np.array([m.shape for m, _ in pyr], np.int64)
+    off = np.zeros(len(pyr) + 1, np.int64)
+    np.cumsum([m.size for m, _ in pyr], out=off[1:])
+    fmn = np.concatenate([np.ravel(m) for m, _ in pyr]).astype(np.float64)
+    fmx = np.concatenate([np.ravel(m) for _, m in pyr]).astype(np.float64)
+    return _leaf_flat(fmn, fmx, off, shapes, shape, eps, eps2, ds_max)
+
+
+def _leaf_flat(fmn, fmx, off, shapes, shape, eps, eps2, ds_max):
+    level = np.empty(tuple(int(s) for s in shape), np.int8)
+    smax = np.empty(level.shape, np.float32)
+    _leaf_kernel(fmn, fmx, off, shapes, float(eps), float(eps2), float(ds_max), level, smax)
     return level, smax
 
 
@@ -125,9 +183,9 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0):
     ----------
     Sun et al. (2008), §4.2 and §5.3.
     """
-    n = np.asarray(ior)
-    pyr = minmax_pyramid(n)
-    level, smax = leaf_levels(pyr, n.shape, float(eps), float(eps2), float(ds_max))
+    n = np.ascontiguousarray(ior, dtype=np.float64)
+    pyr, fmn, fmx, off, shapes = _pyramid_flat(n)  # parallel kernels; min / max are exact in any order
+    level, smax = _leaf_flat(fmn, fmx, off, shapes, n.shape, float(eps), float(eps2), float(ds_max))
     const = np.isinf(smax)
     top_mn, top_mx = pyr[-1]
     stats = {

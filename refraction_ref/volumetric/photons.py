@@ -28,6 +28,7 @@ References
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from ..camera import Camera
@@ -60,6 +61,69 @@ def box_entry(origins, dirs, bounds):
     miss = ~(t_out > t_in)
     t_in[miss] = np.inf
     return t_in, t_out
+
+
+@nb.njit(cache=True, inline="always")
+def _np_min(a, b):
+    """``np.minimum``: NaN-propagating, and ``b`` on a tie (so the same signed zero)."""
+    return a if (a < b or a != a) else b
+
+
+@nb.njit(cache=True, inline="always")
+def _np_max(a, b):
+    """``np.maximum``: NaN-propagating, and ``b`` on a tie (so the same signed zero)."""
+    return a if (a > b or a != a) else b
+
+
+@nb.njit(cache=True, parallel=True)
+def _slab_entry(org, dirs, b, t_in):
+    """:func:`box_entry`'s ``t_in`` per ray, the same operations in the same order; parallel over rays."""
+    for p in nb.prange(org.shape[0]):
+        lo = 0.0
+        hi = 0.0
+        for c in range(3):
+            inv = 1.0 / dirs[p, c]
+            t0 = (b[0, c] - org[p, c]) * inv
+            t1 = (b[1, c] - org[p, c]) * inv
+            if t0 != t0:
+                lc = -np.inf
+                hc = np.inf
+            else:
+                lc = _np_min(t0, t1)
+                hc = _np_max(t0, t1)
+            if c == 0:
+                lo = lc
+                hi = hc
+            else:
+                lo = _np_max(lo, lc)
+                hi = _np_min(hi, hc)
+        t = _np_max(lo, 0.0)
+        t_in[p] = t if hi > t else np.inf
+
+
+@nb.njit(cache=True, parallel=True)
+def _ortho_origins(ca, cc, s, side, e1, e2, dmin, d, org):
+    """Texel ray origins of a directional light's texture (row r, column q); parallel over rows."""
+    M = s.shape[0]
+    for r in nb.prange(M):
+        C = cc - s[r] * side
+        for q in range(M):
+            A = ca + s[q] * side
+            for c in range(3):
+                org[r * M + q, c] = A * e1[c] + C * e2[c] + dmin * d[c]
+
+
+@nb.njit(cache=True, parallel=True)
+def _gather_hits(org, dirs, t_in, idx, b, pos, dout):
+    """Entry points (clipped to the box) and directions of the covered texels; parallel over photons."""
+    for m in nb.prange(idx.shape[0]):
+        p = idx[m]
+        t = t_in[p]
+        for c in range(3):
+            x = org[p, c] + t * dirs[p, c]
+            x = _np_max(x, b[0, c])
+            pos[m, c] = _np_min(x, b[1, c])
+            dout[m, c] = dirs[p, c]
 
 
 def _basis(d):
@@ -125,11 +189,9 @@ def generate_photons(lights, bounds, shape, photons):
             ca, cc = 0.5 * (a.min() + a.max()), 0.5 * (c.min() + c.max())
             s = (np.arange(M) + 0.5) / M - 0.5
             # texel (row r, column q): row 0 at the top (+e2), as the camera convention
-            A = ca + s[None, :] * side
-            C = cc - s[:, None] * side
             dmin = float(np.min(corners @ d)) - 1.0  # the texture plane, in front of the box
-            A, C = np.broadcast_arrays(A, C)
-            org = (A[..., None] * e1 + C[..., None] * e2 + dmin * d).reshape(-1, 3)
+            org = np.empty((M * M, 3))
+            _ortho_origins(float(ca), float(cc), s, float(side), e1, e2, dmin, d, org)
             dirs = np.broadcast_to(d, org.shape)
             w = rad * (side / M) ** 2 / h2
             weights = np.broadcast_to(w, org.shape)
@@ -166,16 +228,23 @@ def generate_photons(lights, bounds, shape, photons):
         else:
             raise SceneError(f"lights[{li}].type is {L['type']!r}; the volumetric method knows 'directional' "
                              "and 'point'")
-        t_in, _ = box_entry(org, np.ascontiguousarray(dirs), b)
-        hit = np.isfinite(t_in)
-        if not np.any(rad > 0):
-            hit[:] = False
-        pos = org[hit] + t_in[hit, None] * dirs[hit]
-        out_p.append(np.clip(pos, b[0], b[1]))
-        out_d.append(np.array(dirs[hit]))
-        out_r.append(np.array(weights[hit]))
-        out_l.append(np.full(int(hit.sum()), li, np.int32))
-        notes.append(f"{what}, {int(hit.sum())} covered texels -> photons")
+        org = np.ascontiguousarray(org, dtype=np.float64)
+        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+        t_in = np.empty(len(org))
+        _slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
+        idx = np.flatnonzero(np.isfinite(t_in)) if np.any(rad > 0) else np.zeros(0, np.int64)
+        pos = np.empty((len(idx), 3))
+        dsel = np.empty((len(idx), 3))
+        _gather_hits(org, dirs, t_in, idx, b, pos, dsel)
+        out_p.append(pos)
+        out_d.append(dsel)
+        if weights.strides[0] == 0:  # one weight for every texel (directional)
+            out_r.append(np.repeat(weights[:1], len(idx), axis=0))
+        else:
+            out_r.append(np.array(weights[idx]))
+        out_l.append(np.full(len(idx), li, np.int32))
+        hit_count = len(idx)
+        notes.append(f"{what}, {hit_count} covered texels -> photons")
     if not out_p:
         z = np.zeros((0, 3))
         return z, z.copy(), z.copy(), np.zeros(0, np.int32), notes

@@ -40,7 +40,7 @@ from scipy import ndimage
 from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
-           "gaussian_blur", "repair_mesh", "voxelize_objects"]
+           "gaussian_blur", "separable_correlate", "repair_mesh", "voxelize_objects"]
 
 
 def auto_bounds(vertices, resolution, padding):
@@ -215,6 +215,54 @@ def _read_subsamples(off, depth, cum, ncol, S, vox, p, q, r, z0, dz, both, votes
                         votes[m, s] += 1
 
 
+@nb.njit(cache=True, parallel=True)
+def _any_all_axis(anyv, allv, axis, oany, oall):
+    """OR and AND of each voxel and its two neighbours along ``axis`` (edges clamped); parallel over x."""
+    nx, ny, nz = anyv.shape
+    for i0 in nb.prange(nx):
+        i = np.int64(i0)
+        for j in range(ny):
+            for k in range(nz):
+                o = False
+                a = True
+                for d in range(-1, 2):
+                    ii = min(max(i + d, 0), nx - 1) if axis == 0 else i
+                    jj = min(max(j + d, 0), ny - 1) if axis == 1 else j
+                    kk = min(max(k + d, 0), nz - 1) if axis == 2 else k
+                    o = o or anyv[ii, jj, kk]
+                    a = a and allv[ii, jj, kk]
+                oany[i, j, k] = o
+                oall[i, j, k] = a
+
+
+def _mixed_voxels(inside):
+    """True where a voxel's 3x3x3 neighbourhood (edges clamped) is neither all inside nor all outside.
+
+    The same booleans as ``maximum_filter != minimum_filter`` (size 3, mode
+    nearest), by three separable OR / AND passes, each parallel over x slabs.
+    """
+    o1 = np.empty_like(inside)
+    a1 = np.empty_like(inside)
+    o2 = np.empty_like(inside)
+    a2 = np.empty_like(inside)
+    _any_all_axis(inside, inside, 2, o1, a1)
+    _any_all_axis(o1, a1, 1, o2, a2)
+    _any_all_axis(o2, a2, 0, o1, a1)
+    return o1 != a1
+
+
+@nb.njit(cache=True, parallel=True)
+def _subsample_coverage(votes, need, vox, cov):
+    """Coverage of the supersampled voxels: the fraction of sub-samples with at least ``need`` votes."""
+    ns = votes.shape[1]
+    for m in nb.prange(votes.shape[0]):
+        c = 0
+        for s in range(ns):
+            if votes[m, s] >= need:
+                c += 1
+        cov[vox[m, 0], vox[m, 1], vox[m, 2]] = c / float(ns)
+
+
 def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     """Fractional solid coverage of every voxel by one mesh (§4.1).
 
@@ -255,8 +303,7 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
             votes_c += wp != 0
     need = 1 if closed else 4
     inside = votes_c >= need
-    u8 = inside.view(np.uint8)
-    mixed = ndimage.maximum_filter(u8, size=3, mode="nearest") != ndimage.minimum_filter(u8, size=3, mode="nearest")
+    mixed = _mixed_voxels(np.ascontiguousarray(inside))
     cov = inside.astype(np.float64)
     S = int(supersample)
     vox = np.argwhere(mixed).astype(np.int64)
@@ -267,7 +314,7 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
             p, q = (ax + 1) % 3, (ax + 2) % 3
             off, depth, cum = column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S))
             _read_subsamples(off, depth, cum, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
-        cov[mixed] = np.count_nonzero(votes >= need, axis=1) / float(S ** 3)
+        _subsample_coverage(votes, need, vox, cov)  # argwhere order = boolean-mask order
     return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
 
 
@@ -290,6 +337,75 @@ def repair_mesh(vertices, faces):
     return vertices, faces, False
 
 
+@nb.njit(cache=True, parallel=True)
+def _sym_correlate_axis(a, w, axis, out):
+    """``scipy.ndimage.correlate1d(a, w, axis, mode="nearest")`` for a symmetric ``w``, bit for bit.
+
+    ``a`` and ``out`` are (nx, ny, nz, C) float64. Every output value is
+    ``a[x] w[r] + sum_{j=-r..-1} (a[x + j] + a[x - j]) w[r + j]`` in that order
+    (scipy's symmetric-filter loop), indices clamped to the grid; each
+    parallel slab writes only its own outputs, so the result does not depend
+    on the thread count.
+    """
+    nx, ny, nz, nc = a.shape
+    r = w.shape[0] // 2
+    if axis == 0:
+        for j in nb.prange(ny):
+            for i in range(nx):
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = a[i, j, k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(i + jj, 0)
+                            hi = min(i - jj, nx - 1)
+                            acc += (a[lo, j, k, c] + a[hi, j, k, c]) * w[r + jj]
+                        out[i, j, k, c] = acc
+    elif axis == 1:
+        for i in nb.prange(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = a[i, j, k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(j + jj, 0)
+                            hi = min(j - jj, ny - 1)
+                            acc += (a[i, lo, k, c] + a[i, hi, k, c]) * w[r + jj]
+                        out[i, j, k, c] = acc
+    else:
+        for i in nb.prange(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = a[i, j, k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(k + jj, 0)
+                            hi = min(k - jj, nz - 1)
+                            acc += (a[i, j, lo, c] + a[i, j, hi, c]) * w[r + jj]
+                        out[i, j, k, c] = acc
+
+
+def separable_correlate(a, w):
+    """Correlate a (nx, ny, nz[, C]) volume with the symmetric taps ``w`` along x, then y, then z.
+
+    Edges clamped. Equal bit for bit to three ``scipy.ndimage.correlate1d``
+    passes (mode ``nearest``), but parallel over slabs.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    w = np.ascontiguousarray(w, dtype=np.float64)
+    if a.ndim not in (3, 4) or w.ndim != 1 or len(w) % 2 != 1 or not np.array_equal(w, w[::-1]):
+        out = a
+        for ax in range(3):
+            out = ndimage.correlate1d(out, w, axis=ax, mode="nearest")
+        return out
+    src = np.ascontiguousarray(a.reshape(a.shape[:3] + (-1,)))
+    x = np.empty_like(src)
+    y = np.empty_like(src)
+    _sym_correlate_axis(src, w, 0, x)  # never writes into the caller's array
+    _sym_correlate_axis(x, w, 1, y)
+    _sym_correlate_axis(y, w, 2, x)
+    return x.reshape(a.shape)
+
+
 def gaussian_blur(a, window):
     """Separable Gaussian of ``window`` taps per axis, sigma = window / 6, edges clamped (§4.1).
 
@@ -304,10 +420,7 @@ def gaussian_blur(a, window):
     x = np.arange(-r, r + 1, dtype=np.float64)
     w = np.exp(-0.5 * (x / sigma) ** 2)
     w /= w.sum()
-    out = a
-    for ax in range(3):
-        out = ndimage.correlate1d(out, w, axis=ax, mode="nearest")
-    return out
+    return separable_correlate(a, w)
 
 
 def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, bounds=None):
