@@ -107,8 +107,14 @@ def test_flux_through_the_silhouette_reaches_the_floor():
         np.testing.assert_allclose(floor, s["flux_on_receivers"], rtol=1e-6)  # a flat floor: |n . V| = 1
         # the silhouette is the sphere's disc (unit irradiance): pi r^2
         assert abs(s["flux_silhouette"] / (np.pi * R * R) - 1) < 0.01
-        # measured: exact 0.007 %, image space 0.8 % (photons trapped at the rim by estimated normals)
-        assert abs(floor - (s["flux_silhouette"] - s["flux_absorbed"])) < 0.01 * s["flux_silhouette"]
+        # measured: exact 0.007 %, image space 1.3 % (photons lost at the rim: trapped by estimated
+        # normals, or their search's last probe lands where the back layer is absent - the thesis's
+        # probe end point, §3.6; 0.8 % with endpoint='bracket', whose fallbacks rescue some of them);
+        # what is missing is exactly the flux lost in the object
+        lost = s["flux_lost_in_object"]
+        assert abs(floor - (s["flux_silhouette"] - s["flux_absorbed"])) < 0.02 * s["flux_silhouette"]
+        np.testing.assert_allclose(floor, s["flux_silhouette"] - s["flux_absorbed"] - lost
+                                   - s["flux_missed_receivers"], rtol=1e-6)
         assert s["flux_absorbed"] > 0.1 * s["flux_silhouette"]
     # both agree on the absorbed flux (measured 0.6 %)
     sa, sb = (res.meta["caustics"]["lights"][0] for res in (a, b))

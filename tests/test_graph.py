@@ -45,7 +45,8 @@ VOLUME = {
 #: one valid, different value per knob: a knob without an entry fails test_every_knob_has_a_mutation
 MUTATIONS = {
     "imagespace": {"iterations": 6, "layers": 3, "slices": 128, "bounds": "global", "mip_size": 8,
-                   "bound_margin": 0.05, "blend": "add", "depth": "float", "slicing": "global",
+                   "bound_margin": 0.05, "blend": "or", "endpoint": "bracket", "filter": "nearest",
+                   "peel_all": True, "depth": "float", "slicing": "global",
                    "peeling": "lut", "normals": "cross", "delta": 1, "exit_threshold": 2.0, "tir": True,
                    "max_interfaces": 3, "record": 2, "photons": 12, "gather": 5, "receiver_hit": "exact",
                    "caustic_map": 12},

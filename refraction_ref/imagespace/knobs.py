@@ -3,7 +3,12 @@
 Defaults are the thesis's own settings where it states one (5 binary-search
 iterations, §3.6; 256 slices, §3.3; 32 layers, §3.4.2; a 256x256 MIP level
 for the search bounds, §3.7; perspective-corrected central differences,
-eq. 3.2). The caustic knobs (``photons``, ``gather``, ``receiver_hit``,
+eq. 3.2; additive blending, §3.3: "Since current Direct3D version does not
+support logical OR blending, we employ additive blending"; the search ends
+at its last probe's texel, §3.6: "Surface normal of the point R3 is then
+calculated using the texture coordinate t_P3 of the point P3"; depth images
+sampled with hardware (bilinear) filtering, §3.4.2: "hardware filtering can
+be easily applied while sampling these textures"). The caustic knobs (``photons``, ``gather``, ``receiver_hit``,
 ``caustic_map``) are read by the caustic stages (§4.1) that the image-space
 method adds when a scene has lights and receivers.
 
@@ -24,7 +29,10 @@ IMAGESPACE_DEFAULTS = {
     "bounds": "mip",          # search bound: 'mip' (256x256 MIP + margin, §3.7) | 'global' (exact max)
     "mip_size": 256,          # MIP level used for the reduction (§3.7)
     "bound_margin": 0.01,     # the "small constant", as a fraction of the object's depth range
-    "blend": "or",            # 'or' | 'add' (GPU additive blending with carry, §3.3)
+    "blend": "add",           # 'add' (the thesis's additive blending with carry, §3.3) | 'or'
+    "endpoint": "probe",      # 'probe': the surface point at the last probe's texel (§3.6) | 'bracket'
+    "filter": "bilinear",     # depth-image sampling: 'bilinear' (hardware filtering, §3.2, §3.4.2) | 'nearest'
+    "peel_all": False,        # peel all `layers` whatever the depth complexity (the thesis's fixed passes)
     "depth": "bitmask",       # 'bitmask' | 'float' (A-buffer of exact fragment depths)
     "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
     "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
@@ -43,7 +51,9 @@ IMAGESPACE_DEFAULTS = {
 
 CHOICES = {
     "bounds": ("mip", "global"),
-    "blend": ("or", "add"),
+    "blend": ("add", "or"),
+    "endpoint": ("probe", "bracket"),
+    "filter": ("bilinear", "nearest"),
     "depth": ("bitmask", "float"),
     "slicing": ("local", "global"),
     "peeling": ("separate", "lut"),
@@ -72,8 +82,9 @@ def validate_imagespace(data, base_dir="."):
     _num(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
     _num(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
     _num(im["record"], "imagespace.record", 0, 64, integer=True)
-    if not isinstance(im["tir"], bool):
-        raise SceneError(f"scene: imagespace.tir must be true or false, got {im['tir']!r}")
+    for key in ("tir", "peel_all"):
+        if not isinstance(im[key], bool):
+            raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
     _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
     _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
     if im["gather"] % 2 == 0:

@@ -27,6 +27,12 @@ meaningful: the optics flip a normal to face the incident ray.
 
 Where a neighbour is absent (silhouette of the layer) the difference
 becomes one-sided; where both are, that gradient component is taken as 0.
+
+Sampling between texel centres (``imagespace.filter``, the thesis's hardware
+filtering of §3.4.2): :func:`sample_depth` reads a layer's depth at any
+screen position, bilinearly over the four texels around it when all four
+hold the layer, at the nearest texel otherwise; :func:`normal_filtered`
+blends those four texels' normals with the same weights.
 """
 
 from __future__ import annotations
@@ -39,7 +45,8 @@ import numpy as np
 from ..camera import unproject_pixel
 from .peel import layer_depth_lut
 
-__all__ = ["NORMAL_METHODS", "normal_at", "layer_normals", "layer_depth", "no_lut"]
+__all__ = ["NORMAL_METHODS", "FILTERS", "normal_at", "normal_filtered", "sample_depth", "layer_normals",
+           "layer_depth", "no_lut"]
 
 NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3}
 
@@ -186,6 +193,121 @@ def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy, ortho=False):
             nz = 1.0
     s = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
     return nx * s, ny * s, nz * s
+
+
+#: depth-image sampling (``imagespace.filter``): kernel codes
+FILTERS = {"nearest": 0, "bilinear": 1}
+
+
+@nb.njit(cache=True, inline="always")
+def _footprint(ldi, n, r, c, lut, filt):
+    """The texels a sample at screen position (r, c) reads, and its weights.
+
+    Returns ``(i0, j0, k, fx, fy)``: the texels ``(i0 + a, j0 + b)`` for
+    ``a, b < k``; ``k`` 2 (bilinear over the four texels around the position,
+    weights ``fx``, ``fy``) when ``filt`` is 1 and all four hold layer ``n``,
+    else 1 (the texel under the position); ``k`` 0 when that texel is off
+    screen or lacks the layer.
+    """
+    H = ldi.shape[1]
+    W = ldi.shape[2]
+    if not (r >= 0.0 and c >= 0.0) or r >= H or c >= W:  # also NaN
+        return np.int64(0), np.int64(0), 0, 0.0, 0.0
+    i = np.int64(math.floor(r))
+    j = np.int64(math.floor(c))
+    if not math.isfinite(layer_depth(ldi, n, i, j, lut)):
+        return i, j, 0, 0.0, 0.0
+    if filt == 0:
+        return i, j, 1, 0.0, 0.0
+    u = c - 0.5
+    v = r - 0.5
+    fj = math.floor(u)
+    fi = math.floor(v)
+    i0 = np.int64(fi)
+    j0 = np.int64(fj)
+    for a in range(2):
+        for b in range(2):
+            if not math.isfinite(layer_depth(ldi, n, i0 + a, j0 + b, lut)):
+                return i, j, 1, 0.0, 0.0  # nearest where any of the four lacks the layer
+    return i0, j0, 2, u - fj, v - fi
+
+
+@nb.njit(cache=True, inline="always")
+def sample_depth(ldi, n, r, c, lut, filt):
+    """Depth of layer ``n`` at screen position (row ``r``, column ``c``), pixel units.
+
+    Texel (i, j) covers ``[i, i + 1) x [j, j + 1)``, its centre at
+    ``(i + 0.5, j + 0.5)``; ``+inf`` off screen or where the texel under the
+    position lacks the layer.
+
+    ``filt`` 0 (nearest): the texel under the position. 1 (bilinear, the
+    hardware filtering of §3.4.2): the bilinear interpolation of the four
+    texels around the position when all four hold layer ``n``, the nearest
+    texel where any of them lacks it (a GPU would blend in the cleared value
+    there). It is written as differences (``a + f (b - a)``, rows then the
+    column), so four equal depths give that depth exactly, and at a texel
+    centre the texel's own depth.
+    """
+    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
+    if k == 0:
+        return np.inf
+    out = 0.0
+    for a in range(k):
+        row = 0.0
+        for b in range(k):
+            d = np.float64(layer_depth(ldi, n, i0 + a, j0 + b, lut))
+            row = d if b == 0 else row + fx * (d - row)
+        out = row if a == 0 else out + fy * (row - out)
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt):
+    """Unit view-space normal of layer ``n`` at screen position (row ``r``, column ``c``).
+
+    ``filt`` 0: the normal of the texel under the position (:func:`normal_at`
+    at its centre). 1 (bilinear): the normals of the four texels around the
+    position (each :func:`normal_at`), blended with the bilinear weights of
+    :func:`sample_depth` and renormalised; the nearest texel's where any of
+    the four lacks the layer. Eq. 3.2's differences are linear in the depths,
+    so this is what a shader computing them from filtered depth reads at the
+    probe's texture coordinate gets (§3.4.2, §3.6), up to the perspective
+    scaling of the denominators; four equal normals give that normal exactly.
+    """
+    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
+    if k == 0:
+        return 0.0, 0.0, 1.0
+    ox = 0.0
+    oy = 0.0
+    oz = 0.0
+    fx0 = 0.0
+    fy0 = 0.0
+    fz0 = 1.0
+    for a in range(k):
+        rx = 0.0
+        ry = 0.0
+        rz = 0.0
+        for b in range(k):
+            ax, ay, az = normal_at(ldi, n, i0 + a, j0 + b, lut, method, delta, W, H, sx, sy, ortho)
+            if a == 0 and b == 0:
+                fx0, fy0, fz0 = ax, ay, az
+            elif ax * fx0 + ay * fy0 + az * fz0 < 0.0:  # one orientation for the blend
+                ax, ay, az = -ax, -ay, -az
+            if b == 0:
+                rx, ry, rz = ax, ay, az
+            else:
+                rx, ry, rz = rx + fx * (ax - rx), ry + fx * (ay - ry), rz + fx * (az - rz)
+        if a == 0:
+            ox, oy, oz = rx, ry, rz
+        else:
+            ox, oy, oz = ox + fy * (rx - ox), oy + fy * (ry - oy), oz + fy * (rz - oz)
+    if k == 1:
+        return ox, oy, oz
+    s = ox * ox + oy * oy + oz * oz
+    if not s > 0.0:
+        return fx0, fy0, fz0
+    s = 1.0 / math.sqrt(s)
+    return ox * s, oy * s, oz * s
 
 
 def no_lut(shape):

@@ -105,7 +105,7 @@ def depth_complexity(bits):
     return total
 
 
-def peel_layers(bits, zlo, zhi, slices, layers=32, total=None):
+def peel_layers(bits, zlo, zhi, slices, layers=32, total=None, peel_all=False):
     """Separate peeling pass: the LDI array of up to ``layers`` depth images.
 
     Parameters
@@ -121,11 +121,17 @@ def peel_layers(bits, zlo, zhi, slices, layers=32, total=None):
         No more layers are peeled than the scene's depth complexity.
     total : (H, W) int32, optional
         :func:`depth_complexity` of ``bits``, if already known.
+    peel_all : bool
+        Peel all ``layers`` whatever the depth complexity (``L = layers``),
+        as the thesis's single pass writes all 32 channels of its 8 render
+        targets (§3.4.2); the layers beyond the depth complexity are
+        ``+inf`` everywhere.
 
     Returns
     -------
     ldi : (L, H, W) float32
         Depth of each layer, front to back, ``L = min(layers, max(total))``
+        (``L = layers`` with ``peel_all``)
         (32-bit floats, as in the thesis's render targets; also halves the
         tracer's memory traffic);
         ``+inf`` where the pixel has fewer layers.
@@ -140,7 +146,7 @@ def peel_layers(bits, zlo, zhi, slices, layers=32, total=None):
     H, W, _ = bits.shape
     if total is None:
         total = depth_complexity(bits)
-    L = int(min(layers, total.max(initial=0)))
+    L = int(layers) if peel_all else int(min(layers, total.max(initial=0)))
     ldi = np.empty((L, H, W), np.float32)
     if L:
         _peel_kernel(np.ascontiguousarray(bits), np.ascontiguousarray(zlo, dtype=np.float64),

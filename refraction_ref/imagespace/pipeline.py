@@ -47,9 +47,10 @@ __all__ = ["render_imagespace", "check_materials", "layered_trace", "METHOD", "T
 #: the knobs each pass reads (the eye's stages and the light's photon pass declare the same)
 MINMAX_KNOBS = ("depth",)
 VOXELIZE_KNOBS = ("depth", "slices", "slicing", "blend", "layers")
-PEEL_KNOBS = ("depth", "layers", "peeling", "slices")
+PEEL_KNOBS = ("depth", "layers", "peeling", "slices", "peel_all")
 REDUCE_KNOBS = ("bounds", "mip_size", "bound_margin")
-TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layers", "exit_threshold", "slices")
+TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layers", "exit_threshold", "slices",
+               "endpoint", "filter")
 
 
 def check_materials(geom):
@@ -115,17 +116,24 @@ def pass_peel(vox, shape, p):
     """
     H, W = shape
     L = int(p["layers"])
+    peel_all = bool(p["peel_all"])
     if vox["bits"] is None:
-        return {"ldi": vox["ldi"], "total": vox["total"], "lut": None, "ran": False,
-                "why": "the A-buffer is already sorted into layers"}
+        ldi = vox["ldi"]
+        why = "the A-buffer is already sorted into layers"
+        if peel_all and ldi.shape[0] < L:  # the thesis's fixed layer count: pad with absent layers
+            ldi = np.concatenate([ldi, np.full((L - ldi.shape[0], H, W), np.inf, ldi.dtype)])
+            why += f"; padded to all {L} layers (peel_all)"
+        return {"ldi": ldi, "total": vox["total"], "lut": None, "ran": False, "why": why}
     S = int(p["slices"])
     total = depth_complexity(vox["bits"])
     if p["peeling"] == "separate":
-        ldi, total = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], S, L, total)
-        return {"ldi": ldi, "total": total, "lut": None, "ran": True,
-                "why": f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
-                       f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)"}
-    Lr = int(min(L, total.max(initial=0)))
+        ldi, total = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], S, L, total, peel_all=peel_all)
+        why = (f"all {L} layers peeled (peel_all, §3.4.2): the scene's depth complexity is "
+               f"{int(total.max(initial=0))}" if peel_all else
+               f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
+               f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)")
+        return {"ldi": ldi, "total": total, "lut": None, "ran": True, "why": why}
+    Lr = L if peel_all else int(min(L, total.max(initial=0)))
     ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
     lut = (True, vox["bits"], np.ascontiguousarray(vox["zlo"]), np.ascontiguousarray(vox["zhi"]), S,
            POPCOUNT8, SELECT8)
@@ -155,7 +163,7 @@ def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
                         cam, ior=ior, outside_ior=outside, world=True, iterations=int(p["iterations"]),
                         normals=p["normals"], delta=int(p["delta"]), tir=bool(p["tir"]),
                         max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel["lut"],
-                        **kw)
+                        endpoint=p["endpoint"], filter=p["filter"], **kw)
 
 
 def layered_trace(geom, cam, p, ior, outside, timings, plan):
@@ -280,7 +288,8 @@ def _st_normals(ctx):
     ldi = pl["ldi"]
     if pl["lut"] is not None:  # on-the-fly peeling: materialise the layers to show their normals
         vox = ctx.buf["voxelize"]
-        ldi, _ = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], int(p["slices"]), int(p["layers"]))
+        ldi, _ = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], int(p["slices"]), int(p["layers"]),
+                             peel_all=bool(p["peel_all"]))
     out = np.full(ldi.shape + (3,), np.nan)
     for k in range(ldi.shape[0]):
         out[k] = layer_normals(ldi[k], cam, p["normals"], int(p["delta"]))
@@ -294,7 +303,9 @@ def _st_trace(ctx):
     b = ctx.buf
     tr = pass_trace(b["minmax"], b["voxelize"], b["peel"], b["reduce"], b["minmax"]["cam"], p, g["ior"],
                     g["outside_ior"], record=int(p["record"]))
-    ctx.note(f"{p['iterations']} binary-search iterations per interface, {p['normals']} normals"
+    ctx.note(f"{p['iterations']} binary-search iterations per interface ending at the "
+             + ("last probe's texel (§3.6)" if p["endpoint"] == "probe" else "final bracket's midpoint")
+             + f", {p['filter']} depth sampling, {p['normals']} normals"
              + (", total internal reflection followed" if p["tir"] else ""))
     out = dict(tr)
     out.setdefault("path_pos", None)
@@ -334,7 +345,7 @@ def eye_stages():
               makes=("ldi", "depth_complexity"), doc="layered depth images (§3.4)"),
         Stage("reduce", _st_reduce, reads=_k(*REDUCE_KNOBS), after=("minmax", "peel"),
               makes=("bounds_hi", "bounds_lo"), doc="search bounds per layer (§3.7)"),
-        Stage("normals", _st_normals, reads=_k("normals", "delta", "slices", "layers"),
+        Stage("normals", _st_normals, reads=_k("normals", "delta", "slices", "layers", "peel_all"),
               after=("minmax", "voxelize", "peel"), makes=("normals",), diagnostic=True,
               doc="per-layer normal maps, view space (§3.5); only when kept"),
         Stage("trace", _st_trace, reads=_k(*TRACE_KNOBS, "record"),

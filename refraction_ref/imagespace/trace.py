@@ -11,11 +11,19 @@ binary search of Oliveira and Brauwers (2007): between the current point
 
 each midpoint ``P`` is projected to its texel ``t_P`` and compared with the
 layer's depth there: in front of the surface moves ``S`` to ``P``, behind it
-moves ``E``; after ``iterations`` halvings the midpoint is the intersection
-(5 iterations by default). Its normal is estimated at ``t_P`` and Snell's
-law gives the next direction. A ray that reaches the pixel's backmost depth
-(the last layer, or within ``exit_threshold`` slices of ``Zmax`` of §3.3)
-stops there: early termination, §3.7. The geometric length travelled
+moves ``E`` (5 iterations by default). The intersection is the thesis's
+``R_n`` (``endpoint='probe'``, the default): the surface point at the last
+probe's texel ``t_Pn`` - the point of the line of sight through ``P_n`` at
+the layer's depth there ("Surface normal of the point R3 is then calculated
+using the texture coordinate t_P3 of the point P3", §3.6); or, with
+``endpoint='bracket'``, the midpoint of the final bracket. Its normal is
+estimated at ``t_P`` and Snell's law gives the next direction. The depth
+images are sampled with bilinear filtering (``filter='bilinear'``, the
+hardware filtering of §3.4.2) where the four texels around a position hold
+the layer, at the nearest texel elsewhere (``filter='nearest'`` always).
+A ray that reaches the pixel's backmost depth (the last layer, or within
+``exit_threshold`` slices of ``Zmax`` of §3.3) stops there: early
+termination, §3.7. The geometric length travelled
 inside gives the Beer-Lambert absorption ``I = I0 exp(-alpha l eta)``
 (§3.8), applied by the caller.
 
@@ -64,31 +72,34 @@ from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
 from ..schedule import coprime_stride, strided
 from ..status import EXITED, LIMIT, LOST, MISSED, TIR
-from .normals import layer_depth, normal_at
+from .normals import layer_depth, normal_filtered, sample_depth
 
-__all__ = ["trace_layers", "exit_thresholds"]
+__all__ = ["trace_layers", "exit_thresholds", "ENDPOINTS"]
 
 _PARALLEL_EPS = 1e-9  # |dd/dt| below this: the ray is parallel to the image plane
 
+#: where a search ends (``imagespace.endpoint``): kernel codes
+ENDPOINTS = {"probe": 0, "bracket": 1}
+
 
 @nb.njit(cache=True, inline="always")
-def _texel(x, y, z, W, H, sx, sy, ortho=False):
-    """Texel (row, col) of a view-space point; (-1, -1) when off screen or behind the eye."""
+def _screen(x, y, z, W, H, sx, sy, ortho=False):
+    """Screen position (row, col) of a view-space point, pixel units; (-1, -1) when off screen or behind the eye."""
     if -z <= 0.0:
-        return -1, -1
+        return -1.0, -1.0
     col, row, d = project_point(x, y, z, W, H, sx, sy, ortho)
     if not (col >= 0.0 and col < W and row >= 0.0 and row < H):
-        return -1, -1
-    return np.int64(row), np.int64(col)
+        return -1.0, -1.0
+    return row, col
 
 
 @nb.njit(cache=True, inline="always")
-def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho=False):
+def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho, filt):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
-    ti, tj = _texel(x, y, z, W, H, sx, sy, ortho)
-    if ti < 0:
+    r, c = _screen(x, y, z, W, H, sx, sy, ortho)
+    if r < 0.0:
         return False
-    ls = layer_depth(ldi, n, ti, tj, lut)
+    ls = sample_depth(ldi, n, r, c, lut, filt)
     if not math.isfinite(ls):
         return False
     if forward:
@@ -142,6 +153,8 @@ class _Knobs(NamedTuple):
     max_events: int
     layer_limit: int
     record: int  # events kept per pixel in path_pos / path_dir (0: none)
+    endpoint: int  # ENDPOINTS code: 0 the last probe's surface point (§3.6), 1 the final bracket's midpoint
+    filt: int  # normals.FILTERS code: 0 nearest texel, 1 bilinear (§3.4.2)
 
 
 class _Frame(NamedTuple):
@@ -173,6 +186,7 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
     W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     ior, outside_ior, iterations, nmethod = knobs.ior, knobs.outside_ior, knobs.iterations, knobs.nmethod
     delta, tir, max_events, layer_limit, rec = knobs.delta, knobs.tir, knobs.max_events, knobs.layer_limit, knobs.record
+    endpoint, filt = knobs.endpoint, knobs.filt
     world, rot, t0 = frame.world, frame.rot, frame.t
     exit_pos, exit_dir, last_dir, status = out.exit_pos, out.exit_dir, out.last_dir, out.status
     interfaces, path_len, path_pos, path_dir = out.interfaces, out.path_len, out.path_pos, out.path_dir
@@ -209,6 +223,7 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
             px, py, pz = qx, qy, qz
             t = 0
             ti, tj = i, j
+            rq, cq = i + 0.5, j + 0.5  # screen position of the pending hit (the normal is read there)
             g = -1
             forward = True
             events = 0
@@ -224,7 +239,10 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 g2 = t if forward else t - 1
                 n1 = ior if g % 2 == 0 else outside_ior
                 n2 = ior if g2 % 2 == 0 else outside_ior
-                nx, ny, nz = normal_at(ldi, t, ti, tj, lut, nmethod, delta, W, H, sx, sy, ortho)
+                # nearest: the texel's own normal (at its centre); bilinear: filtered reads at the hit's
+                # texture coordinate
+                rn, cn = (ti + 0.5, tj + 0.5) if filt == 0 else (rq, cq)
+                nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, W, H, sx, sy, ortho, filt)
                 wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
                 if events < rec:  # event `events`: where, and the direction Snell gave
                     _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
@@ -274,27 +292,42 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
                 a = 0.0
                 b = 1.0
+                m = 1.0  # the last probe (E itself when there are no iterations)
                 found = False
                 for _ in range(iterations):
                     m = 0.5 * (a + b)
                     if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
-                               forward, lut, W, H, sx, sy, ortho):
+                               forward, lut, W, H, sx, sy, ortho, filt):
                         b = m
                         found = True
                     else:
                         a = m
+                if endpoint == 0:
+                    # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there (on the line
+                    # of sight through P_n, at the layer's depth), whichever side of the layer P_n was
+                    qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
+                    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+                    dq = sample_depth(ldi, t, rq, cq, lut, filt) if rq >= 0.0 else np.inf
+                    if not math.isfinite(dq):
+                        st = EXITED if outside else LOST  # the last probe's texel lacks the layer
+                        break
+                    qx, qy, qz = unproject_pixel(cq, rq, dq, W, H, sx, sy, ortho)
+                    ti, tj = np.int64(math.floor(rq)), np.int64(math.floor(cq))
+                    continue
+                # 'bracket': the midpoint of the final bracket, with two fallbacks
                 if not found:
-                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy, ortho)
+                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy, ortho, filt)
                 if not found:
                     st = EXITED if outside else LOST
                     break
                 m = 0.5 * (a + b)
                 qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
-                ti, tj = _texel(qx, qy, qz, W, H, sx, sy, ortho)
-                if ti < 0 or not math.isfinite(layer_depth(ldi, t, ti, tj, lut)):
+                rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+                if rq < 0.0 or not math.isfinite(layer_depth(ldi, t, np.int64(rq), np.int64(cq), lut)):
                     # the midpoint fell where the layer is absent: use the bracket's far end
                     qx, qy, qz = px + b * (ex - px), py + b * (ey - py), pz + b * (ez - pz)
-                    ti, tj = _texel(qx, qy, qz, W, H, sx, sy, ortho)
+                    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+                ti, tj = np.int64(rq), np.int64(cq)
             status[i, j] = st
             interfaces[i, j] = nint
             path_len[i, j] = plen
@@ -334,7 +367,7 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
 
 def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
                  iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
-                 layer_limit=None, lut=None, world=False, record=0):
+                 layer_limit=None, lut=None, world=False, record=0, endpoint="probe", filter="bilinear"):
     """Trace every pixel's ray through the layered depth images.
 
     Parameters
@@ -378,6 +411,22 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     record : int, default 0
         Keep the first ``record`` events of every path in ``path_pos`` and
         ``path_dir``; 0 records nothing (and adds no keys).
+    endpoint : {'probe', 'bracket'}
+        Where a search ends. ``probe`` (the thesis, §3.6): at the texel of
+        the last probe ``P_n`` (the midpoint tested by the last iteration;
+        ``E`` with 0 iterations), on the layer's surface there: the point
+        of the line of sight through ``P_n`` at the layer's (sampled) depth,
+        whichever side of the layer ``P_n`` was; the search fails only where
+        that texel lacks the layer. ``bracket``: the midpoint of the final
+        bracket (an untested point), after testing ``E`` when no probe
+        crossed the layer, and moved to the bracket's far end when the
+        midpoint's texel lacks the layer.
+    filter : {'bilinear', 'nearest'}
+        How the depth images are sampled (search tests, hit depth, normal
+        reads): ``bilinear`` (the thesis's hardware filtering, §3.4.2) over
+        the four texels around the position when all four hold the layer,
+        the nearest texel where any of them lacks it; ``nearest``: the
+        texel under the position, normals at its centre.
 
     Returns
     -------
@@ -410,10 +459,14 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     bounds, early termination), §3.8 (path length for absorption);
     Oliveira and Brauwers (2007).
     """
-    from .normals import NORMAL_METHODS, no_lut
+    from .normals import FILTERS, NORMAL_METHODS, no_lut
 
     if normals not in NORMAL_METHODS:
         raise ValueError(f"trace_layers: unknown normals {normals!r}; choose one of {sorted(NORMAL_METHODS)}")
+    if endpoint not in ENDPOINTS:
+        raise ValueError(f"trace_layers: unknown endpoint {endpoint!r}; choose one of {sorted(ENDPOINTS)}")
+    if filter not in FILTERS:
+        raise ValueError(f"trace_layers: unknown filter {filter!r}; choose one of {sorted(FILTERS)}")
     if int(record) != record or record < 0:
         raise ValueError(f"trace_layers: record must be an integer >= 0, got {record!r}")
     record = int(record)
@@ -440,7 +493,8 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
                      no_lut(None) if lut is None else lut)
     grid = _Grid(Wc, Hc, sx, sy, bool(camera.ortho))
     knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
-                   int(max_interfaces), int(L if layer_limit is None else layer_limit), record)
+                   int(max_interfaces), int(L if layer_limit is None else layer_limit), record,
+                   ENDPOINTS[endpoint], FILTERS[filter])
     _trace_kernel(layers, dirs, own, grid, knobs, _Frame(bool(world), m, t), out)
     res = {"exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "last_dir": out.last_dir,
            "interfaces": out.interfaces, "path_length": out.path_len, "status": out.status}
