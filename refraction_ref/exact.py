@@ -26,10 +26,13 @@ References
 
 from __future__ import annotations
 
+import math
+
+import numba as nb
 import numpy as np
 
 from . import optics
-from .embree import embree_scene
+from .embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
 from .status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
@@ -49,7 +52,7 @@ STATUS_BOUNCE_LIMIT = LIMIT
 STATUS_BOUNCE_LIMIT_TIR = TIR
 STATUS_LOST = LOST
 
-_CHUNK = 65536
+_CHUNK = HIT_CHUNK
 _OUTSIDE = -1  # medium index of the surrounding medium
 _ACTIVE = -1  # status value of a ray still being traced (internal)
 
@@ -149,14 +152,299 @@ def _validate(vertices, faces, face_object, object_ior, object_absorption,
     return v, f, fo, ior, ab, o, d, vn
 
 
-def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
-
-
 def _unit(a):
     n = np.linalg.norm(a, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         return a / n
+
+
+@nb.njit(cache=True, inline="always")
+def _dot3(ax, ay, az, bx, by, bz):
+    """``a . b`` summed as ``(ax bx + az bz) + ay by``, the order in which NumPy's
+    ``einsum('ij,ij->i')`` sums it (measured, NumPy 2.x on x86-64; the NumPy tracer
+    of earlier versions used it), so the results stay bit-identical to that tracer."""
+    return (ax * bx + az * bz) + ay * by
+
+
+@nb.njit(cache=True, inline="always")
+def _sign(x):
+    """``np.sign``: -1, 0, 1, NaN for NaN."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    if x == 0.0:
+        return 0.0
+    return x
+
+
+@nb.njit(cache=True, inline="always")
+def _clip01(x):
+    """``np.clip(x, 0, 1)`` (NaN stays NaN)."""
+    if x < 0.0:
+        return 0.0
+    if x > 1.0:
+        return 1.0
+    return x
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _face_rows(lo, hi, v, faces, v0, e1, e2, ng):
+    """Faces ``[lo, hi)``: first vertex, edges ``v1 - v0``, ``v2 - v0`` and the unit geometric
+    normal ``e1 x e2 / |e1 x e2|`` (NaN for a face of zero area), as ``np.cross`` and
+    ``np.linalg.norm`` compute them."""
+    for k in range(lo, hi):
+        a, b, c = faces[k, 0], faces[k, 1], faces[k, 2]
+        for j in range(3):
+            v0[k, j] = v[a, j]
+            e1[k, j] = v[b, j] - v[a, j]
+            e2[k, j] = v[c, j] - v[a, j]
+        nx = e1[k, 1] * e2[k, 2] - e1[k, 2] * e2[k, 1]
+        ny = e1[k, 2] * e2[k, 0] - e1[k, 0] * e2[k, 2]
+        nz = e1[k, 0] * e2[k, 1] - e1[k, 1] * e2[k, 0]
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        ng[k, 0] = nx / nrm
+        ng[k, 1] = ny / nrm
+        ng[k, 2] = nz / nrm
+
+
+@nb.njit(cache=True, nogil=True)
+def _init_rows(lo, hi, o, d, pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length, trans,
+               exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked, path_pos, path_dir):
+    """Rays ``[lo, hi)``: the tracer's per-ray arrays before the first bounce (filled by the
+    first bounce's chunks, in parallel, rather than by NumPy up front)."""
+    for i in range(lo, hi):
+        for c in range(3):
+            pos[i, c] = o[i, c]
+            dirn[i, c] = d[i, c]
+            last_dir[i, c] = d[i, c]
+            side[i, c] = 0.0
+            trans[i, c] = 1.0
+            exit_pos[i, c] = np.nan
+            exit_dir[i, c] = np.nan
+            hit_pos[i, c] = np.nan
+            first_normal[i, c] = np.nan
+            first_dir[i, c] = np.nan
+        medium[i] = _OUTSIDE
+        status[i] = _ACTIVE
+        last_tir[i] = False
+        interfaces[i] = 0
+        bounces[i] = 0
+        path_length[i] = 0.0
+        first_face[i] = -1
+        leaked[i] = False
+        if path_pos.shape[0] == o.shape[0]:  # recording (else a dummy)
+            for k in range(path_pos.shape[1]):
+                for c in range(3):
+                    path_pos[i, k, c] = np.nan
+                    path_dir[i, k, c] = np.nan
+
+
+@nb.njit(cache=True, nogil=True)
+def _query_rows(lo, hi, active, pos, dirn, side, eps, first, org32, dir32):
+    """Rows ``[lo, hi)``: the float32 Embree queries of the rays ``active[m]``, their origins
+    pushed off the surface along the new direction and the face normal (``pos + eps (dir + side)``)
+    after the first bounce."""
+    for m in range(lo, hi):
+        i = active[m]
+        for c in range(3):
+            dc = dirn[i, c]
+            if first:
+                org32[m, c] = np.float32(pos[i, c])
+            else:
+                org32[m, c] = np.float32(pos[i, c] + eps * (dc + side[i, c]))
+            dir32[m, c] = np.float32(dc)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, outside_ior,
+                 v0_all, e1_all, e2_all, ng_all, faces, vn_v, vn_c, fo, ior, med_ior, d0,
+                 active, prim, tfar, bu, bv, seg, seg_obj,
+                 pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length,
+                 exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked,
+                 path_pos, path_dir):
+    """One bounce of the rays ``active[m]``, rows ``m`` in ``[lo, hi)``, given Embree's hits in
+    those rows (``prim``, ``tfar``, barycentrics ``bu``, ``bv``).
+
+    float64 Möller-Trumbore on Embree's triangle, Snell / TIR
+    (:func:`refraction_ref.optics.refract3`) with the interpolated shading
+    normal (per vertex ``vn_v`` or per corner ``vn_c``; the other is a
+    dummy), and the bookkeeping of the tracer's per-ray arrays. Writes only
+    the rows of its own rays, so any split of the rows over threads gives
+    the same result. ``seg[m]``, ``seg_obj[m]``: length and object of the
+    segment just travelled inside an object (``seg_obj = -1``: none), for
+    the Beer-Lambert factor. Serial and without the GIL: one chunk of a
+    thread pool (:func:`refraction_ref.embree.run_chunks`).
+
+    The dot products are summed as NumPy's ``einsum('ij,ij->i')`` sums them
+    (:func:`_dot3`) and every other operation is the one of the NumPy tracer
+    of earlier versions, in its order, so the results are bit-identical to it.
+    """
+    n_out = med_ior.shape[0] - 1  # med_ior's entry of the outside medium
+    for m in range(lo, hi):
+        i = active[m]
+        seg_obj[m] = -1
+        seg[m] = 0.0
+        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
+        dx, dy, dz = dirn[i, 0], dirn[i, 1], dirn[i, 2]
+        fi = np.int64(prim[m])
+        if fi < 0:  # no further hit
+            if bounce == 0:
+                status[i] = MISSED
+                for c in range(3):
+                    exit_dir[i, c] = d0[i, c]
+            else:
+                status[i] = EXITED
+                for c in range(3):
+                    exit_pos[i, c] = pos[i, c]
+                    exit_dir[i, c] = dirn[i, c]
+                leaked[i] = medium[i] != _OUTSIDE
+            for c in range(3):
+                last_dir[i, c] = dirn[i, c]
+            continue
+
+        # --- float64 Möller–Trumbore on the triangle Embree found ------------
+        e1x, e1y, e1z = e1_all[fi, 0], e1_all[fi, 1], e1_all[fi, 2]
+        e2x, e2y, e2z = e2_all[fi, 0], e2_all[fi, 1], e2_all[fi, 2]
+        pvx = dy * e2z - dz * e2y
+        pvy = dz * e2x - dx * e2z
+        pvz = dx * e2y - dy * e2x
+        det = _dot3(e1x, e1y, e1z, pvx, pvy, pvz)
+        inv = 1.0 / det
+        tx = px - v0_all[fi, 0]
+        ty = py - v0_all[fi, 1]
+        tz = pz - v0_all[fi, 2]
+        u = _dot3(tx, ty, tz, pvx, pvy, pvz) * inv
+        qx = ty * e1z - tz * e1y
+        qy = tz * e1x - tx * e1z
+        qz = tx * e1y - ty * e1x
+        w2 = _dot3(dx, dy, dz, qx, qy, qz) * inv
+        t = _dot3(e2x, e2y, e2z, qx, qy, qz) * inv
+        if not math.isfinite(t) or t <= 0.0:  # parallel / degenerate: trust Embree's distance
+            tf = np.float64(tfar[m])
+            if bounce:
+                hx = (px + eps * (dx + side[i, 0])) + tf * dx
+                hy = (py + eps * (dy + side[i, 1])) + tf * dy
+                hz = (pz + eps * (dz + side[i, 2])) + tf * dz
+            else:
+                hx = px + tf * dx
+                hy = py + tf * dy
+                hz = pz + tf * dz
+            t = _dot3(hx - px, hy - py, hz - pz, dx, dy, dz)
+            u = np.float64(bu[m])  # barycentrics of the Embree point
+            w2 = np.float64(bv[m])
+        xx = px + t * dx
+        xy = py + t * dy
+        xz = pz + t * dz
+        if bounce == 0:
+            hit_pos[i, 0] = xx
+            hit_pos[i, 1] = xy
+            hit_pos[i, 2] = xz
+            first_face[i] = fi
+        if bounce == max_bounces:  # budget spent, and there is a further hit
+            status[i] = TIR if last_tir[i] else LIMIT
+            for c in range(3):
+                last_dir[i, c] = dirn[i, c]
+            continue
+
+        # --- path length on the segment just travelled (Beer-Lambert: _absorb) --
+        med = medium[i]
+        if med != _OUTSIDE:
+            path_length[i] += t
+            seg[m] = t
+            seg_obj[m] = med
+
+        # --- normals --------------------------------------------------------
+        ngx, ngy, ngz = ng_all[fi, 0], ng_all[fi, 1], ng_all[fi, 2]
+        cos_g = _dot3(dx, dy, dz, ngx, ngy, ngz)
+        entering = cos_g < 0.0
+        if smooth:
+            b1 = _clip01(u)
+            b2 = _clip01(w2)
+            b0 = _clip01(1.0 - u - w2)
+            s = b0 + b1 + b2
+            if not (s > 0):
+                s = 1.0
+            if per_corner:  # the same sum, the corner normals of face fi
+                nsx = (b0 * vn_c[fi, 0, 0] + b1 * vn_c[fi, 1, 0] + b2 * vn_c[fi, 2, 0]) / s
+                nsy = (b0 * vn_c[fi, 0, 1] + b1 * vn_c[fi, 1, 1] + b2 * vn_c[fi, 2, 1]) / s
+                nsz = (b0 * vn_c[fi, 0, 2] + b1 * vn_c[fi, 1, 2] + b2 * vn_c[fi, 2, 2]) / s
+            else:
+                a0, a1, a2 = faces[fi, 0], faces[fi, 1], faces[fi, 2]
+                nsx = (b0 * vn_v[a0, 0] + b1 * vn_v[a1, 0] + b2 * vn_v[a2, 0]) / s
+                nsy = (b0 * vn_v[a0, 1] + b1 * vn_v[a1, 1] + b2 * vn_v[a2, 1]) / s
+                nsz = (b0 * vn_v[a0, 2] + b1 * vn_v[a1, 2] + b2 * vn_v[a2, 2]) / s
+            nrm = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+            nsx = nsx / nrm
+            nsy = nsy / nrm
+            nsz = nsz / nrm
+            if not (math.isfinite(nsx) and math.isfinite(nsy) and math.isfinite(nsz)):
+                nsx, nsy, nsz = ngx, ngy, ngz
+            if _dot3(nsx, nsy, nsz, ngx, ngy, ngz) < 0.0:
+                nsx, nsy, nsz = -nsx, -nsy, -nsz
+        else:
+            nsx, nsy, nsz = ngx, ngy, ngz
+
+        # --- Snell (optics.refract3) -----------------------------------------
+        obj = fo[fi]
+        n1 = med_ior[n_out] if med == _OUTSIDE else med_ior[med]
+        n2 = ior[obj] if entering else outside_ior
+        eta = n1 / n2
+        ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, nsx, nsy, nsz, eta)
+        if smooth:
+            # transmitted rays must keep the sign of d.Ng, reflected ones flip it
+            sn = _sign(_dot3(ndx, ndy, ndz, ngx, ngy, ngz))
+            sg = _sign(cos_g)
+            wrong = (sn == sg) if tir else (sn != sg)
+            if wrong:
+                ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, ngx, ngy, ngz, eta)
+                nsx, nsy, nsz = ngx, ngy, ngz
+
+        lost = not (math.isfinite(ndx) and math.isfinite(ndy) and math.isfinite(ndz))
+        if lost:  # keep the previous direction
+            ndx, ndy, ndz = dx, dy, dz
+        if bounce < record:  # every active ray has had `bounce` events: this is row `bounce`
+            path_pos[i, bounce, 0] = xx
+            path_pos[i, bounce, 1] = xy
+            path_pos[i, bounce, 2] = xz
+            if lost:
+                path_dir[i, bounce, 0] = np.nan
+                path_dir[i, bounce, 1] = np.nan
+                path_dir[i, bounce, 2] = np.nan
+            else:
+                path_dir[i, bounce, 0] = ndx
+                path_dir[i, bounce, 1] = ndy
+                path_dir[i, bounce, 2] = ndz
+
+        # --- bookkeeping ----------------------------------------------------
+        if bounce == 0:
+            first_normal[i, 0] = nsx
+            first_normal[i, 1] = nsy
+            first_normal[i, 2] = nsz
+            first_dir[i, 0] = ndx
+            first_dir[i, 1] = ndy
+            first_dir[i, 2] = ndz
+        crossed = not tir and not lost
+        if crossed:
+            medium[i] = obj if entering else _OUTSIDE
+            interfaces[i] += 1
+        bounces[i] += 1
+        last_tir[i] = tir
+        pos[i, 0] = xx
+        pos[i, 1] = xy
+        pos[i, 2] = xz
+        dirn[i, 0] = ndx
+        dirn[i, 1] = ndy
+        dirn[i, 2] = ndz
+        last_dir[i, 0] = ndx
+        last_dir[i, 1] = ndy
+        last_dir[i, 2] = ndz
+        sgn = 1.0 if _dot3(ndx, ndy, ndz, ngx, ngy, ngz) >= 0.0 else -1.0
+        side[i, 0] = ngx * sgn
+        side[i, 1] = ngy * sgn
+        side[i, 2] = ngz * sgn
+        if lost:
+            status[i] = LOST
 
 
 def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
@@ -228,8 +516,10 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         larger of the bounding-box diagonal and the largest absolute
         coordinate. Distances and hit points are *not* affected by it: they
         are recomputed in float64 from the un-offset surface point.
-    chunk_size : int, default 65536
-        Rays per Embree call.
+    chunk_size : int, default 8192
+        Rays per Embree call and per chunk of a bounce; the chunks run on up
+        to ``numba.get_num_threads()`` threads. Results depend neither on the
+        chunk size nor on the thread count.
     record : int, default 0
         Keep the first ``record`` events of every path in ``path_pos`` and
         ``path_dir``; 0 records nothing (and adds no keys).
@@ -291,9 +581,16 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
 
     Notes
     -----
-    Deterministic: identical inputs give bit-identical outputs (Embree's
-    BVH build and traversal are deterministic and all float64 work is
-    element-wise).
+    Deterministic: identical inputs give bit-identical outputs whatever the
+    thread count (Embree's BVH build and traversal are deterministic, its
+    queries run on fixed chunks of rays, and all float64 work is per ray,
+    in Numba kernels that write only their ray's rows).
+
+    Threads: each bounce splits the rays still travelling into fixed chunks
+    of ``chunk_size`` that ``numba.get_num_threads()`` threads take in turn
+    (:func:`refraction_ref.embree.run_chunks`); a chunk is queried with
+    Embree (embreex releases the GIL while tracing) and then bounced by a
+    Numba kernel that releases the GIL too.
 
     References
     ----------
@@ -331,40 +628,46 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     record = int(record)
 
     n = len(o)
-    nan3 = np.full((n, 3), np.nan)
-    pos = o.copy()
-    dirn = d.copy()
-    side = np.zeros((n, 3))  # unit face normal on the side the ray leaves to
-    medium = np.full(n, _OUTSIDE, dtype=np.int64)
-    status = np.full(n, _ACTIVE, dtype=np.int8)
-    last_tir = np.zeros(n, dtype=bool)
-    interfaces = np.zeros(n, dtype=np.int16)
-    bounces = np.zeros(n, dtype=np.int16)
-    path_length = np.zeros(n)
-    trans = np.ones((n, 3))
-    exit_pos = nan3.copy()
-    exit_dir = nan3.copy()
-    last_dir = d.copy()
-    hit_pos = nan3.copy()
-    first_face = np.full(n, -1, dtype=np.int64)
-    first_normal = nan3.copy()
-    first_dir = nan3.copy()
-    leaked = np.zeros(n, dtype=bool)
+    # per-ray arrays; the first bounce's chunks fill them (_init_rows)
+    pos, dirn, side = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))  # side: unit face normal on the
+    medium = np.empty(n, dtype=np.int64)                                     # side the ray leaves to
+    status = np.empty(n, dtype=np.int8)
+    last_tir = np.empty(n, dtype=bool)
+    interfaces = np.empty(n, dtype=np.int16)
+    bounces = np.empty(n, dtype=np.int16)
+    path_length = np.empty(n)
+    trans = np.empty((n, 3))
+    exit_pos, exit_dir, last_dir, hit_pos = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    first_face = np.empty(n, dtype=np.int64)
+    first_normal, first_dir = np.empty((n, 3)), np.empty((n, 3))
+    leaked = np.empty(n, dtype=bool)
     if record:
-        path_pos = np.full((n, record, 3), np.nan)
-        path_dir = np.full((n, record, 3), np.nan)
+        path_pos = np.empty((n, record, 3))
+        path_dir = np.empty((n, record, 3))
+    else:  # never written (bounce < record is never true)
+        path_pos = path_dir = np.empty((1, 1, 3))
     # index of refraction of each medium; the outside medium is the last entry
     med_ior = np.append(ior, float(outside_ior))
 
-    tri = v[f]  # (F, 3, 3) float64
-    e1_all = tri[:, 1] - tri[:, 0]
-    e2_all = tri[:, 2] - tri[:, 0]
-    ng_all = _unit(np.cross(e1_all, e2_all))
+    # per face: first vertex, edges, unit geometric normal
+    nf = len(f)
+    v0_all, e1_all, e2_all, ng_all = np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3))
+    run_chunks(lambda a, b: _face_rows(a, b, v, f, v0_all, e1_all, e2_all, ng_all), nf, chunk_length(nf, 1 << 15))
+    # shading normals: per vertex (V, 3) or per corner (F, 3, 3); the other is a dummy
+    vn_v = np.ascontiguousarray(vn) if smooth and not per_corner else np.zeros((1, 3))
+    vn_c = np.ascontiguousarray(vn) if smooth and per_corner else np.zeros((1, 3, 3))
+    absorbing = bool(np.any(ab > 0))  # else exp(-0) = 1 leaves the transmittance as it is
 
-    if n == 0:
-        scene = None
-    else:
-        scene = embree_scene(v, f)
+    scene = mesh_scene(v, f) if n else None
+    # per-bounce work arrays, rows [0, len(active)) used
+    org32 = np.empty((n, 3), np.float32)
+    dir32 = np.empty((n, 3), np.float32)
+    prim = np.empty(n, np.int32)
+    tfar = np.empty(n, np.float32)
+    bu = np.empty(n, np.float32)
+    bv = np.empty(n, np.float32)
+    seg = np.empty(n)
+    seg_obj = np.empty(n, np.int64)
 
     bar = None
     if progress:
@@ -372,149 +675,41 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
 
         bar = tqdm(total=max_bounces + 1, desc="trace_exact", unit="bounce")
 
+    # the arguments of _bounce_rows
+    params = (max_bounces, record, epsilon, bool(smooth), bool(per_corner), float(outside_ior))
+    geo = (v0_all, e1_all, e2_all, ng_all, f, vn_v, vn_c, fo, ior, med_ior, d)
+    state = (pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length)
+    out_arrays = (exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked,
+                  path_pos, path_dir)
+    active = np.arange(n, dtype=np.int64)
     for bounce in range(max_bounces + 1):
-        active = np.flatnonzero(status == _ACTIVE)
+        if bounce:
+            active = active[status[active] == _ACTIVE]
+        m = len(active)
         if bar is not None:
-            bar.set_postfix(active=len(active))
-        if len(active) == 0:
+            bar.set_postfix(active=m)
+        if m == 0:
             break
-        for c0 in range(0, len(active), chunk_size):
-            idx = active[c0:c0 + chunk_size]
-            p = pos[idx]
-            dd = dirn[idx]
-            if bounce == 0:
-                org = p
-            else:
-                org = p + epsilon * (dd + side[idx])
-            res = scene.run(np.ascontiguousarray(org, dtype=np.float32),
-                            np.ascontiguousarray(dd, dtype=np.float32), output=1)
-            prim = np.asarray(res["primID"], dtype=np.int64)
-            miss = prim < 0
 
-            # --- rays with no further hit -----------------------------------
-            mi = idx[miss]
-            if bounce == 0:
-                status[mi] = MISSED
-                exit_dir[mi] = d[mi]
-            else:
-                status[mi] = EXITED
-                exit_pos[mi] = pos[mi]
-                exit_dir[mi] = dirn[mi]
-                leaked[mi] = medium[mi] != _OUTSIDE
-            last_dir[mi] = dirn[mi]
+        def chunk(a, b, bounce=bounce, active=active):
+            # rows [a, b) of the active rays: float32 queries, Embree, the float64 bounce
+            if bounce == 0:  # active is 0..n-1: rows [a, b) are rays [a, b)
+                _init_rows(a, b, o, d, *state, trans, *out_arrays)
+            _query_rows(a, b, active, pos, dirn, side, epsilon, bounce == 0, org32, dir32)
+            res = scene.run(org32[a:b], dir32[a:b], output=1)
+            prim[a:b] = res["primID"]
+            tfar[a:b] = res["tfar"]
+            bu[a:b] = res["u"]
+            bv[a:b] = res["v"]
+            _bounce_rows(a, b, bounce, *params, *geo, active, prim, tfar, bu, bv, seg, seg_obj, *state, *out_arrays)
+            if absorbing:  # Beer-Lambert with NumPy's exp, the one of optics.beer_lambert
+                k = seg_obj[a:b]
+                sel = np.flatnonzero(k >= 0)
+                if len(sel):
+                    k = k[sel]
+                    trans[active[a:b][sel]] *= optics.beer_lambert(ab[k], seg[a:b][sel], ior[k])
 
-            hm = ~miss
-            hi_ = idx[hm]
-            if len(hi_) == 0:
-                continue
-            # --- float64 Möller–Trumbore on the triangle Embree found --------
-            fi = prim[hm]
-            p = p[hm]
-            dd = dd[hm]
-            v0 = tri[fi, 0]
-            e1 = e1_all[fi]
-            e2 = e2_all[fi]
-            pvec = np.cross(dd, e2)
-            det = _dot(e1, pvec)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                inv = 1.0 / det
-                tvec = p - v0
-                u = _dot(tvec, pvec) * inv
-                qvec = np.cross(tvec, e1)
-                w2 = _dot(dd, qvec) * inv
-                t = _dot(e2, qvec) * inv
-            bad = ~np.isfinite(t) | (t <= 0.0)
-            if np.any(bad):  # parallel / degenerate: trust Embree's distance
-                tf = np.asarray(res["tfar"], dtype=np.float64)[hm]
-                h = org[hm] + tf[:, None] * dd if bounce else p + tf[:, None] * dd
-                t_fb = _dot(h - p, dd)
-                t = np.where(bad, t_fb, t)
-                # barycentrics of the Embree point
-                u = np.where(bad, np.asarray(res["u"], dtype=np.float64)[hm], u)
-                w2 = np.where(bad, np.asarray(res["v"], dtype=np.float64)[hm], w2)
-            x = p + t[:, None] * dd
-            if bounce == 0:
-                hit_pos[hi_] = x
-                first_face[hi_] = fi
-            if bounce == max_bounces:  # budget spent, and there is a further hit
-                status[hi_] = np.where(last_tir[hi_], TIR, LIMIT).astype(np.int8)
-                last_dir[hi_] = dirn[hi_]
-                continue
-
-            # --- absorption / path length on the segment just travelled -----
-            med = medium[hi_]
-            inside = med != _OUTSIDE
-            if np.any(inside):
-                ii = hi_[inside]
-                k = med[inside]
-                seg = t[inside]
-                path_length[ii] += seg
-                trans[ii] *= optics.beer_lambert(ab[k], seg, ior[k])
-
-            # --- normals ----------------------------------------------------
-            ng = ng_all[fi]
-            cos_g = _dot(dd, ng)
-            entering = cos_g < 0.0
-            if smooth:
-                b1 = np.clip(u, 0.0, 1.0)
-                b2 = np.clip(w2, 0.0, 1.0)
-                b0 = np.clip(1.0 - u - w2, 0.0, 1.0)
-                s = b0 + b1 + b2
-                s = np.where(s > 0, s, 1.0)
-                if per_corner:  # the same sum, the corner normals of face fi
-                    cn = vn[fi]
-                    ns = (b0[:, None] * cn[:, 0] + b1[:, None] * cn[:, 1]
-                          + b2[:, None] * cn[:, 2]) / s[:, None]
-                else:
-                    tf_ = f[fi]
-                    ns = (b0[:, None] * vn[tf_[:, 0]] + b1[:, None] * vn[tf_[:, 1]]
-                          + b2[:, None] * vn[tf_[:, 2]]) / s[:, None]
-                ns = _unit(ns)
-                okn = np.all(np.isfinite(ns), axis=1)
-                ns = np.where(okn[:, None], ns, ng)
-                flip = _dot(ns, ng) < 0.0
-                ns[flip] = -ns[flip]
-            else:
-                ns = ng
-
-            # --- Snell (optics.refract) --------------------------------------
-            obj = fo[fi]
-            n1 = med_ior[med]  # med == -1 indexes the outside entry
-            n2 = np.where(entering, ior[obj], float(outside_ior))
-            eta = n1 / n2
-            newd, tir = optics.refract(dd, ns, eta)
-            if smooth:
-                # transmitted rays must keep the sign of d.Ng, reflected ones flip it
-                cos_new = _dot(newd, ng)
-                wrong = np.where(tir, np.sign(cos_new) == np.sign(cos_g),
-                                 np.sign(cos_new) != np.sign(cos_g))
-                if np.any(wrong):
-                    nd2, tir2 = optics.refract(dd[wrong], ng[wrong], eta[wrong])
-                    newd[wrong] = nd2
-                    tir[wrong] = tir2
-                    ns[wrong] = ng[wrong]
-
-            lost = ~np.all(np.isfinite(newd), axis=1)
-            newd = np.where(lost[:, None], dd, newd)  # keep previous dir for lost rays
-            if bounce < record:  # every active ray has had `bounce` events: this is row `bounce`
-                path_pos[hi_, bounce] = x
-                path_dir[hi_, bounce] = np.where(lost[:, None], np.nan, newd)
-
-            # --- bookkeeping ------------------------------------------------
-            if bounce == 0:
-                first_normal[hi_] = ns
-                first_dir[hi_] = newd
-            crossed = ~tir & ~lost
-            medium[hi_] = np.where(crossed, np.where(entering, obj, _OUTSIDE), med)
-            interfaces[hi_] += crossed.astype(np.int16)
-            bounces[hi_] += 1
-            last_tir[hi_] = tir
-            pos[hi_] = x
-            dirn[hi_] = newd
-            last_dir[hi_] = newd
-            side[hi_] = ng * np.where(_dot(newd, ng) >= 0.0, 1.0, -1.0)[:, None]
-            if np.any(lost):
-                status[hi_[lost]] = LOST
+        run_chunks(chunk, m, chunk_length(m, chunk_size))
         if bar is not None:
             bar.update(1)
     if bar is not None:

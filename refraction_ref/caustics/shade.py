@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..embree import run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
@@ -71,8 +72,13 @@ def shadow_map_visibility(lcam, zmin, points, bias):
     return (~shadow).astype(np.float64)
 
 
-def exact_visibility(obj_tris, light, points, normals):
-    """Visibility of a light at world points past the refractive triangles (Embree shadow rays)."""
+def exact_visibility(obj_tris, light, points, normals, chunk=1 << 15):
+    """Visibility of a light at world points past the refractive triangles (Embree shadow rays).
+
+    The points are tested in fixed chunks of ``chunk`` on ``numba.get_num_threads()``
+    threads (:func:`refraction_ref.embree.run_chunks`); every ray is tested on its own,
+    so the result does not depend on the chunks or the threads.
+    """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0 or len(obj_tris) == 0:
         return np.ones(len(p))
@@ -85,7 +91,14 @@ def exact_visibility(obj_tris, light, points, normals):
     tmax = None
     if light["type"] == "point":
         tmax = np.linalg.norm(np.asarray(light["position"], dtype=np.float64) - o, axis=1)
-    return (~occluded(obj_tris, o, to_light, tmax)).astype(np.float64)
+    soup_scene(obj_tris)  # built (and cached) once, before the threads query it
+    hit = np.empty(len(p), dtype=bool)
+
+    def one(a, b):
+        hit[a:b] = occluded(obj_tris, o[a:b], to_light[a:b], None if tmax is None else tmax[a:b])
+
+    run_chunks(one, len(p), chunk)
+    return (~hit).astype(np.float64)
 
 
 def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
