@@ -1,7 +1,7 @@
 """A sweep on dask.distributed against the same tasks one after another (issue: past one machine).
 
 Runs ``specs/imagespace_knobs.json`` (40 tasks: 2 scenes x 10 iteration
-counts x 2 difference steps, 192x192, 5 timed renders each after a warm-up,
+counts x 2 difference steps, 384x384, 5 timed renders each after a warm-up,
 one Numba thread per task, errors against the exact reference) twice in one
 run: on a fresh ``LocalCluster`` of 2 single-thread worker processes
 (cluster start-up and the workers' kernel loading included), and in this
