@@ -111,10 +111,10 @@ def _cmd_check(a):
 
 
 def _cmd_sweep(a):
-    from .sweep import load_spec, sweep
+    from .sweep import load_spec, sweep, tasks_of
 
     spec = load_spec(a.spec)
-    n = len(spec["scenes"]) * len(spec["methods"]) * max(1, __import__("math").prod(len(v) for v in spec["grid"].values()))
+    n = len(tasks_of(spec))
     where = a.scheduler or f"a LocalCluster of {a.workers} worker process(es) x {a.threads_per_worker} thread(s)"
     print(f"sweep {spec['name']}: {n} tasks on {where}", flush=True)
     rows, paths, wall = sweep(spec, out=a.out, scheduler=a.scheduler, workers=a.workers,

@@ -169,14 +169,14 @@ def format_comparison(c, name_a="A", name_b="B"):
     return "\n".join(lines + extra)
 
 
-def _figure(ncols, width=4.0, height=4.4):
+def _figure(ncols, width=4.0, height=4.4, nrows=1):
     """A figure and axes without pyplot, so the caller's matplotlib back-end is left alone."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width * ncols, height))
+    fig = Figure(figsize=(width * ncols, height * nrows))
     FigureCanvasAgg(fig)
-    return fig, fig.subplots(1, ncols)
+    return fig, fig.subplots(nrows, ncols)
 
 
 def plot_comparison(a, b, path, name_a="A", name_b="B"):
@@ -231,12 +231,8 @@ def _plot_maps(a, b, path, name_a, name_b):
         raise CompareError("compare --plot: the runs share no image and no caustic map of the same shape; "
                            "nothing to plot")
     rows = ([("image", None)] if has_img else []) + [(k, None) for k in maps]
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(12, 4 * len(rows)))
-    FigureCanvasAgg(fig)
-    ax = np.atleast_2d(fig.subplots(len(rows), 3))
+    fig, ax = _figure(3, width=4.0, height=4.0, nrows=len(rows))
+    ax = np.atleast_2d(ax)
     for i, (k, _) in enumerate(rows):
         if k == "image":
             ax[i, 0].imshow(tonemap(a["image"]))

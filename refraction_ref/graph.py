@@ -451,6 +451,8 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
     info["timings_ms"] = timings
     info["plan"] = plan
     info["stages"] = [s.name for s in stages]
+    read = {r.split(".")[0] for st in stages for r in st.reads} & set(BLOCKS)
+    info["params_read"] = {b: scene.data[b] for b in sorted(read)}  # every knob block a stage read
     return arrays, info
 
 

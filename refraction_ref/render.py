@@ -26,14 +26,6 @@ def _params(method, scene):
     return {b: scene.data[b] for b in blocks}
 
 
-def _params_read(m, scene):
-    """Every knob block any of the scene's stages reads, e.g. ``imagespace.caustic_map`` for exact caustics."""
-    from .graph import BLOCKS
-
-    names = {r.split(".")[0] for st in m.stages(scene) for r in st.reads} & set(BLOCKS)
-    return {b: scene.data[b] for b in sorted(names)}
-
-
 _KERNEL_DIRS = {"imagespace": "imagespace", "exact": ".", "levelmap": "levelmap", "volumetric": "volumetric"}
 
 
@@ -60,7 +52,6 @@ def run_method(scene, method, cache=None, keep=None, progress=False):
         "method": method,
         "scene": scene.data,
         "params": _params(method, scene),
-        "params_read": _params_read(m, scene),
         "version": software_versions()["refraction_ref"],
         "contract_version": CONTRACT_VERSION,
         "versions": software_versions(),

@@ -121,7 +121,7 @@ def _seed_key(scene):
     return "levelmap.exact_seed" if scene.data.get("water") is not None else "exact.photon_seed"
 
 
-def photon_quantum(scene, method):
+def photon_quantum(scene):
     """The irradiance one photon of the exact references deposits in one texel (flux / texel area).
 
     For the exact photon reference: the largest photon flux of the light's
@@ -202,7 +202,7 @@ def build(folder, only=None, progress=False, log=print):
                     if k.startswith("caustic_map_"):
                         maps.setdefault(k, []).append(a)
             _save_npz(os.path.join(d, "batches.npz"), {k: np.stack(v) for k, v in maps.items()})
-            q = photon_quantum(scene, method)
+            q = photon_quantum(scene)
             for k in maps:
                 keys[k]["tolerance"]["quantum"] = q
             entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
