@@ -11,7 +11,7 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref import cli
-from refraction_ref.compare import CompareError, check_comparable, plot_comparison
+from refraction_ref.compare import check_comparable, plot_comparison
 
 SMALL = {"camera": {"width": 24, "height": 24}}
 POOL = "refraction_ref/data/levelmap_default.json"
