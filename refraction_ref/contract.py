@@ -15,7 +15,7 @@ import platform
 __all__ = ["CONTRACT_VERSION", "software_versions"]
 
 #: Version of ``docs/oracle.md``; see its changelog.
-CONTRACT_VERSION = 3
+CONTRACT_VERSION = 4
 
 
 def _cpu_name():
