@@ -126,6 +126,21 @@ def _cmd_sweep(a):
     return 0 if not failed else 1
 
 
+def _cmd_tables(a):
+    from .tables.common import HELD, NOT_HELD
+    from .tables.report import run_tables
+
+    log = (lambda m: print(m, file=sys.stderr, flush=True)) if not a.quiet else (lambda m: None)
+    only = [k for k in a.only.split(",") if k] if a.only else None
+    reports = run_tables(a.out, quick=a.quick, only=only, log=log)
+    claims = [c for r in reports for c in r.claims]
+    held = sum(c.verdict == HELD for c in claims)
+    not_held = sum(c.verdict == NOT_HELD for c in claims)
+    print(f"{held} claims held, {not_held} not held, {len(claims) - held - not_held} not measured; "
+          f"wrote {os.path.join(a.out, 'tables.md')}")
+    return 0
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="refraction-ref",
                                 description="CPU reference renderer for refraction through transparent objects.")
@@ -183,15 +198,23 @@ def main(argv=None):
     w.add_argument("--threads-per-worker", type=int, default=1, help="threads per LocalCluster worker (default 1)")
     w.add_argument("--quiet", action="store_true")
     w.set_defaults(fn=_cmd_sweep)
+    t = sub.add_parser("tables", help="reproduce every paper's tables and check their claims (Markdown report)")
+    t.add_argument("--out", default="out/tables", help="folder for tables.md, claims.csv, one CSV per table, plots")
+    t.add_argument("--quick", action="store_true", help="reduced sizes (the CI smoke run, about 1.5 min)")
+    t.add_argument("--only", metavar="PAPER,...", help="chaudhari, sun, tipprasert (default: all)")
+    t.add_argument("--quiet", action="store_true", help="no progress lines")
+    t.set_defaults(fn=_cmd_tables)
     a = p.parse_args(argv)
     from .compare import CompareError
     from .golden.check import CheckError
     from .scene import SceneError
     from .sweep import SweepError
+    from .tables.report import TablesError
 
     try:
         return a.fn(a)
-    except (SceneError, CompareError, CheckError, SweepError, FileExistsError, FileNotFoundError) as e:
+    except (SceneError, CompareError, CheckError, SweepError, TablesError, FileExistsError,
+            FileNotFoundError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
 

@@ -1,0 +1,148 @@
+"""``refraction-ref tables``: every paper's tables and claims, measured here, in one Markdown report.
+
+Each paper module returns a :class:`.common.Report`; this module runs them,
+writes one CSV per table, ``claims.csv`` and ``tables.md`` (our numbers beside
+the papers', the plots, and the claims marked held / not held).
+
+References
+----------
+Chaudhari (2008) §4.2, Tables 4.1, 4.2; Sun et al. (2008) §6, Tables 1, 2;
+Tipprasert (2006) ch. 5, Tables 5-1, 5-3, 5-4, 5-5.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import os
+import time
+
+from .common import HELD, NOT_HELD, Report
+
+__all__ = ["TablesError", "PAPERS", "run_tables", "write_report", "markdown"]
+
+class TablesError(ValueError):
+    """A request the tables command cannot serve (an unknown paper)."""
+
+
+#: name -> (module, paper); the order of the report
+PAPERS = {
+    "chaudhari": ("refraction_ref.tables.chaudhari_report", "Chaudhari 2008"),
+    "sun": ("refraction_ref.tables.sun", "Sun et al. 2008"),
+    "tipprasert": ("refraction_ref.tables.tipprasert", "Tipprasert 2006"),
+}
+
+
+def run_tables(out, quick=False, only=None, log=print):
+    """Run each paper's tables and write the report into ``out``.
+
+    Parameters
+    ----------
+    out : path-like
+        Output folder (created).
+    quick : bool
+        Each paper's reduced run (the CI smoke run; about half a minute each).
+    only : sequence of str, optional
+        Keys of :data:`PAPERS` to run (default: all).
+    log : callable
+        Progress lines.
+
+    Returns
+    -------
+    list of Report
+    """
+    only = list(PAPERS) if not only else list(only)
+    bad = [k for k in only if k not in PAPERS]
+    if bad:
+        raise TablesError(f"tables: unknown paper {bad[0]!r} in --only; choose from {', '.join(PAPERS)}")
+    out = os.fspath(out)
+    os.makedirs(out, exist_ok=True)
+    reports = []
+    for key in only:
+        mod_name, paper = PAPERS[key]
+        t0 = time.perf_counter()
+        try:
+            mod = importlib.import_module(mod_name)
+        except ModuleNotFoundError as e:
+            if e.name != mod_name:  # a broken import inside the module is a bug, not an absence
+                raise
+            log(f"{paper}: not available in this build")
+            reports.append(Report(paper, seconds=0.0))
+            continue
+        rep = mod.run(quick=quick, out=out, log=log)
+        rep.seconds = time.perf_counter() - t0
+        log(f"{paper}: {len(rep.tables)} tables, {len(rep.claims)} claims in {rep.seconds:.0f} s")
+        reports.append(rep)
+    write_report(reports, out, quick)
+    return reports
+
+
+def _cell(x):
+    if x is None:
+        return "—"
+    if isinstance(x, float):
+        return f"{x:.3g}" if abs(x) < 1e4 else f"{x:,.0f}"
+    if isinstance(x, int) and not isinstance(x, bool) and abs(x) >= 1e4:
+        return f"{x:,}"
+    return str(x).replace("|", "\\|")
+
+
+def _md_table(columns, rows):
+    out = ["| " + " | ".join(_cell(c) for c in columns) + " |", "|" + "|".join("---" for _ in columns) + "|"]
+    out += ["| " + " | ".join(_cell(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def markdown(reports, quick=False):
+    """The report's Markdown text."""
+    from ..contract import software_versions
+
+    v = software_versions()
+    lines = ["# The papers' tables and claims, measured with refraction_ref", "",
+             f"{'Quick run (CI smoke sizes)' if quick else 'Full run'}; "
+             f"{v.get('cpu', '')} ({v.get('cpu_count', os.cpu_count())} CPUs), numba {v.get('numba', '')}. "
+             "Our times are a CPU's and the papers' a GPU's of their day: compare ratios and trends, "
+             "not absolute times.", ""]
+    claims = [c for r in reports for c in r.claims]
+    if claims:
+        n_held = sum(c.verdict == HELD for c in claims)
+        n_not = sum(c.verdict == NOT_HELD for c in claims)
+        lines += ["## Claims", "",
+                  f"{n_held} held, {n_not} not held, {len(claims) - n_held - n_not} not measured.", "",
+                  _md_table(["paper", "section", "claim", "verdict", "measured", "why"],
+                            [[c.paper, c.section, f"“{c.quote}”", f"**{c.verdict}**", c.measured, c.why]
+                             for c in claims]), ""]
+    for r in reports:
+        lines += [f"## {r.paper}", ""]
+        if not r.tables and not r.claims:
+            lines += ["Not measured in this build.", ""]
+            continue
+        lines += [f"Measured in {r.seconds:.0f} s.", ""]
+        for t in r.tables:
+            lines += [f"### {t.title}", "", _md_table(t.columns, t.rows), ""]
+            if t.note:
+                lines += [t.note, ""]
+            lines += [f"CSV: `{t.key}.csv`", ""]
+            if t.plot:
+                lines += [f"![{t.title}]({t.plot})", ""]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(reports, out, quick=False):
+    """Write ``<table key>.csv`` per table, ``claims.csv`` and ``tables.md`` into ``out``."""
+    from ..files import atomic_open
+
+    for r in reports:
+        for t in r.tables:
+            with atomic_open(os.path.join(out, f"{t.key}.csv"), "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(t.columns)
+                w.writerows([["" if c is None else c for c in row] for row in t.rows])
+    with atomic_open(os.path.join(out, "claims.csv"), "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["paper", "section", "quote", "verdict", "measured", "why"])
+        for r in reports:
+            for c in r.claims:
+                w.writerow([c.paper, c.section, c.quote, c.verdict, c.measured, c.why])
+    with atomic_open(os.path.join(out, "tables.md"), "w") as f:
+        f.write(markdown(reports, quick))
