@@ -30,7 +30,12 @@ def _same(a, b):
     ({"camera": {"width": 16, "height": 16}, "objects": [],
       "volume": {"ior": luneburg(32), "extinction": 0.1, "scattering": [0.2, 0.2, 0.2], "bounds": BOUNDS.tolist()},
       "volumetric": {"photons": 16}}, None),
-], ids=["bunny32", "luneburg"])
+    ({"camera": {"width": 16, "height": 16}, "objects": [{"mesh": "sphere", "fit": 0.8}],
+      "lights": [{"type": "directional", "direction": [0.2, -1.0, 0.1]}],
+      "receivers": [{"mesh": "plane", "size": [1.6, 1.6], "transform": {"translate": [0, -0.7, 0]}}],
+      "imagespace": {"caustic_map": 16},
+      "volumetric": {"resolution": 24, "photons": 32, "bounds": [[-1, -1, -1], [1, 1, 1]]}}, None),
+], ids=["bunny32", "luneburg", "proxy_and_receivers"])
 def test_stages_identical_on_one_and_two_threads(scene, overrides, on_one_and_two_threads):
     a, b = on_one_and_two_threads(
         lambda: _stage_arrays(rr.render(scene, method="volumetric", overrides=overrides, keep="stages")))

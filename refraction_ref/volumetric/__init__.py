@@ -8,11 +8,14 @@ stage (``timings_ms``)     pass (module)                                   secti
 ``gradient``               central differences of n (:mod:`.gradient`)      §3, eq. 3
 ``octree``                 min/max pyramid, leaf levels, max steps          §4.2, §5.3
                            (:mod:`.octree`)
-``photons``                one photon per covered light texel               §4.3
-                           (:mod:`.photons`)
+``photons``                one photon per light texel covered by the        §4.3
+                           proxy geometry (:mod:`.photons`)
+``receivers``              diffuse receivers the photons stop on (only      Fig. 9
+                           with lights and receivers)
 ``march``                  adaptive marching + deposition (:mod:`.march`)   §4.4, eqs 4-6
 ``smooth``                 3x3x3 smoothing of the radiance (:mod:`.march`)  §4.4
 ``view``                   curved viewing rays, HG phase (:mod:`.view`)     §4.5
+``caustics``               receivers' caustic maps (only with receivers)    Fig. 9
 =========================  ==============================================  ===========
 
 :func:`render_volumetric` in :mod:`.pipeline` puts the passes together;

@@ -48,9 +48,29 @@ stop_fraction : float
     Marching stops when fewer than this fraction of photons are active
     (default 1/1000, §4.4).
 stiff : float
-    Stiffness bound: a step never changes ``|v|`` by more than this
-    fraction of n, i.e. ``ds <= stiff * n / |grad n|`` (default 0.25). It
-    overrides ``ds_min`` at sharp index steps.
+    Stiffness bound of ``stepping = 'robust'``: a step never changes ``|v|``
+    by more than this fraction of n, i.e. ``ds <= stiff * n / |grad n|``
+    (default 0.25). It overrides ``ds_min`` at sharp index steps. Not read
+    by ``stepping = 'paper'``.
+stepping : {'paper', 'robust'}
+    'paper' (default) is §4.4 and §5.3 as written: the step is the distance
+    to the octree node's boundary clamped to ``[ds_min, ds_max]``, every
+    step applies eqs. 4-5, and a voxel's level-0 octree range is its own
+    value. 'robust' adds this package's extensions: the ``stiff`` cap and
+    step halving at index jumps, and a 26-neighbour dilation of the level-0
+    ranges so that constant nodes have an exactly zero gradient and are
+    crossed in one straight step.
+proxy : {'inflated', 'box'}
+    Where photons start (§4.3). 'inflated' (default): the light's texture
+    records the proxy geometry, an inflated copy of every mesh (for
+    ``volume`` input: the box of the voxels whose index differs from
+    ``outside_ior``, grown by ``proxy_inflate`` voxels); texels that miss the
+    proxy make no photon. 'box': the volume's bounding box (every covered
+    texel makes a photon).
+proxy_inflate : float
+    Inflation distance of the proxy, in voxels (default 6: the 9^3 blur's
+    half-width of 4 voxels, plus 2 for the trilinear and central-difference
+    stencils). Must be >= 0.
 """
 
 from __future__ import annotations
@@ -61,16 +81,19 @@ import numpy as np
 
 from ..graph import KnobBlock, register_block
 
-__all__ = ["validate_volumetric", "INTEGRATORS", "VOLUME_KEYS", "VOLUMETRIC_DEFAULTS"]
+__all__ = ["validate_volumetric", "INTEGRATORS", "STEPPINGS", "PROXIES", "VOLUME_KEYS", "VOLUMETRIC_DEFAULTS"]
 
 VOLUMETRIC_DEFAULTS = {
     "resolution": 128, "photons": 1024, "ds_min": 1.0, "ds_max": 8.0, "eps": 0.005, "eps2": 0.02,
     "integrator": "euler", "phase_g": 0.0, "scattering": 0.2, "absorption": 0.0,
     "supersample": 4, "blur": 9, "padding": 6, "bounds": None, "max_steps": 0,
     "min_radiance": 1e-3, "stop_fraction": 1e-3, "stiff": 0.25,
+    "stepping": "paper", "proxy": "inflated", "proxy_inflate": 6.0,
 }
 
 INTEGRATORS = ("euler", "rk4")
+STEPPINGS = ("paper", "robust")
+PROXIES = ("inflated", "box")
 VOLUME_KEYS = ("ior", "extinction", "scattering", "bounds")
 
 
@@ -143,6 +166,13 @@ def validate_volumetric(data, base_dir="."):
     _num(v["min_radiance"], "volumetric.min_radiance", 0.0, 1.0)
     _num(v["stop_fraction"], "volumetric.stop_fraction", 0.0, 1.0)
     _num(v["stiff"], "volumetric.stiff", 0.0, 10.0, lo_open=True)
+    if v["stepping"] not in STEPPINGS:
+        raise SceneError(f"scene: 'volumetric.stepping' is {v['stepping']!r}; choose 'paper' (Sun et al. 2008 "
+                         "§4.4/§5.3 as written) or 'robust' (stiffness cap, step halving, dilated octree)")
+    if v["proxy"] not in PROXIES:
+        raise SceneError(f"scene: 'volumetric.proxy' is {v['proxy']!r}; choose 'inflated' (photons start on an "
+                         "inflated copy of the objects, §4.3) or 'box' (on the volume's bounding box)")
+    _num(v["proxy_inflate"], "volumetric.proxy_inflate", 0.0, 1000.0)
     N = int(v["resolution"])
     need = N ** 3 * 200
     if data["volume"] is None and need > 12 * 2**30:

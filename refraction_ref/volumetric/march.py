@@ -6,7 +6,11 @@ RGB radiance L. One step:
 1. **Step size** (§4.4, §5.3): the distance along v to the boundary of the
    octree leaf node containing x, clamped to ``[ds_min, smax]`` where smax
    is the node's maximum step (unbounded in constant nodes, ``ds_max``
-   voxels where eps <= range < eps'). A *stiffness bound*
+   voxels where eps <= range < eps'). That is all of it with
+   ``stepping = 'paper'`` (every step then applies eqs. 4-5 with the
+   sampled gradient). With ``stepping = 'robust'`` a constant node is
+   crossed in one straight step (its gradient is exactly zero: the octree
+   is dilated), and a *stiffness bound*
    ``ds <= stiff * n / |grad n|`` then caps the step at sharp index steps
    (it overrides ds_min), so one step never changes |v| by more than the
    fraction ``stiff`` of n; and a step whose end point sees an index change
@@ -21,7 +25,10 @@ RGB radiance L. One step:
    segment inside the voxel (in voxels).
 
 A photon dies when it leaves the volume (its exit point and direction are
-recorded), when its radiance falls below ``min_radiance`` of its start,
+recorded), when a step meets a diffuse receiver (the step ends on it; its
+hit point, receiver and transmittance are recorded; an exiting photon goes
+on straight, outside the volume, to the first receiver it meets there),
+when its radiance falls below ``min_radiance`` of its start,
 when |v| collapses, or at ``max_steps``. The paper's stopping rule (stop
 iterating when fewer than ``stop_fraction`` of the photons are active) is
 applied exactly: photons still active at that iteration have their later
@@ -39,6 +46,8 @@ never per-pixel statuses):
  2  ``LIMIT``            stopped at ``max_steps``, or cut by the stopping rule
  3  ``PHOTON_ABSORBED``  radiance fell below ``min_radiance`` of its start; not ``TIR``
  4  ``LOST``             |v| or n collapsed, or a non-finite state
+ 5  ``PHOTON_RECEIVED``  stopped on a receiver inside the volume (a diffuse surface, §6.2.2
+                         Fig. 9); ``hit_pos`` / ``hit_receiver`` are valid
 ==  ===================  ==============================================================
 
 Determinism: deposits are accumulated as 64-bit fixed-point integers, in one
@@ -70,7 +79,7 @@ import numpy as np
 from ..status import EXITED, LIMIT, LOST
 
 __all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS",
-           "PHOTON_ACTIVE", "PHOTON_ABSORBED"]
+           "PHOTON_ACTIVE", "PHOTON_ABSORBED", "PHOTON_RECEIVED", "receiver_tuple"]
 
 # The march's own photon codes (module docstring); EXITED, LIMIT and LOST come from refraction_ref.status.
 #: photon not traced (yet): the initial status (same value as the oracle's MISSED, other meaning)
@@ -78,8 +87,12 @@ PHOTON_ACTIVE = 0
 #: photon's radiance fell below ``min_radiance`` of its start (same value as the oracle's TIR, other meaning)
 PHOTON_ABSORBED = 3
 
+#: photon stopped on a receiver inside the volume (the march's own code; never a per-pixel status)
+PHOTON_RECEIVED = 5
+
 #: Photon status codes by name.
-STATUS = {"active": PHOTON_ACTIVE, "exited": EXITED, "stopped": LIMIT, "absorbed": PHOTON_ABSORBED, "lost": LOST}
+STATUS = {"active": PHOTON_ACTIVE, "exited": EXITED, "stopped": LIMIT, "absorbed": PHOTON_ABSORBED, "lost": LOST,
+          "received": PHOTON_RECEIVED}
 
 INTEG_EULER = 0
 INTEG_RK4 = 1
@@ -253,6 +266,87 @@ class _Knobs(NamedTuple):
     max_steps: int
     min_rad: float  # a photon dies below this fraction of its start radiance
     record: int  # steps kept per photon in the path (0: none)
+    paper: int  # 1: stepping 'paper' (no stiffness cap, no halving, no straight shortcut); 0: 'robust'
+    n_half: float  # the half-contrast index level: a photon beyond it has met refractive material
+    side: float  # +1 (object denser than the outside) or -1
+
+
+class _Recv(NamedTuple):
+    """Diffuse receivers the photons stop on (:func:`receiver_tuple`); T = 0 for none."""
+
+    tris: np.ndarray  # (T, 3, 3) float64 world vertices, grouped by receiver
+    lo: np.ndarray  # (R, 3) float64 each receiver's bounding box
+    hi: np.ndarray  # (R, 3)
+    start: np.ndarray  # (R + 1,) int64: receiver r owns tris[start[r]:start[r + 1]]
+
+
+def receiver_tuple(tris=None, owner=None):
+    """The receivers of a march from a triangle soup and its owners (None: no receivers).
+
+    Parameters
+    ----------
+    tris : (T, 3, 3) float64, optional
+    owner : (T,) int, optional
+        Receiver index of each triangle (0 .. R - 1).
+    """
+    if tris is None or len(tris) == 0:
+        z = np.zeros((0, 3))
+        return _Recv(np.zeros((0, 3, 3)), z, z.copy(), np.zeros(1, np.int64))
+    owner = np.asarray(owner, np.int64)
+    order = np.argsort(owner, kind="stable")
+    t = np.ascontiguousarray(np.asarray(tris, np.float64)[order])
+    o = owner[order]
+    R = int(o.max()) + 1
+    start = np.searchsorted(o, np.arange(R + 1)).astype(np.int64)
+    lo = np.full((R, 3), np.inf)
+    hi = np.full((R, 3), -np.inf)
+    for r in range(R):
+        if start[r + 1] > start[r]:
+            v = t[start[r]:start[r + 1]].reshape(-1, 3)
+            lo[r], hi[r] = v.min(axis=0), v.max(axis=0)
+    return _Recv(t, lo, hi, start)
+
+
+@nb.njit(cache=True)
+def _segment_receiver(recv, x, y, z, dx, dy, dz, tmax):
+    """Smallest t in (0, tmax] where ``x + t d`` meets a receiver triangle (two-sided, Moller-Trumbore).
+
+    Returns ``(t, q)``, q the triangle's index in ``recv.tris``; ``(inf, -1)`` when none.
+    """
+    tris, rlo, rhi, start = recv.tris, recv.lo, recv.hi, recv.start
+    best = np.inf
+    br = -1
+    ax0, ax1 = min(x, x + tmax * dx), max(x, x + tmax * dx)
+    ay0, ay1 = min(y, y + tmax * dy), max(y, y + tmax * dy)
+    az0, az1 = min(z, z + tmax * dz), max(z, z + tmax * dz)
+    for r in range(rlo.shape[0]):
+        pad = 1e-9 * (1.0 + abs(rlo[r, 0]) + abs(rlo[r, 1]) + abs(rlo[r, 2]) + abs(rhi[r, 0]) + abs(rhi[r, 1])
+                      + abs(rhi[r, 2]))
+        if (ax1 < rlo[r, 0] - pad or ax0 > rhi[r, 0] + pad or ay1 < rlo[r, 1] - pad or ay0 > rhi[r, 1] + pad
+                or az1 < rlo[r, 2] - pad or az0 > rhi[r, 2] + pad):
+            continue
+        for q in range(start[r], start[r + 1]):
+            v0x, v0y, v0z = tris[q, 0, 0], tris[q, 0, 1], tris[q, 0, 2]
+            e1x, e1y, e1z = tris[q, 1, 0] - v0x, tris[q, 1, 1] - v0y, tris[q, 1, 2] - v0z
+            e2x, e2y, e2z = tris[q, 2, 0] - v0x, tris[q, 2, 1] - v0y, tris[q, 2, 2] - v0z
+            px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+            det = e1x * px + e1y * py + e1z * pz
+            if det == 0.0 or det != det:
+                continue
+            inv = 1.0 / det
+            tx, ty, tz = x - v0x, y - v0y, z - v0z
+            u = (tx * px + ty * py + tz * pz) * inv
+            if u < 0.0 or u > 1.0:
+                continue
+            qx, qy, qz = ty * e1z - tz * e1y, tz * e1x - tx * e1z, tx * e1y - ty * e1x
+            w = (dx * qx + dy * qy + dz * qz) * inv
+            if w < 0.0 or u + w > 1.0:
+                continue
+            t = (e2x * qx + e2y * qy + e2z * qz) * inv
+            if t > 0.0 and t <= tmax and t < best:
+                best = t
+                br = q
+    return best, br
 
 
 class _Deposits(NamedTuple):
@@ -280,6 +374,10 @@ class _Outputs(NamedTuple):
     exit_pos: np.ndarray  # (P, 3)
     exit_dir: np.ndarray  # (P, 3)
     paths: np.ndarray  # (P, record + 1, 3); (1, 1, 3) unused when record is 0
+    touched: np.ndarray  # (P,) int8: 1 when the photon met refractive material (beyond n_half)
+    hit_pos: np.ndarray  # (P, 3): where it met a receiver (NaN: none)
+    hit_recv: np.ndarray  # (P,) int32: which receiver triangle (index in _Recv.tris; -1: none)
+    hit_trans: np.ndarray  # (P, 3): its transmittance exp(-int kappa) there
 
 
 @nb.njit(cache=True)
@@ -376,7 +474,7 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
 
 
 @nb.njit(cache=True)
-def _trace_one(p, grid, photons, knobs, dep, g, out, path):
+def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
     """Trace photon p to its end; returns (steps, status, max relative |v|-n drift).
 
     Deposits into buffer ``g`` of ``dep``, writes ``out.exit_pos`` /
@@ -390,8 +488,18 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
     pos, dirs, rad = photons.pos, photons.dirs, photons.rad
     ds_min, stiff, integ, max_steps = knobs.ds_min, knobs.stiff, knobs.integ, knobs.max_steps
     min_rad, record = knobs.min_rad, knobs.record
+    paper = knobs.paper
+    n_half = knobs.n_half
+    side = knobs.side
     dep_from = dep.start
     exit_pos, exit_dir = out.exit_pos, out.exit_dir
+    touched_out = out.touched
+    hit_pos = out.hit_pos
+    hit_recv = out.hit_recv
+    hit_trans = out.hit_trans
+    nrecv = recv.tris.shape[0]
+    touched = 0
+    tr_r, tr_g, tr_b = 1.0, 1.0, 1.0
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     x, y, z = pos[p, 0], pos[p, 1], pos[p, 2]
     n = sample_field(field, lo, ih, x, y, z)[0]
@@ -415,7 +523,9 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
             break
         i, j, k = voxel_of(lo, ih, nx, ny, nz, x, y, z)
         cap = smax[i, j, k]
-        const = cap == np.inf
+        # robust stepping: a constant octree node (zero gradient, dilated octree) is crossed in one straight
+        # step; the paper's stepping applies eqs. 4-5 at every step
+        const = cap == np.inf and paper == 0
         if const:  # a constant octree node: straight line to its boundary, no field sampling
             n = np.float64(field[i, j, k, 0])
             gx, gy, gz = 0.0, 0.0, 0.0
@@ -424,6 +534,8 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
         else:
             n, gx, gy, gz = sample_field(field, lo, ih, x, y, z)
         carried = False
+        if side * (n - n_half) > 0.0:
+            touched = 1
         vn = math.sqrt(vx * vx + vy * vy + vz * vz)
         if not (vn > 1e-12 * n) or not (n > 0.0):
             status = LOST
@@ -437,6 +549,9 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
         ds = max(ds, ds_min)
         if const:
             x1, y1, z1, vx1, vy1, vz1 = x + ds * ux, y + ds * uy, z + ds * uz, vx, vy, vz
+        elif paper != 0:  # §4.4 / §5.3: clamp(ds_octree, ds_min, ds_max), one step of eqs. 4-5
+            ds = min(ds, cap * hmin)
+            x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
         else:
             ds = min(ds, cap * hmin)
             gn = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -460,6 +575,12 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
             status = LOST
             break
         s = segment_exit(lo, hi, x, y, z, x1, y1, z1)
+        hitr = -1
+        if nrecv > 0:  # a diffuse receiver on the step ends it there
+            th, hr = _segment_receiver(recv, x, y, z, x1 - x, y1 - y, z1 - z, s)
+            if hr >= 0:
+                s = th
+                hitr = hr
         ex, ey, ez = x + s * (x1 - x), y + s * (y1 - y), z + s * (z1 - z)
         sx, sy, sz = ex - x, ey - y, ez - z
         seg = math.sqrt(sx * sx + sy * sy + sz * sz)
@@ -467,10 +588,13 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
         if kr == kg and kg == kb:  # grey extinction (the common case): one exp
             a = math.exp(-kr * seg) if kr != 0.0 else 1.0
             nr, ng, nb_ = lr * a, lg * a, lb * a
+            tr_r, tr_g, tr_b = tr_r * a, tr_g * a, tr_b * a
         else:
-            nr = lr * math.exp(-kr * seg)
-            ng = lg * math.exp(-kg * seg)
-            nb_ = lb * math.exp(-kb * seg)
+            a_r = math.exp(-kr * seg)
+            a_g = math.exp(-kg * seg)
+            a_b = math.exp(-kb * seg)
+            nr, ng, nb_ = lr * a_r, lg * a_g, lb * a_b
+            tr_r, tr_g, tr_b = tr_r * a_r, tr_g * a_g, tr_b * a_b
         if steps >= dep_from and seg > 0.0:
             deposit_segment(dep, g, lo, ih, (x, y, z), (ex, ey, ez), (lr, lg, lb), (nr, ng, nb_),
                             (sx / seg, sy / seg, sz / seg))
@@ -479,6 +603,16 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
             path[steps, 0] = ex
             path[steps, 1] = ey
             path[steps, 2] = ez
+        if hitr >= 0:
+            status = PHOTON_RECEIVED
+            hit_pos[p, 0] = ex
+            hit_pos[p, 1] = ey
+            hit_pos[p, 2] = ez
+            hit_recv[p] = hitr
+            hit_trans[p, 0] = tr_r
+            hit_trans[p, 1] = tr_g
+            hit_trans[p, 2] = tr_b
+            break
         if s < 1.0:
             status = EXITED
             if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
@@ -490,17 +624,21 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path):
             exit_dir[p, 0] = vx1 / v1
             exit_dir[p, 1] = vy1 / v1
             exit_dir[p, 2] = vz1 / v1
+            hit_trans[p, 0] = tr_r
+            hit_trans[p, 1] = tr_g
+            hit_trans[p, 2] = tr_b
             break
         x, y, z, vx, vy, vz = x1, y1, z1, vx1, vy1, vz1
         lr, lg, lb = nr, ng, nb_
         if max(lr, max(lg, lb)) < thr or lmax0 <= 0.0:
             status = PHOTON_ABSORBED
             break
+    touched_out[p] = touched
     return steps, status, drift
 
 
 @nb.njit(cache=True, parallel=True)
-def _march_kernel(grid, photons, sel, knobs, dep, out):
+def _march_kernel(grid, photons, sel, knobs, dep, out, recv):
     """Trace the photons ``sel`` (indices into ``photons``), chunks of 256 spread over the deposit buffers."""
     nbuf = dep.buffers
     # one output array per statement (see view._view_kernel: numba's dead-code elimination)
@@ -516,10 +654,96 @@ def _march_kernel(grid, photons, sel, knobs, dep, out):
             if (q // chunk) % nbuf != g:
                 continue
             p = sel[q]
-            st, ss, dr = _trace_one(p, grid, photons, knobs, dep, g, out, paths[p] if rec else dummy_path)
+            st, ss, dr = _trace_one(p, grid, photons, knobs, dep, g, out, paths[p] if rec else dummy_path, recv)
             out_steps[p] = st
             out_status[p] = ss
             out_drift[p] = dr
+
+
+@nb.njit(cache=True, parallel=True)
+def _skipped_attenuation(ext, lo, ih, a, b, out):
+    """``out = exp(-integral of kappa)`` per channel along each straight segment a -> b (3D DDA; parallel over photons).
+
+    The segment a photon started on a proxy skipped (from the volume's face
+    to the proxy, where the index is the outside's): eq. 6 integrated
+    exactly voxel by voxel, so that the photon reaches the proxy with the
+    radiance the light has there.
+    """
+    nx, ny, nz = ext.shape[0], ext.shape[1], ext.shape[2]
+    for p in nb.prange(a.shape[0]):
+        u0 = (a[p, 0] - lo[0]) * ih[0]
+        w0 = (a[p, 1] - lo[1]) * ih[1]
+        t0 = (a[p, 2] - lo[2]) * ih[2]
+        du = (b[p, 0] - lo[0]) * ih[0] - u0
+        dw = (b[p, 1] - lo[1]) * ih[1] - w0
+        dt = (b[p, 2] - lo[2]) * ih[2] - t0
+        wx, wy, wz = b[p, 0] - a[p, 0], b[p, 1] - a[p, 1], b[p, 2] - a[p, 2]
+        length = math.sqrt(wx * wx + wy * wy + wz * wz)  # world length of the segment
+        tr, tg, tb = 0.0, 0.0, 0.0
+        if length > 0.0:
+            i = cell(u0, nx)
+            j = cell(w0, ny)
+            k = cell(t0, nz)
+            si = 1 if du > 0 else -1
+            sj = 1 if dw > 0 else -1
+            sk = 1 if dt > 0 else -1
+            ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else np.inf
+            tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else np.inf
+            tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else np.inf
+            di = abs(1.0 / du) if du != 0.0 else np.inf
+            dj = abs(1.0 / dw) if dw != 0.0 else np.inf
+            dk = abs(1.0 / dt) if dt != 0.0 else np.inf
+            t = 0.0
+            for _ in range(nx + ny + nz + 3):
+                tn = min(ti, min(tj, min(tk, 1.0)))
+                w = (tn - t) * length
+                if w > 0.0:
+                    tr += ext[i, j, k, 0] * w
+                    tg += ext[i, j, k, 1] * w
+                    tb += ext[i, j, k, 2] * w
+                if tn >= 1.0:
+                    break
+                if ti <= tj and ti <= tk:
+                    i = min(max(i + si, 0), nx - 1)
+                    ti += di
+                elif tj <= tk:
+                    j = min(max(j + sj, 0), ny - 1)
+                    tj += dj
+                else:
+                    k = min(max(k + sk, 0), nz - 1)
+                    tk += dk
+                t = tn
+        out[p, 0] = math.exp(-tr)
+        out[p, 1] = math.exp(-tg)
+        out[p, 2] = math.exp(-tb)
+
+
+@nb.njit(cache=True, parallel=True)
+def _exit_receivers(sel, exit_pos, exit_dir, recv, reach, hit_pos, hit_recv):
+    """Exited photons ``sel`` go on straight outside the volume to the first receiver (parallel over photons)."""
+    for m in nb.prange(sel.shape[0]):
+        p = sel[m]
+        t, r = _segment_receiver(recv, exit_pos[p, 0], exit_pos[p, 1], exit_pos[p, 2],
+                                 exit_dir[p, 0], exit_dir[p, 1], exit_dir[p, 2], reach)
+        if r >= 0:
+            for c in range(3):
+                hit_pos[p, c] = exit_pos[p, c] + t * exit_dir[p, c]
+            hit_recv[p] = r
+
+
+def half_contrast(field_or_ior, outside_ior):
+    """``(n_half, side)``: the index level halfway to the volume's largest contrast with the outside.
+
+    A point with ``side * (n - n_half) > 0`` is inside refractive material
+    (the viewing pass's ``hit``; the march's "met the object" flag).
+    """
+    a = np.asarray(field_or_ior)
+    n = a[..., 0] if a.ndim == 4 else a
+    lo, hi = float(n.min()), float(n.max())
+    c = hi - outside_ior if abs(hi - outside_ior) >= abs(lo - outside_ior) else lo - outside_ior
+    if c == 0.0:
+        return float("inf"), 1.0
+    return float(outside_ior + 0.5 * c), (1.0 if c > 0 else -1.0)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -628,7 +852,7 @@ def _grid(field, extinction, level, smax, bounds):
 
 def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_min=1.0, stiff=0.25,
                   integrator="euler", max_steps=0, min_radiance=1e-3, stop_fraction=1e-3, buffers=None,
-                  record=0):
+                  record=0, stepping="robust", receivers=None, outside_ior=1.0, entry=None):
     """Trace photons through the volume and deposit their radiance (§4.4).
 
     Parameters
@@ -657,6 +881,23 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     record : int
         K >= 0: keep the first K steps of every photon's path (``paths``).
         Does not change any other result; 0 allocates nothing.
+    stepping : {'robust', 'paper'}
+        'paper': §4.4 / §5.3 as written (give it the undilated octree,
+        ``build_octree(..., dilate=False)``); 'robust' (this function's
+        default, for callers of earlier versions): stiffness cap, step
+        halving, straight steps across constant nodes. The scene knob
+        ``volumetric.stepping`` defaults to 'paper'.
+    receivers : _Recv, optional
+        From :func:`receiver_tuple`: diffuse surfaces the photons stop on.
+    outside_ior : float
+        Index outside the objects: a photon that crosses the half-contrast
+        level (:func:`half_contrast`) has met refractive material
+        (``touched``).
+    entry : (P, 3) float64, optional
+        Where each photon's texel ray entered the volume, when it starts
+        later, on a proxy (§4.3): its radiance is first attenuated by the
+        extinction along the straight segment ``entry -> pos`` it skipped
+        (eq. 6, voxel by voxel). The transmittance ``hit_trans`` includes it.
 
     Returns
     -------
@@ -672,6 +913,13 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
         after each of the first K steps (world; a step that leaves the
         volume ends on its face), NaN after the photon stopped (after
         ``steps``, so a photon cut by the stopping rule ends at the cut).
+        ``touched`` (P,) bool: the photon met refractive material;
+        ``hit_pos`` (P, 3) (NaN: none), ``hit_receiver`` (P,) int32 (-1:
+        none), ``hit_tri`` (P,) int64 (the triangle, an index into
+        ``receivers.tris``; -1: none), ``hit_trans`` (P, 3): where the
+        photon met a receiver (inside
+        the volume, status 5, or straight on after exiting, status 1), and
+        its transmittance there; ``propagated``: photons that took a step.
 
     References
     ----------
@@ -696,21 +944,33 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     sr = 2.0 ** 58 / (16.0 * total)  # 16 = generous bound on one photon's length per voxel
     sd = sr / 3.0
     paths = np.full((P, record + 1, 3), np.nan) if record else np.zeros((1, 1, 3))
+    if stepping not in ("paper", "robust"):
+        raise ValueError(f"stepping must be 'paper' or 'robust', got {stepping!r}")
+    recv = receiver_tuple() if receivers is None else receivers
     out = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
-                   np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths)
+                   np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths, np.zeros(P, np.int8),
+                   np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
     steps, status, drift, exit_pos, exit_dir = out.steps, out.status, out.drift, out.exit_pos, out.exit_dir
+    rad = np.ascontiguousarray(rad, dtype=np.float64)
+    pre_trans = None
+    if entry is not None and P:
+        pre_trans = np.empty_like(rad)
+        _skipped_attenuation(grid.ext, grid.lo, grid.ih, np.ascontiguousarray(entry, dtype=np.float64),
+                             np.ascontiguousarray(pos, dtype=np.float64), pre_trans)
+        rad = rad * pre_trans
     photons = _Photons(np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(dirs, dtype=np.float64),
-                       np.ascontiguousarray(rad, dtype=np.float64))
+                       rad)
+    n_half, side = half_contrast(field, float(outside_ior))
     knobs = _Knobs(float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
-                   float(min_radiance), record)
+                   float(min_radiance), record, 1 if stepping == "paper" else 0, n_half, side)
     rows = acc.reshape(-1, 6)
     py, pz = acc.shape[2], acc.shape[3]
     if P:
         _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs,
-                      _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, 0, 1), out)
+                      _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, 0, 1), out, recv)
     # the paper's stopping rule: iterate until fewer than stop_fraction * P photons are active
     truncated = 0
-    if P and stop_fraction is not None:
+    if P and stop_fraction is not None and stop_fraction > 0:  # 0: no stopping rule (every photon to its end)
         k = int(math.ceil(stop_fraction * P)) - 1
         if k < P:
             cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
@@ -718,20 +978,35 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
             if len(late):
                 # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
                 redo = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P),
-                                np.full((P, 3), np.nan), np.full((P, 3), np.nan), np.zeros((1, 1, 3)))
+                                np.full((P, 3), np.nan), np.full((P, 3), np.nan), np.zeros((1, 1, 3)),
+                                np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32),
+                                np.full((P, 3), np.nan))
                 _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
-                              _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, cut, -1), redo)
+                              _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, cut, -1), redo, recv)
                 steps[late] = cut
                 status[late] = LIMIT
                 exit_pos[late] = np.nan
                 exit_dir[late] = np.nan
+                out.hit_pos[late] = np.nan
+                out.hit_recv[late] = -1
                 if record:
                     paths[late, cut + 1:] = np.nan
                 truncated = int(len(late))
+    if P and recv.tris.shape[0]:
+        ex = np.flatnonzero(status == EXITED).astype(np.int64)
+        reach = 1e6 * (1.0 + float(np.abs(grid.lo).max() + np.abs(grid.hi).max()))
+        _exit_receivers(ex, exit_pos, exit_dir, recv, reach, out.hit_pos, out.hit_recv)
+    if pre_trans is not None:
+        out.hit_trans[:] *= pre_trans
+    hit_tri = out.hit_recv.astype(np.int64)
+    hit_receiver = np.where(hit_tri >= 0, np.searchsorted(recv.start, hit_tri, side="right") - 1, -1)
     sums = np.empty((nx, ny, nz, 6))
     _merge_buffers(acc, sr, sd, sums)
     _give_workspace(acc)
     info = {
+        "touched": out.touched.astype(bool), "hit_pos": out.hit_pos, "hit_receiver": hit_receiver.astype(np.int32),
+        "hit_tri": hit_tri,
+        "hit_trans": out.hit_trans, "propagated": int(np.count_nonzero(steps > 0)),
         "exit_pos": exit_pos, "exit_dir": exit_dir, "status": status, "steps": steps,
         "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
         "drift_max": float(drift.max()) if P else 0.0,
@@ -745,7 +1020,7 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
 
 
 def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0, stiff=0.25,
-                integrator="euler", max_steps=0, max_points=100000):
+                integrator="euler", max_steps=0, max_points=100000, stepping="robust"):
     """The polylines followed by a few photons (for tests and figures); no deposition.
 
     Returns
@@ -763,14 +1038,18 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
     K = max(min(max_points, max_steps + 1), 1) - 1  # steps kept after the start point
     if K == 0:
         return [pos[p:p + 1].copy() for p in range(len(pos))]
-    knobs = _Knobs(float(ds_min) * grid.hmin, float(stiff), _integ_code(integrator), int(max_steps), 0.0, K)
+    knobs = _Knobs(float(ds_min) * grid.hmin, float(stiff), _integ_code(integrator), int(max_steps), 0.0, K,
+                   1 if stepping == "paper" else 0, float("inf"), 1.0)
     dep = _Deposits(np.zeros((1, 6), np.int64), 1, nx, ny, nz, 1, 1, 1.0, 1.0, 1 << 62, 0)  # never deposits
-    out = _Outputs(np.zeros(len(pos), np.int32), np.zeros(len(pos), np.int8), np.zeros(len(pos)),
-                   np.full(pos.shape, np.nan), np.full(pos.shape, np.nan), np.zeros((1, 1, 3)))
+    P = len(pos)
+    out = _Outputs(np.zeros(P, np.int32), np.zeros(P, np.int8), np.zeros(P),
+                   np.full(pos.shape, np.nan), np.full(pos.shape, np.nan), np.zeros((1, 1, 3)),
+                   np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
+    recv = receiver_tuple()
     paths = []
     for p in range(len(pos)):
         path = np.empty((K + 1, 3))
-        steps = _trace_one(p, grid, photons, knobs, dep, 0, out, path)[0]
+        steps = _trace_one(p, grid, photons, knobs, dep, 0, out, path, recv)[0]
         paths.append(path[: min(steps, K) + 1].copy())
     return paths
 

@@ -15,10 +15,13 @@ eps (the node is constant, the photon goes straight to its boundary), and
 ``ds_max`` voxels (8 in the paper) otherwise.
 
 Any grid size works: nodes of level k cover voxels ``[a 2^k, (a + 1) 2^k)``
-clipped to the grid. The level-0 range of a voxel includes its 26
-neighbours, because the interpolated n and the central-difference gradient
-in a voxel depend on them: a node marked constant then has an exactly zero
-gradient everywhere inside it.
+clipped to the grid. With ``dilate`` (``volumetric.stepping = 'robust'``)
+the level-0 range of a voxel includes its 26 neighbours, because the
+interpolated n and the central-difference gradient in a voxel depend on
+them: a node marked constant then has an exactly zero gradient everywhere
+inside it. Without it (``stepping = 'paper'``, §4.2 as written) a voxel's
+level-0 range is its own value (zero), so every voxel is at least a
+constant level-0 node.
 
 References
 ----------
@@ -60,6 +63,17 @@ def _dilate_minmax(n, mn, mx):
 
 
 @nb.njit(cache=True, parallel=True)
+def _copy_minmax(n, mn, mx):
+    """Level 0 without dilation: min = max = the voxel's own value (§4.2); parallel over x slabs."""
+    nx, ny, nz = n.shape
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                mn[i, j, k] = n[i, j, k]
+                mx[i, j, k] = n[i, j, k]
+
+
+@nb.njit(cache=True, parallel=True)
 def _reduce_minmax(mn, mx, omn, omx):
     """2x2x2 min / max reduction, odd sizes by edge replication; parallel over the coarse x slabs."""
     nx, ny, nz = mn.shape
@@ -80,7 +94,7 @@ def _reduce_minmax(mn, mx, omn, omx):
                 omx[a, b, c] = hi
 
 
-def _pyramid_flat(n):
+def _pyramid_flat(n, dilate=True):
     """The pyramid in two flat buffers (min, max), with per-level offsets and shapes."""
     K = max(1, math.ceil(math.log2(max(n.shape))))
     shapes = [tuple(n.shape)]
@@ -93,14 +107,17 @@ def _pyramid_flat(n):
     fmx = np.empty(off[-1])
     lv = [(fmn[off[k]:off[k + 1]].reshape(shapes[k]), fmx[off[k]:off[k + 1]].reshape(shapes[k]))
           for k in range(len(shapes))]
-    _dilate_minmax(n, *lv[0])
+    if dilate:
+        _dilate_minmax(n, *lv[0])
+    else:
+        _copy_minmax(n, *lv[0])
     for k in range(K):
         _reduce_minmax(*lv[k], *lv[k + 1])
     return lv, fmn, fmx, off, np.array(shapes, np.int64)
 
 
-def minmax_pyramid(ior):
-    """Min and max of n per node, for levels 0 (dilated voxels) to K (one node).
+def minmax_pyramid(ior, dilate=True):
+    """Min and max of n per node, for levels 0 (voxels, dilated by default) to K (one node).
 
     Returns
     -------
@@ -108,7 +125,7 @@ def minmax_pyramid(ior):
         Level k arrays have shape ``ceil(shape / 2^k)``; K = ceil(log2(max shape)).
     """
     n = np.ascontiguousarray(ior, dtype=np.float64)
-    return _pyramid_flat(n)[0]
+    return _pyramid_flat(n, dilate)[0]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -167,8 +184,18 @@ def _leaf_flat(fmn, fmx, off, shapes, shape, eps, eps2, ds_max):
     return level, smax
 
 
-def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0):
+def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0, dilate=True):
     """Dense leaf-level octree of an index volume.
+
+    Parameters
+    ----------
+    ior : (nx, ny, nz) array
+    eps, eps2, ds_max : float
+        Tolerances and step limit (§5.3).
+    dilate : bool
+        Level-0 ranges over each voxel's 3x3x3 neighbourhood (the 'robust'
+        stepping; default, as before), or each voxel's own value (the
+        paper's §4.2, ``stepping = 'paper'``).
 
     Returns
     -------
@@ -184,7 +211,7 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0):
     Sun et al. (2008), §4.2 and §5.3.
     """
     n = np.ascontiguousarray(ior, dtype=np.float64)
-    pyr, fmn, fmx, off, shapes = _pyramid_flat(n)  # parallel kernels; min / max are exact in any order
+    pyr, fmn, fmx, off, shapes = _pyramid_flat(n, bool(dilate))  # parallel kernels; min / max are exact in any order
     level, smax = _leaf_flat(fmn, fmx, off, shapes, n.shape, float(eps), float(eps2), float(ds_max))
     const = np.isinf(smax)
     top_mn, top_mx = pyr[-1]

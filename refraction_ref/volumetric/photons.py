@@ -13,6 +13,23 @@ its exact equivalent for a box, a slab test per texel ray.
   box centre (the shared :class:`~refraction_ref.camera.Camera`, so texel
   rays are its primary rays), just covering the box.
 
+Proxy geometry (§4.3, last paragraph): "we can render a proxy geometry
+into the shadow map, rather than the bounding cube of the volume". The
+light's texture keeps its window (it still just covers the volume's box,
+so texels are the box's texels), but a texel makes a photon only where its
+ray meets the proxy, and the photon starts where it does:
+
+* ``("mesh", tris)``: an inflated copy of the objects' meshes
+  (:func:`inflate_mesh`), rendered as the nearest front face per texel
+  (Embree's nearest hit on the texel's ray, then the hit recomputed in
+  float64 on that triangle: the exact equivalent of rasterizing the proxy
+  at texel centres). A texel whose nearest proxy face is a back face (its
+  ray starts inside the proxy, or slips through a crack) starts on the
+  volume's box instead, as without a proxy.
+* ``("box", (2, 3) bounds)``: a box inside the volume (for ``volume``
+  input: the voxels whose index differs from the outside, grown by the
+  inflation; :func:`occupied_box`).
+
 Photon weights make the stored radiance independent of the photon count and
 of the voxel size: a photon carries ``L * dA / h^2`` (directional: dA the
 texel area) or ``I * domega / h^2`` (point: domega the texel's solid
@@ -34,7 +51,7 @@ import numpy as np
 from ..camera import Camera
 from ..scene import SceneError
 
-__all__ = ["generate_photons", "box_entry"]
+__all__ = ["generate_photons", "box_entry", "inflate_mesh", "occupied_box"]
 
 
 def box_entry(origins, dirs, bounds):
@@ -126,6 +143,148 @@ def _gather_hits(org, dirs, t_in, idx, b, pos, dout):
             dout[m, c] = dirs[p, c]
 
 
+def inflate_mesh(vertices, faces, distance):
+    """An inflated copy of a closed triangle mesh: every face plane moved out by at least ``distance``.
+
+    Vertices are welded by position (so seams do not open), each is moved
+    along its area-weighted normal by ``distance / c`` where c is the
+    smallest cosine between that normal and the normals of its faces,
+    bounded below by 1/2 (a "mitred" offset: each face's plane moves by at
+    least ``distance`` wherever c >= 1/2). Faces are wound outwards (the
+    winding is flipped if the signed volume is negative).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int
+    distance : float
+        World units (>= 0).
+
+    Returns
+    -------
+    tris : (F, 3, 3) float64
+        The inflated triangles, wound outwards.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3: "for a complex object, we typically use a
+    mesh that has been inflated to encompass the entire object".
+    """
+    from ..meshes import vertex_normals
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros((0, 3, 3))
+    uv, inv = np.unique(v, axis=0, return_inverse=True)
+    fw = inv.reshape(-1)[f]
+    vol = float(np.einsum("ij,ij->i", uv[fw[:, 0]], np.cross(uv[fw[:, 1]], uv[fw[:, 2]])).sum())
+    if vol < 0:
+        fw = fw[:, ::-1]
+    vn = vertex_normals(uv, fw)
+    fn = np.cross(uv[fw[:, 1]] - uv[fw[:, 0]], uv[fw[:, 2]] - uv[fw[:, 0]])
+    ln = np.linalg.norm(fn, axis=1, keepdims=True)
+    fn = np.divide(fn, ln, out=np.zeros_like(fn), where=ln > 0)
+    cmin = np.ones(len(uv))
+    for k in range(3):
+        np.minimum.at(cmin, fw[:, k], np.where(ln[:, 0] > 0, np.einsum("ij,ij->i", vn[fw[:, k]], fn), 1.0))
+    scale = float(distance) / np.maximum(cmin, 0.5)
+    out = uv + vn * scale[:, None]
+    return np.ascontiguousarray(out[fw])
+
+
+def occupied_box(ior, bounds, outside_ior, eps, grow):
+    """The proxy of a ``volume`` input: the box of the voxels whose index differs from the outside.
+
+    Parameters
+    ----------
+    ior : (nx, ny, nz) float64
+    bounds : (2, 3) float64
+    outside_ior : float
+    eps : float
+        A voxel differs when ``|n - outside_ior| >= eps`` (the octree's
+        primary tolerance).
+    grow : float
+        Voxels added on every side (``volumetric.proxy_inflate``).
+
+    Returns
+    -------
+    (2, 3) float64 or None
+        World bounds, clipped to the volume; None when no voxel differs.
+    """
+    n = np.asarray(ior)
+    b = np.asarray(bounds, dtype=np.float64)
+    h = (b[1] - b[0]) / np.asarray(n.shape, dtype=np.float64)
+    occ = np.abs(n - float(outside_ior)) >= float(eps)
+    if not occ.any():
+        return None
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        ax = np.flatnonzero(occ.any(axis=tuple(c for c in range(3) if c != a)))
+        lo[a] = b[0, a] + (ax[0] - float(grow)) * h[a]
+        hi[a] = b[0, a] + (ax[-1] + 1 + float(grow)) * h[a]
+    return np.stack([np.maximum(lo, b[0]), np.minimum(hi, b[1])])
+
+
+@nb.njit(cache=True, parallel=True)
+def _proxy_entry(org, dirs, tris, prim, t_box, t_out):
+    """Start parameter per texel ray from the proxy's nearest face (float64 on Embree's triangle).
+
+    ``t_box`` (in, out): the box entry (inf: misses the box). Out: the
+    proxy's front-face hit clamped to the box entry, the box entry where
+    the nearest face is a back face, inf where the ray misses the proxy or
+    meets it beyond the box; parallel over rays.
+    """
+    for p in nb.prange(org.shape[0]):
+        q = prim[p]
+        tb = t_box[p]
+        if q < 0 or not (tb < np.inf):
+            t_box[p] = np.inf
+            continue
+        e1x = tris[q, 1, 0] - tris[q, 0, 0]
+        e1y = tris[q, 1, 1] - tris[q, 0, 1]
+        e1z = tris[q, 1, 2] - tris[q, 0, 2]
+        e2x = tris[q, 2, 0] - tris[q, 0, 0]
+        e2y = tris[q, 2, 1] - tris[q, 0, 1]
+        e2z = tris[q, 2, 2] - tris[q, 0, 2]
+        nx_ = e1y * e2z - e1z * e2y
+        ny_ = e1z * e2x - e1x * e2z
+        nz_ = e1x * e2y - e1y * e2x
+        dn = dirs[p, 0] * nx_ + dirs[p, 1] * ny_ + dirs[p, 2] * nz_
+        if not dn < 0.0:  # a back face (or edge-on): start on the box, as without a proxy
+            continue
+        t = ((tris[q, 0, 0] - org[p, 0]) * nx_ + (tris[q, 0, 1] - org[p, 1]) * ny_
+             + (tris[q, 0, 2] - org[p, 2]) * nz_) / dn
+        if not t < t_out[p]:  # the proxy lies beyond the volume on this ray
+            t_box[p] = np.inf
+        elif t > tb:
+            t_box[p] = t
+
+
+def _proxy_t(org, dirs, b, proxy):
+    """Start parameters of the texel rays with the proxy (inf: no photon)."""
+    t_in = np.empty(len(org))
+    if proxy is None:
+        _slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
+        return t_in
+    kind, data = proxy
+    if kind == "box":
+        _slab_entry(org, dirs, np.asarray(data, dtype=np.float64), t_in)
+        return t_in
+    from ..embree import nearest_hits, soup_scene
+
+    _slab_entry(org, dirs, b, t_in)
+    _, t_out = box_entry(org, dirs, b)
+    tris = np.ascontiguousarray(data, dtype=np.float64)
+    if len(tris) == 0:
+        t_in[:] = np.inf
+        return t_in
+    prim = nearest_hits(soup_scene(tris, cache=False), org, dirs)[0].astype(np.int64)
+    _proxy_entry(org, dirs, tris, prim, t_in, t_out)
+    return t_in
+
+
 def _basis(d):
     a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     e1 = np.cross(d, a)
@@ -137,8 +296,8 @@ def _inside(p, bounds):
     return bool(np.all(p > bounds[0]) and np.all(p < bounds[1]))
 
 
-def generate_photons(lights, bounds, shape, photons):
-    """One photon per covered texel of each light's view of the volume box (§4.3).
+def generate_photons(lights, bounds, shape, photons, proxy=None):
+    """One photon per covered texel of each light's view of the volume box, or of a proxy (§4.3).
 
     Parameters
     ----------
@@ -151,6 +310,12 @@ def generate_photons(lights, bounds, shape, photons):
         Volume grid shape (for the voxel cross-section).
     photons : int
         Texture side M per light.
+    proxy : None or (kind, data), optional
+        None: photons start on the volume's box. ``("mesh", tris)`` with
+        ``tris`` (T, 3, 3) the proxy's triangles wound outwards
+        (:func:`inflate_mesh`), or ``("box", bounds)`` a box inside the
+        volume (:func:`occupied_box`): only texels whose ray meets the proxy
+        make photons, starting where they meet it (module docstring).
 
     Returns
     -------
@@ -230,8 +395,7 @@ def generate_photons(lights, bounds, shape, photons):
                              "and 'point'")
         org = np.ascontiguousarray(org, dtype=np.float64)
         dirs = np.ascontiguousarray(dirs, dtype=np.float64)
-        t_in = np.empty(len(org))
-        _slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
+        t_in = _proxy_t(org, dirs, b, proxy)
         idx = np.flatnonzero(np.isfinite(t_in)) if np.any(rad > 0) else np.zeros(0, np.int64)
         pos = np.empty((len(idx), 3))
         dsel = np.empty((len(idx), 3))
@@ -244,7 +408,8 @@ def generate_photons(lights, bounds, shape, photons):
             out_r.append(np.array(weights[idx]))
         out_l.append(np.full(len(idx), li, np.int32))
         hit_count = len(idx)
-        notes.append(f"{what}, {hit_count} covered texels -> photons")
+        on = "box" if proxy is None else ("inflated mesh proxy" if proxy[0] == "mesh" else "occupied-box proxy")
+        notes.append(f"{what}, {hit_count} texels covered by the {on} -> photons")
     if not out_p:
         z = np.zeros((0, 3))
         return z, z.copy(), z.copy(), np.zeros(0, np.int32), notes

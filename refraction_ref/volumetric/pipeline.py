@@ -11,11 +11,16 @@ stage             inputs                                               section
                   ior, ``volume`` block, resolution, padding,
                   supersample, blur, bounds
 ``gradient``      voxelize                                             §3, eq. 3
-``octree``        voxelize; eps, eps2, ds_max                          §4.2, §5.3
-``photons``       voxelize (bounds); lights; photons                   §4.3
-``march``         gradient, octree, photons; ds_min, stiff,            §4.4, eqs. 4-6
-                  integrator, max_steps, min_radiance, stop_fraction,
-                  scattering, absorption
+``octree``        voxelize; eps, eps2, ds_max, stepping                §4.2, §5.3
+``photons``       voxelize (bounds, meshes); lights; photons, proxy,   §4.3
+                  proxy_inflate, outside_ior
+``receivers``     receivers, lights, imagespace.caustic_map (only      §6.2.2, Fig. 9
+                  with lights and receivers)
+``march``         gradient, octree, photons, (receivers); ds_min,      §4.4, eqs. 4-6
+                  stiff, integrator, max_steps, min_radiance,
+                  stop_fraction, scattering, absorption, stepping,
+                  outside_ior
+``caustics``      march, receivers; lights (only with receivers)       §6.2.2, Fig. 9
 ``photon_paths``  the march's inputs; only when kept: a fixed sample   §4.4
                   of photon paths, step by step, for inspection
 ``smooth``        march (and, for the viewing pass, the source volume  §4.4
@@ -49,9 +54,9 @@ from ..environment import environment_lookup
 from ..graph import Method, Stage, describe, register_method, run_graph
 from ..scene import SceneError
 from .gradient import gradient_field
-from .march import march_photons, smooth_radiance
+from .march import march_photons, receiver_tuple, smooth_radiance
 from .octree import build_octree
-from .photons import generate_photons
+from .photons import generate_photons, inflate_mesh, occupied_box
 from .view import source_volume, view_volume
 
 __all__ = ["render_volumetric", "load_volume", "STAGES", "METHOD"]
@@ -160,7 +165,7 @@ def _run_voxelize(scene):
         note = (f"volumetric input bypasses voxelization: volume.ior {ior.shape}"
                 + ("" if not d["objects"] else f"; the {len(d['objects'])} scene objects are ignored"))
         return {"ior": ior, "extinction": ext, "scattering": sca, "absorption": None, "bounds": b,
-                "triangles": 0, "notes": [note], "ran": False}
+                "triangles": 0, "notes": [note], "ran": False, "mesh": None}
     geom = scene_geometry(scene)
     if len(geom.faces) == 0:
         raise SceneError("volumetric: the scene has no objects and no 'volume'; add an object or give "
@@ -171,7 +176,8 @@ def _run_voxelize(scene):
     notes.append(f"coverage -> IOR, {'Gaussian ' + str(v['blur']) + '^3, sigma = ' + format(v['blur'] / 6, 'g') if v['blur'] > 1 else 'no blur'}")
     return {"ior": ior, "extinction": None, "scattering": None,
             "absorption": absn if np.any(absn > 0) else None, "bounds": b,
-            "triangles": int(len(geom.faces)), "notes": notes, "ran": True}
+            "triangles": int(len(geom.faces)), "notes": notes, "ran": True,
+            "mesh": (geom.vertices, geom.faces)}
 
 
 def _warm():
@@ -188,10 +194,14 @@ def _warm():
                          "volume": {"ior": n, "bounds": [[-1, -1, -1], [1, 1, 1]]},
                          "volumetric": {"photons": 4, "integrator": integ, "phase_g": 0.3}})
         render_volumetric(sc, warm=False)
-    sc = load_scene({"camera": {"width": 4, "height": 4},
-                     "objects": [{"mesh": "sphere", "fit": 1.0}],
-                     "volumetric": {"photons": 4, "resolution": 16, "padding": 2}})
-    render_volumetric(sc, warm=False)
+    for stepping in ("paper", "robust"):
+        sc = load_scene({"camera": {"width": 4, "height": 4},
+                         "objects": [{"mesh": "sphere", "fit": 1.0}],
+                         "lights": [{"type": "directional", "direction": [0, -1, 0]}],
+                         "receivers": [{"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, -0.6, 0]}}],
+                         "imagespace": {"caustic_map": 4},
+                         "volumetric": {"photons": 4, "resolution": 16, "padding": 2, "stepping": stepping}})
+        render_volumetric(sc, warm=False)
 
 
 _warm.done = False
@@ -216,32 +226,85 @@ def _st_gradient(ctx):
 
 def _st_octree(ctx):
     v = ctx.scene.data["volumetric"]
-    level, smax, ost = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"])
-    msg = (f"{100 * ost['constant_fraction']:.1f}% of voxels in constant nodes (crossed in one step), "
+    paper = v["stepping"] == "paper"
+    level, smax, ost = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"], dilate=not paper)
+    # the viewing pass crosses nodes whose gradient is exactly zero in straight steps (an exact shortcut of
+    # §4.5's fixed step): it needs the dilated octree's constant nodes whatever the photons' stepping
+    view_smax = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"])[1] if paper else smax
+    msg = (f"{100 * ost['constant_fraction']:.1f}% of voxels in constant nodes ("
+           + ("stepped to their boundary" if paper else "crossed in one straight step") + "), "
            f"{100 * ost['limited_fraction']:.1f}% limited to ds_max = {v['ds_max']} voxels")
     if ost["constant_index"]:
         msg += "; the index is constant everywhere: photons and rays go straight"
+    msg += ("; stepping 'paper': level-0 ranges are single voxels (§4.2), no stiffness cap or halving"
+            if paper else "; stepping 'robust': level-0 ranges dilated over 26 neighbours")
     ctx.note(msg)
     ctx.stats["octree"] = {k: ost[k] for k in ("constant_fraction", "limited_fraction", "levels", "constant_index")}
-    return {"level": level, "step_max": smax, "info": ost}
+    return {"level": level, "step_max": smax, "view_step_max": view_smax, "info": ost}
+
+
+def _proxy(ctx):
+    """The proxy geometry of §4.3 (None: the volume's box) and a sentence saying what it is."""
+    d = ctx.scene.data
+    v = d["volumetric"]
+    vox = ctx.buf["voxelize"]
+    if v["proxy"] == "box":
+        return None, "proxy 'box': photons start on the volume's bounding box"
+    b = np.asarray(vox["bounds"], dtype=np.float64)
+    shape = vox["ior"].shape
+    hmin = float(np.min((b[1] - b[0]) / np.asarray(shape, dtype=np.float64)))
+    grow = float(v["proxy_inflate"])
+    if vox["mesh"] is not None:
+        tris = inflate_mesh(vox["mesh"][0], vox["mesh"][1], grow * hmin)
+        return ("mesh", tris), (f"proxy 'inflated': the objects' meshes inflated by {grow:g} voxels "
+                                f"({len(tris)} triangles), nearest front face per texel (§4.3)")
+    box = occupied_box(vox["ior"], b, float(d["outside_ior"]), 1e-6, grow)
+    if box is None:
+        return None, ("proxy 'inflated' on volume input: no voxel differs from outside_ior, so photons start "
+                      "on the volume's bounding box")
+    return ("box", box), (f"proxy 'inflated' on volume input: the box of the voxels whose index differs from "
+                          f"outside_ior, grown by {grow:g} voxels, {np.round(box, 4).tolist()} (§4.3)")
 
 
 def _st_photons(ctx):
     d = ctx.scene.data
     vox = ctx.buf["voxelize"]
+    M = int(d["volumetric"]["photons"])
     if not d["lights"]:
         z = np.zeros((0, 3))
         ph = (z, z.copy(), z.copy(), np.zeros(0, np.int32), ["no lights: no photons"])
     else:
-        ph = generate_photons(d["lights"], vox["bounds"], vox["ior"].shape, int(d["volumetric"]["photons"]))
+        proxy, what = _proxy(ctx)
+        ctx.note(what)
+        ph = generate_photons(d["lights"], vox["bounds"], vox["ior"].shape, M, proxy=proxy)
     for n in ph[4]:
         ctx.note(n)
-    return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2]}
+    ctx.stats["photons"] = {"photons_initial": M * M * len(d["lights"]), "photons_generated": int(len(ph[0])),
+                            "proxy": d["volumetric"]["proxy"]}
+    entry = None
+    if d["volumetric"]["proxy"] != "box" and len(ph[0]):
+        # where each texel ray entered the volume: the march attenuates the photon over the skipped segment
+        from .photons import box_entry
+
+        _, back = box_entry(ph[0], -ph[1], np.asarray(vox["bounds"], dtype=np.float64))
+        entry = ph[0] - np.where(np.isfinite(back), np.maximum(back, 0.0), 0.0)[:, None] * ph[1]
+    return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2], "entry": entry}
+
+
+def _st_receivers(ctx):
+    from ..caustics.receivers import receiver_set
+
+    d = ctx.scene.data
+    rs = receiver_set(ctx.scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    recv = receiver_tuple(rs.tris, rs.owner)
+    ctx.note(f"{len(rs.boxes)} diffuse receiver(s), {len(rs.tris)} triangles: photons stop on them (inside the "
+             f"volume, or straight on after leaving it); {d['imagespace']['caustic_map']}^2 caustic maps")
+    return {"rs": rs, "recv": recv, **{f"frame_{r}": rs.frame(r).astype(np.float64) for r in range(len(rs.boxes))}}
 
 
 #: the knobs the ``march`` stage reads (``photon_paths`` reads the same)
 MARCH_KNOBS = ("ds_min", "stiff", "integrator", "max_steps", "min_radiance", "stop_fraction", "scattering",
-               "absorption")
+               "absorption", "stepping")
 
 
 def _march_volume(ctx):
@@ -252,27 +315,35 @@ def _march_volume(ctx):
     return b["gradient"]["field"], kappa, octv["level"], octv["step_max"], vox["bounds"]
 
 
-def _march_settings(v):
-    """The march's keyword arguments from the ``volumetric`` block (``stop_fraction`` apart)."""
+def _march_settings(ctx, idx=None):
+    """The march's keyword arguments from the scene (``stop_fraction`` apart), for photons ``idx`` (None: all)."""
+    d = ctx.scene.data
+    v = d["volumetric"]
+    rc = ctx.buf.get("receivers")
+    entry = ctx.buf["photons"].get("entry")
+    if entry is not None and idx is not None:
+        entry = entry[idx]
     return dict(ds_min=float(v["ds_min"]), stiff=float(v["stiff"]), integrator=v["integrator"],
-                max_steps=int(v["max_steps"]), min_radiance=float(v["min_radiance"]))
+                max_steps=int(v["max_steps"]), min_radiance=float(v["min_radiance"]), stepping=v["stepping"],
+                receivers=rc["recv"] if rc is not None else None, outside_ior=float(d["outside_ior"]), entry=entry)
 
 
 def _st_march(ctx):
     v = ctx.scene.data["volumetric"]
     ph = ctx.buf["photons"]["ph"]
     pos, dirs, rad = ph[0], ph[1], ph[2]
-    sums, minfo = march_photons(*_march_volume(ctx), pos, dirs, rad, **_march_settings(v),
+    sums, minfo = march_photons(*_march_volume(ctx), pos, dirs, rad, **_march_settings(ctx),
                                 stop_fraction=float(v["stop_fraction"]))
     ctx.note(f"{len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
              f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
              f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
-    ctx.stats["march"] = {"photons": int(len(pos)), "photon_steps": minfo["total_steps"],
+    ctx.stats["march"] = {"photons": int(len(pos)), "photons_propagated": minfo["propagated"],
+                          "photon_steps": minfo["total_steps"], "stepping": v["stepping"],
                           "photons_truncated": minfo["truncated"], "drift_max": minfo["drift_max"],
                           "drift_median": minfo["drift_median"], "drift_p99": minfo["drift_p99"],
                           "deposit_buffers": minfo["buffers"]}
     return {"sums": sums, "minfo": minfo, "exit_pos": minfo["exit_pos"], "exit_dir": minfo["exit_dir"],
-            "photon_status": minfo["status"]}
+            "photon_status": minfo["status"], "hit_pos": minfo["hit_pos"], "hit_receiver": minfo["hit_receiver"]}
 
 
 #: photons in the ``photon_paths`` sample, and the steps recorded of each
@@ -306,15 +377,59 @@ def _st_photon_paths(ctx):
     int64, the photons' indices in ``stage.photons.start_pos`` (and
     ``photon_exit_pos``, ``photon_status``).
     """
-    v = ctx.scene.data["volumetric"]
     ph = ctx.buf["photons"]["ph"]
     idx = path_sample(len(ph[0]))
-    _, info = march_photons(*_march_volume(ctx), ph[0][idx], ph[1][idx], ph[2][idx], **_march_settings(v),
+    _, info = march_photons(*_march_volume(ctx), ph[0][idx], ph[1][idx], ph[2][idx], **_march_settings(ctx, idx),
                             stop_fraction=None, record=PATH_STEPS)
     longer = int(np.count_nonzero(info["steps"] > PATH_STEPS))
     ctx.note(f"{len(idx)} of {len(ph[0])} photons, their first {PATH_STEPS} steps ({longer} take more), "
              "marched alone (no stopping rule), deposits discarded")
     return {"paths": info["paths"], "path_index": idx}
+
+
+def _st_caustics(ctx):
+    """Irradiance of the photons that met refractive material, splatted into each receiver's map.
+
+    Each photon of light l carries the flux of its texel for a light of unit
+    strength (texel area, or solid angle) times its transmittance; where it
+    met receiver r (inside the volume, or straight on after leaving it),
+    that flux times the cosine with the receiver's face normal over the
+    texel area is splatted bilinearly into ``caustic_map_r`` (mean over
+    channels, summed over lights) and ``caustic_rgb_r`` (each light's
+    radiance), as the image-space and exact methods write them
+    (docs/oracle.md, "Caustics on receivers"). Photons that never crossed
+    the half-contrast level of the index (direct light) are left out.
+    """
+    from ..caustics.pipeline import _collect, splat_maps
+
+    d = ctx.scene.data
+    rs = ctx.buf["receivers"]["rs"]
+    ph = ctx.buf["photons"]["ph"]
+    minfo = ctx.buf["march"]["minfo"]
+    vox = ctx.buf["voxelize"]
+    b = np.asarray(vox["bounds"], dtype=np.float64)
+    h = (b[1] - b[0]) / np.asarray(vox["ior"].shape, dtype=np.float64)
+    h2 = float(np.prod(h)) ** (2.0 / 3.0)
+    size = int(d["imagespace"]["caustic_map"])
+    light = ph[3]
+    per_light = []
+    landed = 0
+    for li, L in enumerate(d["lights"]):
+        rad = np.asarray(L["radiance"], dtype=np.float64)
+        sel = np.flatnonzero((light == li) & minfo["touched"] & (minfo["hit_tri"] >= 0))
+        if len(sel) == 0 or rad.max() <= 0:
+            per_light.append([np.zeros(bx.size + (3,)) for bx in rs.boxes])
+            continue
+        unit = ph[2][sel].max(axis=1) * h2 / rad.max()  # the texel's flux for a light of unit strength
+        flux = unit[:, None] * minfo["hit_trans"][sel]
+        per_light.append(splat_maps(rs, minfo["hit_pos"][sel], minfo["hit_tri"][sel], flux, size))
+        landed += len(sel)
+    arrays = {}
+    _collect(d["lights"], rs, per_light, arrays, 1)
+    ctx.note(f"{landed} photons that met refractive material landed on the receivers; bilinear splat, no gathering")
+    ctx.stats["caustics"] = {"photons_on_receivers": int(landed), "caustic_map": size,
+                             "receivers": len(rs.boxes)}
+    return {"arrays": arrays, **arrays}
 
 
 def _st_smooth(ctx):
@@ -334,7 +449,7 @@ def _st_view(ctx):
     cam = Camera.from_dict(d["camera"])
     H, W = cam.shape
     origin, rdir = cam.primary_rays()
-    vw = view_volume(b["gradient"]["field"], b["smooth"]["source"], b["octree"]["step_max"], b["voxelize"]["bounds"],
+    vw = view_volume(b["gradient"]["field"], b["smooth"]["source"], b["octree"]["view_step_max"], b["voxelize"]["bounds"],
                      origin.reshape(-1, 3), rdir.reshape(-1, 3), integrator=v["integrator"],
                      phase_g=float(v["phase_g"]), outside_ior=float(d["outside_ior"]),
                      n_range=(ost["n_min"], ost["n_max"]))
@@ -352,22 +467,48 @@ def _st_view(ctx):
     }
 
 
+def _has_receivers(scene):
+    return bool(scene.data["lights"]) and bool(scene.data["receivers"])
+
+
+def _skipped(scene):
+    if _has_receivers(scene):
+        return []
+    missing = [k for k in ("lights", "receivers") if not scene.data[k]]
+    why = f"the scene has no {' and no '.join(missing)}: no receivers to voxelize, no caustic maps"
+    return [{"stage": "receivers", "ran": False, "why": why}, {"stage": "caustics", "ran": False, "why": why}]
+
+
 def _stages(scene):
+    rc = _has_receivers(scene)
+    nr = len(scene.data["receivers"] or []) if rc else 0
+    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
+                        makes=tuple(f"frame_{r}" for r in range(nr)),
+                        doc="diffuse receivers the photons stop on, and their caustic-map frames (Fig. 9)"),) if rc else ()
+    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "imagespace.caustic_map"), after=("voxelize", "photons", "march", "receivers"),
+                        makes=tuple(f"{k}_{r}" for k in ("caustic_map", "caustic_frame", "caustic_rgb")
+                                    for r in range(nr)),
+                        doc="irradiance of the refracted photons on each receiver (Fig. 9)"),) if rc else ()
+    after_march = ("voxelize", "gradient", "octree", "photons") + (("receivers",) if rc else ())
     return (
         Stage("voxelize", _st_voxelize, reads=("objects", "outside_ior", "volume", _V + "resolution", _V + "padding",
                                                 _V + "supersample", _V + "blur", _V + "bounds"),
               makes=("ior_volume",), doc="solid voxelization, coverage -> index, Gaussian blur (§4.1)"),
         Stage("gradient", _st_gradient, after=("voxelize",), makes=("field",),
               doc="central differences of n (§3, eq. 3)"),
-        Stage("octree", _st_octree, reads=(_V + "eps", _V + "eps2", _V + "ds_max"), after=("voxelize",),
-              makes=("level", "step_max"), doc="min/max pyramid, leaf levels, step-size map (§4.2, §5.3)"),
-        Stage("photons", _st_photons, reads=("lights", _V + "photons"), after=("voxelize",),
-              makes=("start_pos", "start_dir", "start_radiance"), doc="one photon per covered light texel (§4.3)"),
-        Stage("march", _st_march, reads=tuple(_V + k for k in MARCH_KNOBS),
-              after=("voxelize", "gradient", "octree", "photons"), makes=("exit_pos", "exit_dir", "photon_status"),
+        Stage("octree", _st_octree, reads=(_V + "eps", _V + "eps2", _V + "ds_max", _V + "stepping"),
+              after=("voxelize",), makes=("level", "step_max", "view_step_max"),
+              doc="min/max pyramid, leaf levels, step-size map (§4.2, §5.3)"),
+        Stage("photons", _st_photons, reads=("lights", "outside_ior", _V + "photons", _V + "proxy",
+                                             _V + "proxy_inflate"), after=("voxelize",),
+              makes=("start_pos", "start_dir", "start_radiance"),
+              doc="one photon per light texel covered by the proxy geometry (§4.3)"),
+    ) + recv_stage + (
+        Stage("march", _st_march, reads=("outside_ior",) + tuple(_V + k for k in MARCH_KNOBS),
+              after=after_march, makes=("exit_pos", "exit_dir", "photon_status", "hit_pos", "hit_receiver"),
               doc="adaptive marching and deposition (§4.4, eqs. 4-6)"),
-        Stage("photon_paths", _st_photon_paths, reads=tuple(_V + k for k in MARCH_KNOBS),
-              after=("voxelize", "gradient", "octree", "photons"), makes=("paths", "path_index"), diagnostic=True,
+        Stage("photon_paths", _st_photon_paths, reads=("outside_ior",) + tuple(_V + k for k in MARCH_KNOBS),
+              after=after_march, makes=("paths", "path_index"), diagnostic=True,
               doc=f"the first {PATH_STEPS} steps of {PATH_SAMPLE} evenly spaced photons, marched alone (§4.4); "
                   "only when kept"),
         Stage("smooth", _st_smooth, reads=(_V + "scattering", _V + "absorption"), after=("voxelize", "march"),
@@ -376,7 +517,7 @@ def _stages(scene):
             _V + k for k in ("phase_g", "integrator")), after=("voxelize", "gradient", "octree", "smooth"),
               makes=("hit", "exit_pos", "exit_dir", "status", "image"),
               doc="curved viewing rays, Henyey-Greenstein in-scattering (§4.5)"),
-    )
+    ) + caus_stage
 
 
 def _assemble(scene, bufs, stats):
@@ -391,16 +532,21 @@ def _assemble(scene, bufs, stats):
         "photon_steps": np.asarray(minfo["total_steps"], np.int64), "photon_status": minfo["status"],
     }
     arrays.update(bufs["view"])
-    st = {"volume_shape": list(ior.shape), "triangles": vox["triangles"], **stats["march"],
+    if "caustics" in bufs:
+        arrays.update(bufs["caustics"]["arrays"])
+    st = {"volume_shape": list(ior.shape), "triangles": vox["triangles"], **stats.get("photons", {}), **stats["march"],
           "occupied_voxels": int(np.count_nonzero(np.abs(ior - float(d["outside_ior"])) > 1e-6)),
           "octree": stats["octree"]}
+    if "caustics" in stats:
+        st["caustics"] = stats["caustics"]
     return arrays, {"triangles": vox["triangles"], "stats": st, "scene": _summary(d)}
 
 
 METHOD = register_method(Method(
     "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=lambda: _warm(),
+    skipped=_skipped,
     results=("voxelize.ior", "voxelize.bounds", "voxelize.triangles", "march.minfo", "smooth.radiance",
-             "smooth.direction", "view"),
+             "smooth.direction", "view", "caustics"),
     doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
 
 
