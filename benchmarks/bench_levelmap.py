@@ -35,43 +35,12 @@ from refraction_ref.levelmap.metrics import luv_difference, relative_l1  # noqa:
 from refraction_ref.levelmap.pipeline import prepare, render_levelmap, warm_up  # noqa: E402
 from refraction_ref.scene import load_scene  # noqa: E402
 
-SUN_TOP = [0.0, -1.0, 0.0]  # the thesis's tables: light from above
-
-
-def uv_sphere(seg=32, rings=32):
-    """A UV sphere of diameter 1 with ``2 seg (rings - 1)`` triangles (32 x 32: 1,984, as Table 5-2)."""
-    v = [[0.0, 0.5, 0.0]]
-    for i in range(1, rings):
-        th = np.pi * i / rings
-        for j in range(seg):
-            ph = 2 * np.pi * j / seg
-            v.append([0.5 * np.sin(th) * np.cos(ph), 0.5 * np.cos(th), 0.5 * np.sin(th) * np.sin(ph)])
-    v.append([0.0, -0.5, 0.0])
-    f = []
-    for j in range(seg):
-        f.append([0, 1 + (j + 1) % seg, 1 + j])
-    for i in range(rings - 2):
-        a, b = 1 + i * seg, 1 + (i + 1) * seg
-        for j in range(seg):
-            j1 = (j + 1) % seg
-            f.append([a + j, a + j1, b + j])
-            f.append([a + j1, b + j1, b + j])
-    last = len(v) - 1
-    base = 1 + (rings - 2) * seg
-    for j in range(seg):
-        f.append([base + j, base + (j + 1) % seg, last])
-    return np.asarray(v), np.asarray(f, np.int64)
+from refraction_ref.tables.tipprasert import SUN_TOP, model_scene as _model_scene, uv_sphere  # noqa: E402,F401
 
 
 def model_scene(mesh, planes=50, floor=False, sun=SUN_TOP, **lm):
     """One model (teapot, sphere or bunny) in a pool under the default waves, as the thesis's tables."""
-    base = default_scene()
-    d = json.loads(json.dumps(base.data, default=lambda o: None))
-    rec = {"mesh": mesh, "fit": 0.9, "transform": {"translate": [0.0, -0.6, 0.0]}, "albedo": [0.85, 0.55, 0.35]}
-    d["receivers"] = ([base.data["receivers"][0]] if floor else []) + [rec]
-    d["lights"][0]["direction"] = list(sun)
-    d["levelmap"].update({"planes": planes, **lm})
-    return load_scene(d)
+    return _model_scene(mesh, planes, floor, sun, **lm)
 
 
 def mesh_arg(name):

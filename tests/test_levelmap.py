@@ -77,7 +77,8 @@ def test_flat_water_closed_form(variant):
     a, info = render_levelmap(sc)
     E = a["caustic_map_0"].astype(float)
     own = own_texels(sc)
-    assert own.sum() > 0.9 * E.size
+    # the thesis's box (eq. 4-3) spans 2 |P| of the farthest corner: the floor fills about half the map
+    assert own.sum() > 0.4 * E.size
     np.testing.assert_allclose(E[own], closed_form(d, K), rtol=1e-5)
     assert np.all(E[~own] == 0)
     assert a["caustic_frame_0"].shape == (4, 3)
@@ -90,7 +91,9 @@ def test_one_and_500_planes(planes):
     a, info = render_levelmap(sc)
     assert info["planes_requested"] == planes
     E = a["caustic_map_0"].astype(float)
-    np.testing.assert_allclose(E[own_texels(sc)], closed_form(d, K), rtol=1e-5)
+    # 5e-5 (was 1e-5 with the tight box): the distance exp(-K d) is interpolated from vertices snapped to
+    # 1/256 texel, and the thesis's box (eq. 4-3) has 1.4x larger texels; one plane far from the tilted floor
+    np.testing.assert_allclose(E[own_texels(sc)], closed_form(d, K), rtol=5e-5)
 
 
 def test_grazing_light_closed_form():
@@ -99,7 +102,8 @@ def test_grazing_light_closed_form():
     a, _ = render_levelmap(sc)
     E = a["caustic_map_0"].astype(float)
     assert np.all(np.isfinite(E))
-    np.testing.assert_allclose(E[own_texels(sc)], closed_form(d, K), rtol=1e-5)
+    # 5e-5 (was 1e-5): distances interpolated at 1/256-texel snapped vertices, 1.4x larger texels (eq. 4-3 box)
+    np.testing.assert_allclose(E[own_texels(sc)], closed_form(d, K), rtol=5e-5)
 
 
 def test_several_lights_sum():
@@ -110,10 +114,11 @@ def test_several_lights_sum():
     assert len(info["planes_used_per_receiver"][0]) == 2  # one set of planes per light (eq. 4-20)
     E = a["caustic_map_0"].astype(float)
     own = own_texels(sc)
-    inner = own.copy()
-    inner[:2] = inner[-2:] = False
-    inner[:, :2] = inner[:, -2:] = False
-    np.testing.assert_allclose(E[inner], closed_form(l1, 0.3) + 2 * closed_form(l2, 0.3), rtol=1e-5)
+    # the floor's texels two texels in from its edges (the thesis's box, eq. 4-3, puts the floor mid-map)
+    from scipy.ndimage import binary_erosion
+
+    inner = binary_erosion(own, iterations=2)
+    np.testing.assert_allclose(E[inner], closed_form(l1, 0.3) + 2 * closed_form(l2, 0.3), rtol=5e-5)
 
 
 # --- extreme cases -----------------------------------------------------------------------------
@@ -265,9 +270,10 @@ def test_agreement_with_exact_reference():
     assert errs["per_ray"] < 0.08, errs
     # the exact reference conserves the flux through the water above the floor (K = 0.2, depth 0.6)
     E = ex["caustic_map_0"].astype(float)
-    inner = own.copy()
-    inner[:8] = inner[-8:] = False
-    inner[:, :8] = inner[:, -8:] = False
+    # the floor's texels 8 in from its edges (the thesis's box, eq. 4-3, puts the floor mid-map)
+    from scipy.ndimage import binary_erosion
+
+    inner = binary_erosion(own, iterations=8)
     mean = E[inner].mean()
     assert abs(mean / closed_form((0.2, -1.0, 0.1), 0.2, depth=0.6) - 1) < 0.03
 

@@ -10,8 +10,11 @@ over lights of eq. 4-20.
 
 The camera image applies eq. 4-19, ``I_o = I_c I_d + I_a``, with ``I_c`` the
 irradiance looked up (nearest texel) in the receiver's caustics map, ``I_d``
-its albedo (the diffuse map) and ``I_a = ambient * albedo``. The receivers are
-seen directly (the water surface itself is not drawn); the background is black.
+its albedo (the diffuse map) and ``I_a = ambient * albedo``. :func:`shade_image`
+sees the receivers directly (the water surface itself is not drawn; the
+background is black): the level map's ``image`` before contract_version 4. The
+render's ``image`` is now the view through the water and ``image_direct`` this
+direct view, both drawn by :mod:`.view`.
 
 References
 ----------

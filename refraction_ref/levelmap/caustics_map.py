@@ -49,9 +49,8 @@ import numba as nb
 import numpy as np
 
 from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values, oriented_triangle, pixel_span
-from .planes import dir_to_map, to_map
 
-__all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane"]
+__all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane", "splat_planes", "GROUP_SECTIONS"]
 
 
 class _Beams(NamedTuple):
@@ -66,31 +65,35 @@ class _Beams(NamedTuple):
 
 
 class _Grid(NamedTuple):
-    """The caustics map drawn into: size, rows per band, scissor rectangle."""
+    """The caustics map drawn into: size, rows per band."""
 
     W: int
     H: int
     band: int
-    rect: np.ndarray  # (4,) int64 (row0, row1, col0, col1)
 
 
-class _Plane(NamedTuple):
-    """The reference plane drawn and the water's absorption."""
+class _Planes(NamedTuple):
+    """The reference planes drawn in one pass, the water's absorption and the texel size."""
 
-    zp: float  # plane depth
+    zp: np.ndarray  # (G,) plane depths
+    key: np.ndarray  # (G,) int64: a fragment of plane g is kept where accept == key[g]
+    rect: np.ndarray  # (G, 4) int64 scissor rectangles (row0, row1, col0, col1)
     K: float  # absorption coefficient
     texel_area: float
 
 
 class _Sections(NamedTuple):
-    """Intersection triangles of the candidate beams with the plane (filled by :func:`_sections`)."""
+    """Intersection triangles of the candidate beams with the planes (filled by :func:`_sections`).
 
-    cand: np.ndarray  # (M,) beam of each section
-    X: np.ndarray  # (M, 3) int64 snapped columns, 1/256 texel
-    Y: np.ndarray  # (M, 3) int64 snapped rows
-    C: np.ndarray  # (M, 3) edge-ray lengths from the water to the plane
-    B: np.ndarray  # (M,) irradiance factor flux / (|T . V| area)
-    rows: np.ndarray  # (M, 2) rows each may cover, (1, 0) when none
+    Section ``s`` is beam ``cand[s % M]`` on plane ``s // M`` (plane-major).
+    """
+
+    cand: np.ndarray  # (M,) candidate beams
+    X: np.ndarray  # (G M, 3) int64 snapped columns, 1/256 texel
+    Y: np.ndarray  # (G M, 3) int64 snapped rows
+    C: np.ndarray  # (G M, 3) edge-ray lengths from the water to the plane
+    B: np.ndarray  # (G M,) irradiance factor flux / (|T . V| area)
+    rows: np.ndarray  # (G M, 2) rows each may cover, (1, 0) when none
 
 
 class _Bins(NamedTuple):
@@ -103,8 +106,7 @@ class _Bins(NamedTuple):
 class _Receiver(NamedTuple):
     """Where fragments land: the depth test and the receiving surface."""
 
-    accept: np.ndarray  # (Hc, Wc) a fragment is kept where accept == key
-    key: int
+    accept: np.ndarray  # (Hc, Wc) int32: a fragment of plane g is kept where accept == planes.key[g]
     zeta: np.ndarray  # (Hc, Wc) receiver depth
     normal: np.ndarray  # (Hc, Wc, 3) receiver unit normal
 
@@ -122,18 +124,50 @@ class BeamSet:
     """
 
     def __init__(self, vols, box):
-        self.O = np.ascontiguousarray(to_map(box, vols.origins))
-        self.D = np.ascontiguousarray(dir_to_map(box, vols.dirs))
+        F = len(vols.flux)
+        self.O = np.empty((F, 3, 3))
+        self.D = np.empty((F, 3, 3))
         self.flux = np.ascontiguousarray(vols.flux)
         self.tbar = np.ascontiguousarray(vols.mean_dir)
-        self.tdz = np.ascontiguousarray(-(vols.mean_dir @ box.V))
-        with np.errstate(divide="ignore"):
-            self.inv_tv = np.where(self.tdz > 1e-12, 1.0 / np.maximum(self.tdz, 1e-12), 0.0)
+        self.tdz = np.empty(F)
+        self.inv_tv = np.empty(F)
+        Hc, Wc = box.size
+        frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0], [Wc, Hc, 0.0]], np.float64)
+        _to_map(np.ascontiguousarray(vols.origins), np.ascontiguousarray(vols.dirs), self.tbar, frame, self.O, self.D,
+                self.tdz, self.inv_tv)
 
     @property
     def arrays(self):
         """The arrays as one :class:`_Beams` named tuple (what the kernels take)."""
         return _Beams(self.O, self.D, self.flux, self.inv_tv, self.tbar, self.tdz)
+
+
+@nb.njit(cache=True, parallel=True)
+def _to_map(org, dirs, tbar, frame, O, D, tdz, inv_tv):
+    """:func:`~.planes.to_map` of the edge-ray origins, :func:`~.planes.dir_to_map` of their directions, and
+    each beam axis's ``T . T0`` and ``1 / |T . V|`` (0 where the beam does not go down the box), beams in parallel."""
+    cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
+    w = frame[4, 0]
+    d = frame[4, 1]
+    Wc = frame[5, 0]
+    Hc = frame[5, 1]
+    for f in nb.prange(org.shape[0]):
+        for k in range(3):
+            qx = org[f, k, 0] - cx
+            qy = org[f, k, 1] - cy
+            qz = org[f, k, 2] - cz
+            O[f, k, 0] = ((qx * frame[1, 0] + qy * frame[1, 1] + qz * frame[1, 2]) / w + 0.5) * Wc
+            O[f, k, 1] = ((qx * frame[3, 0] + qy * frame[3, 1] + qz * frame[3, 2]) / d + 0.5) * Hc
+            O[f, k, 2] = -(qx * frame[2, 0] + qy * frame[2, 1] + qz * frame[2, 2])
+            tx = dirs[f, k, 0]
+            ty = dirs[f, k, 1]
+            tz = dirs[f, k, 2]
+            D[f, k, 0] = (tx * frame[1, 0] + ty * frame[1, 1] + tz * frame[1, 2]) * (Wc / w)
+            D[f, k, 1] = (tx * frame[3, 0] + ty * frame[3, 1] + tz * frame[3, 2]) * (Hc / d)
+            D[f, k, 2] = -(tx * frame[2, 0] + ty * frame[2, 1] + tz * frame[2, 2])
+        z = -(tbar[f, 0] * frame[2, 0] + tbar[f, 1] * frame[2, 1] + tbar[f, 2] * frame[2, 2])
+        tdz[f] = z
+        inv_tv[f] = 1.0 / z if z > 1e-12 else 0.0
 
 
 def beams_in_map(vols, box):
@@ -154,7 +188,8 @@ def cull_beams(beams, box, zmin, zmax):
         Indices of the candidate beams, increasing.
     """
     Hc, Wc = box.size
-    O, D = beams.O, beams.D
+    O = beams.O
+    D = beams.D
     ok = (beams.flux > 0) & np.all(D[..., 2] > 0, axis=1)
     hi = np.full((len(O), 2), -np.inf)
     lo2 = np.full((len(O), 2), np.inf)
@@ -172,21 +207,38 @@ def cull_beams(beams, box, zmin, zmax):
 
 
 @nb.njit(cache=True, parallel=True)
-def _sections(beams, grid, plane, sec):
-    """Intersection triangles of the candidate beams ``sec.cand`` with the plane ``zeta = plane.zp``."""
-    # the named tuples unpacked by name, outside the prange loop (inside it, Numba
-    # drops stores into arrays taken from a tuple: numba#7135)
-    O, D, flux, inv_tv = beams.O, beams.D, beams.flux, beams.inv_tv
-    zp, texel_area, rect = plane.zp, plane.texel_area, grid.rect
-    cand, X, Y, C, B, rows = sec.cand, sec.X, sec.Y, sec.C, sec.B, sec.rows
-    for m in nb.prange(cand.shape[0]):
-        t = cand[m]
+def _sections(beams, planes, grid, sec):
+    """Intersection triangles of the candidate beams ``sec.cand`` with every plane ``zeta = planes.zp[g]``."""
+    # the named tuples unpacked by name, one field per statement, outside the prange loop (inside it,
+    # Numba drops stores into arrays taken from a tuple: numba#7135)
+    O = beams.O
+    D = beams.D
+    flux = beams.flux
+    inv_tv = beams.inv_tv
+    zps = planes.zp
+    rects = planes.rect
+    texel_area = planes.texel_area
+    cand = sec.cand
+    X = sec.X
+    Y = sec.Y
+    C = sec.C
+    B = sec.B
+    rows = sec.rows
+    M = cand.shape[0]
+    for s in nb.prange(X.shape[0]):
+        g = s // M
+        t = cand[s - g * M]
+        zp = zps[g]
         ok = flux[t] > 0.0
         lam0 = 0.0
         lam1 = 0.0
         lam2 = 0.0
-        fc = np.empty(3)
-        fr = np.empty(3)
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
         for k in range(3):
             dz = D[t, k, 2]
             lam = -1.0
@@ -201,62 +253,83 @@ def _sections(beams, grid, plane, sec):
                 ok = False
                 c = 0.0
                 r = 0.0
-            X[m, k] = np.int64(np.round(c * 256.0))
-            Y[m, k] = np.int64(np.round(r * 256.0))
-            fc[k] = c
-            fr[k] = r
+            X[s, k] = np.int64(np.round(c * 256.0))
+            Y[s, k] = np.int64(np.round(r * 256.0))
             if k == 0:
                 lam0 = lam
+                c0 = c
+                r0 = r
             elif k == 1:
                 lam1 = lam
+                c1 = c
+                r1 = r
             else:
                 lam2 = lam
+                c2 = c
+                r2 = r
+        i0, i1 = 1, 0
         if ok:
             # area of the (unsnapped) intersection triangle in texels, at least one texel
-            af = (fc[1] - fc[0]) * (fr[2] - fr[0]) - (fr[1] - fr[0]) * (fc[2] - fc[0])
+            af = (c1 - c0) * (r2 - r0) - (r1 - r0) * (c2 - c0)
             a_tex = max(0.5 * abs(af), 1.0)
-            B[m] = flux[t] * inv_tv[t] / (a_tex * texel_area)
-            C[m, 0] = lam0
-            C[m, 1] = lam1
-            C[m, 2] = lam2
-            lo = min(Y[m, 0], min(Y[m, 1], Y[m, 2]))
-            hi = max(Y[m, 0], max(Y[m, 1], Y[m, 2]))
-            xlo = min(X[m, 0], min(X[m, 1], X[m, 2]))
-            xhi = max(X[m, 0], max(X[m, 1], X[m, 2]))
-            i0, i1 = pixel_span(lo, hi, rect[0], rect[1])
-            j0, j1 = pixel_span(xlo, xhi, rect[2], rect[3])
+            B[s] = flux[t] * inv_tv[t] / (a_tex * texel_area)
+            C[s, 0] = lam0
+            C[s, 1] = lam1
+            C[s, 2] = lam2
+            lo = min(Y[s, 0], min(Y[s, 1], Y[s, 2]))
+            hi = max(Y[s, 0], max(Y[s, 1], Y[s, 2]))
+            xlo = min(X[s, 0], min(X[s, 1], X[s, 2]))
+            xhi = max(X[s, 0], max(X[s, 1], X[s, 2]))
+            i0, i1 = pixel_span(lo, hi, rects[g, 0], rects[g, 1])
+            j0, j1 = pixel_span(xlo, xhi, rects[g, 2], rects[g, 3])
             if j0 > j1 or i0 > i1:
                 i0, i1 = 1, 0
-        else:
-            i0, i1 = 1, 0
-        rows[m, 0] = i0
-        rows[m, 1] = i1
+        rows[s, 0] = i0
+        rows[s, 1] = i1
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat(beams, sec, bins, grid, recv, plane, out):
-    """Additive blending of intersection triangles; fragments pass where ``recv.accept == recv.key``."""
-    # unpacked by name, outside the prange loop (see _sections)
-    tbar, tdz = beams.tbar, beams.tdz
-    cand, X, Y, C, B, rows = sec.cand, sec.X, sec.Y, sec.C, sec.B, sec.rows
-    counts, tris = bins.counts, bins.tris
-    H, band, rect = grid.H, grid.band, grid.rect
-    accept, key, zeta, normal = recv.accept, recv.key, recv.zeta, recv.normal
-    zp, K = plane.zp, plane.K
+def _splat(beams, sec, bins, grid, recv, planes, out):
+    """Additive blending of intersection triangles, plane after plane; fragments pass where
+    ``recv.accept == planes.key[g]`` (the depth test of eq. 4-15)."""
+    # unpacked by name, one field per statement, outside the prange loop (see _sections)
+    tbar = beams.tbar
+    tdz = beams.tdz
+    cand = sec.cand
+    X = sec.X
+    Y = sec.Y
+    C = sec.C
+    B = sec.B
+    rows = sec.rows
+    counts = bins.counts
+    tris = bins.tris
+    H = grid.H
+    band = grid.band
+    accept = recv.accept
+    zeta = recv.zeta
+    normal = recv.normal
+    zps = planes.zp
+    keys = planes.key
+    rects = planes.rect
+    K = planes.K
+    M = cand.shape[0]
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         r0 = b * band
         r1 = min(r0 + band, H) - 1
         for q in range(counts[b], counts[b + 1]):
-            m = tris[q]
-            t = cand[m]
+            s = tris[q]
+            g = s // M
+            t = cand[s - g * M]
+            key = keys[g]
+            zp = zps[g]
             # a folded beam (negative area): same coverage, re-oriented
-            x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = oriented_triangle(X, Y, C, m)
+            x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = oriented_triangle(X, Y, C, s)
             if area == 0:
                 continue
-            i0 = max(rows[m, 0], r0)
-            i1 = min(rows[m, 1], r1)
-            j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rect[2], rect[3])
+            i0 = max(rows[s, 0], r0)
+            i1 = min(rows[s, 1], r1)
+            j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rects[g, 2], rects[g, 3])
             if j0 > j1 or i0 > i1:
                 continue
             a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
@@ -265,7 +338,7 @@ def _splat(beams, sec, bins, grid, recv, plane, out):
             ty = tbar[t, 1]
             tz = tbar[t, 2]
             kk = K / tdz[t] if K > 0.0 else 0.0
-            base = B[m]
+            base = B[s]
             px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
                 w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
@@ -278,31 +351,42 @@ def _splat(beams, sec, bins, grid, recv, plane, out):
                         continue
                     if accept[i, j] != key:  # depth test against the position map (eq. 4-15)
                         continue
-                    g = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
+                    g_ = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
                     if K > 0.0:
                         lam = (w0 * c0 + w1 * c1 + w2 * c2) * inv_area
-                        g *= math.exp(-K * lam - kk * (zeta[i, j] - zp))
-                    out[i, j] += base * g
+                        g_ *= math.exp(-K * lam - kk * (zeta[i, j] - zp))
+                    out[i, j] += base * g_
 
 
-def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
-    """Draw every candidate beam's intersection triangle with plane ``zp`` into ``out``.
+#: sections computed per pass: planes are drawn in groups of about this many beam sections, so that
+#: a render launches a few parallel kernels per group rather than per plane (fork-join costs, which
+#: dominate on a loaded machine) while the section buffers stay small (~100 bytes per section)
+GROUP_SECTIONS = 1 << 18
+
+
+def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, out):
+    """Draw every candidate beam's intersection triangle with each plane ``zps[g]`` into ``out``.
+
+    Planes are drawn in order, in groups of about :data:`GROUP_SECTIONS`
+    sections per kernel launch; a texel receives its additions plane by plane,
+    each plane's triangles in beam order, whatever the grouping and thread
+    count (bit-identical to drawing one plane at a time).
 
     Parameters
     ----------
     beams : BeamSet
     cand : (M,) int64
-        Candidate beams (:func:`cull_beams`).
+        Candidate beams (:func:`cull_beams`, or every beam with flux).
     box : Box
-    zp : float
-        Plane depth.
+    zps : (G,) float
+        Plane depths.
     K : float
         Absorption coefficient of the water.
-    rect : (4,) int64
-        Scissor rectangle (row0, row1, col0, col1).
-    accept : (Hc, Wc) int32 and key : int
-        A fragment is kept where ``accept == key``: the plane index map
-        (level map, eq. 4-15) or a slice mask (volumetric baseline).
+    rects : (G, 4) int64
+        Scissor rectangle (row0, row1, col0, col1) of each plane; ``row0 > row1`` draws nothing.
+    accept : (Hc, Wc) int32 and keys : (G,) int
+        A fragment of plane g is kept where ``accept == keys[g]``: the plane
+        index map (level map, eq. 4-15) or a slice mask (volumetric baseline).
     zeta, normal : (Hc, Wc), (Hc, Wc, 3)
         Depth and unit normal of the receiver surface at each texel.
     out : (Hc, Wc) float64
@@ -312,17 +396,39 @@ def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
     -------
     int
         Number of intersection triangles drawn.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eqs. 4-15 to 4-18, Fig. 4-15 (steps 2.1 to 2.3).
     """
     Hc, Wc = box.size
     M = len(cand)
-    if M == 0 or rect[0] > rect[1]:
+    zps = np.asarray(zps, np.float64).reshape(-1)
+    keys = np.asarray(keys, np.int64).reshape(-1)
+    rects = np.ascontiguousarray(np.asarray(rects, np.int64).reshape(-1, 4))
+    live = np.flatnonzero(rects[:, 0] <= rects[:, 1])
+    if M == 0 or len(live) == 0:
         return 0
-    sec = _Sections(cand, np.empty((M, 3), np.int64), np.empty((M, 3), np.int64), np.empty((M, 3), np.float64),
-                    np.zeros(M, np.float64), np.empty((M, 2), np.int64))
-    grid = _Grid(Wc, Hc, BAND, np.ascontiguousarray(rect, dtype=np.int64))
-    plane = _Plane(float(zp), float(K), float(box.texel_area))
+    grid = _Grid(Wc, Hc, BAND)
     arrays = beams.arrays
-    _sections(arrays, grid, plane, sec)
-    bins = _Bins(*bin_bands(sec.rows, Hc, BAND))
-    _splat(arrays, sec, bins, grid, _Receiver(accept, int(key), zeta, normal), plane, out)
-    return int(np.count_nonzero(sec.rows[:, 0] <= sec.rows[:, 1]))
+    recv = _Receiver(accept, zeta, normal)
+    G = max(1, GROUP_SECTIONS // M)
+    drawn = 0
+    for a in range(0, len(live), G):
+        idx = live[a:a + G]
+        S = len(idx) * M
+        planes = _Planes(np.ascontiguousarray(zps[idx]), np.ascontiguousarray(keys[idx]),
+                         np.ascontiguousarray(rects[idx]), float(K), float(box.texel_area))
+        sec = _Sections(cand, np.empty((S, 3), np.int64), np.empty((S, 3), np.int64), np.empty((S, 3), np.float64),
+                        np.zeros(S, np.float64), np.empty((S, 2), np.int64))
+        _sections(arrays, planes, grid, sec)
+        bins = _Bins(*bin_bands(sec.rows, Hc, BAND))
+        _splat(arrays, sec, bins, grid, recv, planes, out)
+        drawn += int(np.count_nonzero(sec.rows[:, 0] <= sec.rows[:, 1]))
+    return drawn
+
+
+def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
+    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``."""
+    return splat_planes(beams, cand, box, [zp], K, np.asarray(rect, np.int64).reshape(1, 4), accept, [key], zeta,
+                        normal, out)

@@ -14,7 +14,9 @@ frame as the level map (first light's box), converted to irradiance with the
 receiver's geometric normal, ``|n . V| / texel_area``. Photons landing on a
 surface that the map does not see (hidden along ``-V``, detected with the
 position map) are dropped, as the map cannot hold them. No Fresnel loss,
-as in eq. 4-18; the refracted light does not meet the water again.
+as in eq. 4-18; the refracted light does not meet the water again. The
+``image`` stage then renders the pool through the analytic surface (eye rays
+met exactly and refracted with the analytic normal, :mod:`.view`).
 
 References
 ----------

@@ -21,11 +21,15 @@ References
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
+import numba as nb
 import numpy as np
 
-from .water import incident_directions, refract_at_vertices
+from ..optics import refract3
+from ..scene import SceneError
+from .water import light_weight
 
 __all__ = ["IlluminationVolumes", "illumination_volumes"]
 
@@ -51,6 +55,117 @@ class IlluminationVolumes(NamedTuple):
     mean_dir: np.ndarray
 
 
+class _Light(NamedTuple):
+    """A light as the kernel takes it: directional (``point = False``: ``dir``) or point (``pos``)."""
+
+    point: bool
+    dir: np.ndarray  # (3,) unit direction of travel (directional)
+    pos: np.ndarray  # (3,) position (point)
+    weight: float  # mean radiance (:func:`~.water.light_weight`)
+
+
+class _Mesh(NamedTuple):
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+
+
+class _Out(NamedTuple):
+    origins: np.ndarray
+    dirs: np.ndarray
+    flux: np.ndarray
+    mean_dir: np.ndarray
+
+
+@nb.njit(cache=True, inline="always")
+def _incident(light_point, ldir, lpos, w, px, py, pz):
+    """Unit incident direction at a point and the irradiance perpendicular to it
+    (:func:`~.water.incident_directions`)."""
+    if not light_point:
+        return ldir[0], ldir[1], ldir[2], w
+    dx = px - lpos[0]
+    dy = py - lpos[1]
+    dz = pz - lpos[2]
+    r2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
+    s = 1.0 / math.sqrt(r2)
+    return dx * s, dy * s, dz * s, w / r2
+
+
+@nb.njit(cache=True, parallel=True)
+def _refract_vertices(mesh, light, eta, T, ok):
+    """T_i at every water vertex (eq. 2-8) and whether light enters there."""
+    V = mesh.vertices
+    N = mesh.normals
+    lp = light.point
+    ld = light.dir
+    lq = light.pos
+    w = light.weight
+    for i in nb.prange(V.shape[0]):
+        ix, iy, iz, _ = _incident(lp, ld, lq, w, V[i, 0], V[i, 1], V[i, 2])
+        tx, ty, tz, tir = refract3(ix, iy, iz, N[i, 0], N[i, 1], N[i, 2], eta)
+        T[i, 0] = tx
+        T[i, 1] = ty
+        T[i, 2] = tz
+        facing = ix * N[i, 0] + iy * N[i, 1] + iz * N[i, 2] < 0.0
+        ok[i] = facing and not tir and ty < 0.0
+
+
+@nb.njit(cache=True, parallel=True)
+def _volumes(mesh, light, T, ok, out):
+    """Per water triangle: its vertices, their T_i, the flux E_perp A_w cos(theta_i) and the beam axis (eq. 4-14)."""
+    V = mesh.vertices
+    F = mesh.faces
+    lp = light.point
+    ld = light.dir
+    lq = light.pos
+    w = light.weight
+    O = out.origins
+    D = out.dirs
+    flux = out.flux
+    M = out.mean_dir
+    for f in nb.prange(F.shape[0]):
+        good = True
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        cx = 0.0
+        cy = 0.0
+        cz = 0.0
+        for k in range(3):
+            v = F[f, k]
+            for c in range(3):
+                O[f, k, c] = V[v, c]
+                D[f, k, c] = T[v, c]
+            mx += T[v, 0]
+            my += T[v, 1]
+            mz += T[v, 2]
+            cx += V[v, 0]
+            cy += V[v, 1]
+            cz += V[v, 2]
+            good = good and ok[v]
+        e1x = O[f, 1, 0] - O[f, 0, 0]
+        e1y = O[f, 1, 1] - O[f, 0, 1]
+        e1z = O[f, 1, 2] - O[f, 0, 2]
+        e2x = O[f, 2, 0] - O[f, 0, 0]
+        e2y = O[f, 2, 1] - O[f, 0, 1]
+        e2z = O[f, 2, 2] - O[f, 0, 2]
+        nx = e1y * e2z - e1z * e2y  # 2 A_w n
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        ix, iy, iz, e = _incident(lp, ld, lq, w, cx / 3.0, cy / 3.0, cz / 3.0)
+        proj = -(nx * ix + ny * iy + nz * iz) * 0.5  # A_w cos(theta_i), signed
+        flux[f] = e * proj if (good and proj > 0.0) else 0.0
+        ln = math.sqrt(mx * mx + my * my + mz * mz)
+        if ln > 0.0:
+            M[f, 0] = mx / ln
+            M[f, 1] = my / ln
+            M[f, 2] = mz / ln
+        else:
+            M[f, 0] = 0.0
+            M[f, 1] = -1.0
+            M[f, 2] = 0.0
+
+
 def illumination_volumes(light, mesh, eta):
     """Build the illumination volume of every water triangle (eq. 4-14).
 
@@ -65,17 +180,24 @@ def illumination_volumes(light, mesh, eta):
     Returns
     -------
     IlluminationVolumes
+
+    References
+    ----------
+    Tipprasert (2006), eq. 2-8, eq. 4-14, eq. 4-18 (its numerator).
     """
-    _, t, ok = refract_at_vertices(light, mesh, eta)
-    f = mesh.faces
-    o = mesh.vertices[f]
-    d = t[f]
-    fn = np.cross(o[:, 1] - o[:, 0], o[:, 2] - o[:, 0])  # 2 A_w n
-    centroid = o.mean(axis=1)
-    inc, e_perp = incident_directions(light, centroid)
-    proj = -np.einsum("ij,ij->i", fn, inc) * 0.5  # A_w cos(theta_i), signed
-    flux = np.where(ok[f].all(axis=1) & (proj > 0.0), e_perp * np.maximum(proj, 0.0), 0.0)
-    m = d.sum(axis=1)
-    ln = np.linalg.norm(m, axis=1, keepdims=True)
-    m = np.divide(m, ln, out=np.tile([0.0, -1.0, 0.0], (len(m), 1)), where=ln > 0)
-    return IlluminationVolumes(o, d, flux, m)
+    if light["type"] not in ("directional", "point"):
+        raise SceneError(f"levelmap: light type {light['type']!r} is not supported; use 'directional' or 'point'")
+    point = light["type"] == "point"
+    d = np.asarray(light["direction"], dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    pos = np.asarray(light["position"] if point else [0.0, 0.0, 0.0], dtype=np.float64)
+    lt = _Light(point, d, pos, light_weight(light))
+    m = _Mesh(np.ascontiguousarray(mesh.vertices, np.float64), np.ascontiguousarray(mesh.faces, np.int64),
+              np.ascontiguousarray(mesh.normals, np.float64))
+    nv, nf = len(m.vertices), len(m.faces)
+    T = np.empty((nv, 3))
+    ok = np.empty(nv, np.bool_)
+    _refract_vertices(m, lt, float(eta), T, ok)
+    out = _Out(np.empty((nf, 3, 3)), np.empty((nf, 3, 3)), np.empty(nf), np.empty((nf, 3)))
+    _volumes(m, lt, T, ok, out)
+    return IlluminationVolumes(out.origins, out.dirs, out.flux, out.mean_dir)

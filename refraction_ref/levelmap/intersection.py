@@ -40,7 +40,7 @@ def _plane_index(depth, own, ztop, s, n, out):
                     out[i, j] = k
 
 
-def plane_index_map(lm, box, n):
+def plane_index_map(lm, box, n, placement="tight"):
     """Plane accepting each texel: ``|zeta - zeta_i| < eps`` (eq. 4-15), ``-1`` for none.
 
     Parameters
@@ -50,34 +50,51 @@ def plane_index_map(lm, box, n):
     n : int
         Number of planes of the normal slicing (smart slicing only removes
         planes of this lattice, see :mod:`.smart_slicing`).
+    placement : {"tight", "thesis"}
+        The lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
 
     Returns
     -------
     (Hc, Wc) int32
         Texels whose first surface is another receiver, or lies outside the
-        box, get ``-1``.
+        planes' acceptance slabs, get ``-1``.
     """
+    from .planes import plane_lattice
+
+    lat = plane_lattice(box, n, placement)
     out = np.empty(lm.depth.shape, np.int32)
-    _plane_index(lm.depth, lm.own, -box.h / 2.0, box.h / int(n), int(n), out)
+    _plane_index(lm.depth, lm.own, lat.zlo, lat.s, int(n), out)
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _rects(pidx, n, out):
+    """Per plane, the rows and columns of its texels: bands of rows in parallel, then merged in band order."""
     H, W = pidx.shape
+    nb_ = min(H, 32)
+    rlo = np.full((nb_, n), H, np.int64)
+    rhi = np.full((nb_, n), -1, np.int64)
+    clo = np.full((nb_, n), W, np.int64)
+    chi = np.full((nb_, n), -1, np.int64)
+    for b in nb.prange(nb_):
+        for i in range(b * H // nb_, (b + 1) * H // nb_):
+            for j in range(W):
+                k = pidx[i, j]
+                if k >= 0 and k < n:
+                    rlo[b, k] = min(rlo[b, k], i)
+                    rhi[b, k] = max(rhi[b, k], i)
+                    clo[b, k] = min(clo[b, k], j)
+                    chi[b, k] = max(chi[b, k], j)
     for k in range(n):
         out[k, 0] = H
         out[k, 1] = -1
         out[k, 2] = W
         out[k, 3] = -1
-    for i in range(H):
-        for j in range(W):
-            k = pidx[i, j]
-            if k >= 0 and k < n:
-                out[k, 0] = min(out[k, 0], i)
-                out[k, 1] = max(out[k, 1], i)
-                out[k, 2] = min(out[k, 2], j)
-                out[k, 3] = max(out[k, 3], j)
+        for b in range(nb_):
+            out[k, 0] = min(out[k, 0], rlo[b, k])
+            out[k, 1] = max(out[k, 1], rhi[b, k])
+            out[k, 2] = min(out[k, 2], clo[b, k])
+            out[k, 3] = max(out[k, 3], chi[b, k])
 
 
 def plane_rects(pidx, n):

@@ -14,7 +14,14 @@ Level-map knobs: ``planes`` (1..4096), ``smart_slicing`` (bool),
 ``per_ray``), ``map_size`` (texels per side, 1..8192), ``shadows`` (bool:
 receivers occlude each other), ``ambient`` (>= 0, eq. 4-19's ``I_a`` as a
 fraction of the albedo), ``exact_samples`` (water samples per side for the
-exact reference, 2..16384), ``exact_seed`` (jitter of those samples).
+exact reference, 2..16384), ``exact_seed`` (jitter of those samples),
+``placement`` (``thesis`` | ``tight``: the reference box and planes of
+eqs. 4-2/4-3, 4-7 to 4-9, or the tight box with planes at slab centres),
+``smart_spacing`` (``lattice`` | ``respace``: smart slicing drops the normal
+slicing's empty planes, or re-spaces ``n_i`` planes in each sub-box by
+eq. 4-22), ``culling`` (``none`` | ``bounds``: every intersection triangle over
+the whole map on every plane, the thesis's cost, or §6.1's bounding-volume
+test and a scissor per plane; the same maps).
 """
 
 from __future__ import annotations
@@ -27,10 +34,14 @@ __all__ = ["merge_water", "validate_levelmap", "VARIANTS", "LEVELMAP_DEFAULTS", 
            "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE"]
 
 VARIANTS = ("levelmap", "volumetric", "per_ray")
+PLACEMENTS = ("thesis", "tight")
+SPACINGS = ("lattice", "respace")
+CULLINGS = ("none", "bounds")
 
 LEVELMAP_DEFAULTS = {
     "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
     "map_size": 512, "shadows": True, "ambient": 0.1, "exact_samples": 2048, "exact_seed": 0,
+    "placement": "thesis", "smart_spacing": "lattice", "culling": "none",
 }
 
 #: Water block (merged only when a scene has one; "water": null means no water).
@@ -74,6 +85,9 @@ def validate_levelmap(data, base_dir="."):
             raise SceneError(f"scene: levelmap.{k} must be true or false, got {p[k]!r}")
     if p["variant"] not in VARIANTS:
         raise SceneError(f"scene: 'levelmap.variant' is {p['variant']!r}; choose one of {', '.join(VARIANTS)}")
+    for k, allowed in (("placement", PLACEMENTS), ("smart_spacing", SPACINGS), ("culling", CULLINGS)):
+        if p[k] not in allowed:
+            raise SceneError(f"scene: 'levelmap.{k}' is {p[k]!r}; choose one of {', '.join(allowed)}")
     w = data.get("water")
     if w is None:
         return data

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba as nb
 import numpy as np
 
 from ..raster import ortho_setup, rasterize_ortho
 from ..receivers import Receivers  # the receivers' triangle soup, shared with the caustics
-from .planes import to_map
 
 __all__ = ["Receivers", "LevelMap", "level_map", "receiver_selection", "map_setup"]
 
@@ -51,6 +51,46 @@ class LevelMap(NamedTuple):
     own: np.ndarray
     normal: np.ndarray
     diffuse: np.ndarray
+
+
+class _Source(NamedTuple):
+    """The visibility buffer and what each triangle id resolves to."""
+
+    ids: np.ndarray  # (Hc, Wc) index into sel, -1 where none
+    sel: np.ndarray  # (T',) receiver triangles drawn
+    owner: np.ndarray  # (T,) receiver of each triangle
+    normals: np.ndarray  # (T, 3) unit face normals
+    albedo: np.ndarray  # (3,) receiver r's albedo
+    r: int
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill(src, tri, own, normal, diffuse):
+    """Triangle, ownership, normal and diffuse map of every texel, rows in parallel."""
+    ids = src.ids
+    sel = src.sel
+    owner = src.owner
+    normals = src.normals
+    albedo = src.albedo
+    r = src.r
+    H, W = ids.shape
+    for i in nb.prange(H):
+        for j in range(W):
+            k = ids[i, j]
+            if k < 0:
+                tri[i, j] = -1
+                own[i, j] = False
+                for c in range(3):
+                    normal[i, j, c] = 0.0
+                    diffuse[i, j, c] = 0.0
+                continue
+            t = sel[k]
+            tri[i, j] = t
+            mine = owner[t] == r
+            own[i, j] = mine
+            for c in range(3):
+                normal[i, j, c] = normals[t, c]
+                diffuse[i, j, c] = np.float32(albedo[c]) if mine else np.float32(0.0)
 
 
 def level_map(receivers, r, box, shadows=True, setup=None):
@@ -80,11 +120,14 @@ def level_map(receivers, r, box, shadows=True, setup=None):
     if setup is None:
         setup = map_setup(receivers, sel, box)
     depth, ids = rasterize_ortho(setup, box.size)
-    hit = ids >= 0
-    tri = np.where(hit, sel[np.maximum(ids, 0)], -1)
-    own = hit & (receivers.owner[np.maximum(tri, 0)] == r)
-    normal = np.where(hit[..., None], receivers.normals[np.maximum(tri, 0)], 0.0)
-    diffuse = np.where(own[..., None], receivers.albedo[r], 0.0).astype(np.float32)
+    Hc, Wc = ids.shape
+    tri = np.empty((Hc, Wc), np.int64)
+    own = np.empty((Hc, Wc), np.bool_)
+    normal = np.empty((Hc, Wc, 3), np.float64)
+    diffuse = np.empty((Hc, Wc, 3), np.float32)
+    src = _Source(np.ascontiguousarray(ids), np.ascontiguousarray(sel, np.int64), receivers.owner, receivers.normals,
+                  np.ascontiguousarray(receivers.albedo[r], np.float64), int(r))
+    _fill(src, tri, own, normal, diffuse)
     return LevelMap(depth, tri, own, normal, diffuse), sel, setup
 
 
@@ -93,6 +136,31 @@ def receiver_selection(receivers, r, shadows=True):
     return np.arange(len(receivers.tris)) if shadows else np.flatnonzero(receivers.owner == r)
 
 
+@nb.njit(cache=True, parallel=True)
+def _tris_to_map(tris, sel, frame, out):
+    """:func:`~.planes.to_map` of the vertices of triangles ``tris[sel]``, triangles in parallel."""
+    cx = frame[0, 0]
+    cy = frame[0, 1]
+    cz = frame[0, 2]
+    w = frame[4, 0]
+    d = frame[4, 1]
+    Wc = frame[5, 0]
+    Hc = frame[5, 1]
+    for m in nb.prange(sel.shape[0]):
+        t = sel[m]
+        for k in range(3):
+            qx = tris[t, k, 0] - cx
+            qy = tris[t, k, 1] - cy
+            qz = tris[t, k, 2] - cz
+            out[m, k, 0] = ((qx * frame[1, 0] + qy * frame[1, 1] + qz * frame[1, 2]) / w + 0.5) * Wc
+            out[m, k, 1] = ((qx * frame[3, 0] + qy * frame[3, 1] + qz * frame[3, 2]) / d + 0.5) * Hc
+            out[m, k, 2] = -(qx * frame[2, 0] + qy * frame[2, 1] + qz * frame[2, 2])
+
+
 def map_setup(receivers, sel, box):
     """Snap and bin the selected receiver triangles in ``box``'s map coordinates."""
-    return ortho_setup(to_map(box, receivers.tris[sel]), box.size)
+    Hc, Wc = box.size
+    frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0], [Wc, Hc, 0.0]], np.float64)
+    tri = np.empty((len(sel), 3, 3))
+    _tris_to_map(receivers.tris, np.ascontiguousarray(sel, np.int64), frame, tri)
+    return ortho_setup(tri, box.size)

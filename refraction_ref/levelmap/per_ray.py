@@ -157,11 +157,23 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
     """Each beam drawn over its region, every texel at its own depth (step 2)."""
     # the named tuples unpacked by name, outside the prange loop (inside it, Numba
     # drops stores into arrays taken from a tuple: numba#7135)
-    O, D, flux, inv_tv, tbar = beams.O, beams.D, beams.flux, beams.inv_tv, beams.tbar
-    cand, rows, cols, counts, tris = reg.cand, reg.rows, reg.cols, reg.counts, reg.tris
-    H, band = grid.H, grid.band
-    accept, depth, normal = recv.accept, recv.depth, recv.normal
-    K, texel_area = knobs.K, knobs.texel_area
+    O = beams.O
+    D = beams.D
+    flux = beams.flux
+    inv_tv = beams.inv_tv
+    tbar = beams.tbar
+    cand = reg.cand
+    rows = reg.rows
+    cols = reg.cols
+    counts = reg.counts
+    tris = reg.tris
+    H = grid.H
+    band = grid.band
+    accept = recv.accept
+    depth = recv.depth
+    normal = recv.normal
+    K = knobs.K
+    texel_area = knobs.texel_area
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         X = np.empty(3, np.int64)

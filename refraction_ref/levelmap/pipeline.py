@@ -13,7 +13,9 @@ stage (``timings_ms``)  pass                                             section
                         (eq. 4-18); or the volumetric baseline's slices  §5.2.1
                         and caustics; or the per-ray variant             §6.3
 ``casting``             several lights into one map (eq. 4-20)           §4.7.1
-``image``               camera view shaded with caustics (eq. 4-19)      §4.6
+``image``               camera view through the water (eq. 2-8, eye      §4.6, §2.6
+                        rays refracted at the mesh) and directly, shaded
+                        with caustics (eq. 4-19; :mod:`.view`)
 =====================  ===============================================  ===========
 
 A registered stage graph (:data:`METHOD`): a camera change re-runs
@@ -38,19 +40,20 @@ from ..camera import Camera
 from ..graph import Method, Stage, register_method, run_graph
 from ..receivers import receiver_soup
 from ..scene import SceneError, load_scene
-from .caustics_map import beams_in_map, cull_beams, splat_plane
-from .casting import cast_between, shade_image
+from .caustics_map import beams_in_map, cull_beams, splat_plane, splat_planes
+from .casting import cast_between
 from .illumination import illumination_volumes
 from .intersection import plane_index_map, plane_rects
 from .maps import level_map
 from .per_ray import per_ray_caustics
-from .planes import frame_of, reference_box, refracted_axis, slice_planes
-from .smart_slicing import smart_planes
+from .planes import frame_of, plane_lattice, receiver_origin, reference_box, refracted_axis
+from .smart_slicing import respaced_planes, smart_planes
 from .volumetric import volumetric_caustics
 from .water import water_mesh
 
 __all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAULT_SCENE_PATH", "METHOD",
-           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage", "water_arrays"]
+           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage", "water_arrays",
+           "IMAGE_BUFFERS"]
 
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
@@ -121,16 +124,26 @@ def water_pass(scene):
 
 
 def planes_pass(scene):
-    """Receivers and one reference box per (receiver, light) (eqs. 4-1 to 4-9)."""
+    """Receivers and one reference box per (receiver, light) (eqs. 4-1 to 4-9).
+
+    With ``levelmap.placement = "thesis"`` each box is centred on the
+    receiver's origin (eqs. 4-2, 4-3), and a point light's axis aims at that
+    origin (Fig. 4-7); with ``"tight"`` on the tight box's centre.
+    """
     water = scene.data["water"]
+    p = scene.data["levelmap"]
+    placement = p["placement"]
     eta = float(scene.data["outside_ior"]) / float(water["ior"])
     rec = receivers_of(scene)
     boxes = []
     for r, v in enumerate(rec.vertices):
-        centre = (v.min(axis=0) + v.max(axis=0)) / 2.0
-        boxes.append([reference_box(v, refracted_axis(lt, water, eta, centre), int(scene.data["levelmap"]["map_size"]))
+        if placement == "thesis":
+            centre = receiver_origin(scene.data["receivers"][r])
+        else:
+            centre = (v.min(axis=0) + v.max(axis=0)) / 2.0
+        boxes.append([reference_box(v, refracted_axis(lt, water, eta, centre), int(p["map_size"]), placement, centre)
                       for lt in scene.data["lights"]])
-    return {"receivers": rec, "boxes": boxes}
+    return {"receivers": rec, "boxes": boxes, "water_block": water, "eta": eta}
 
 
 def level_map_pass(rec, boxes, shadows):
@@ -148,43 +161,68 @@ def level_map_pass(rec, boxes, shadows):
 def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=None):
     """The caustics map of one (receiver, light); ``extra`` gets the planes' offsets ``zeta`` and the
     indices ``used`` (level map), and with ``per_plane`` (a list) each used plane's own map is appended
-    as ``(index, zeta, map)`` instead of being summed (the ``plane_maps`` inspection stage)."""
+    as ``(index, zeta, map)`` instead of being summed (the ``plane_maps`` inspection stage).
+
+    ``levelmap.culling = "none"`` (the thesis's cost, Figs. 4-15, 5-7): every beam's intersection
+    triangle is drawn over the whole map on every plane drawn, each fragment depth-tested;
+    ``"bounds"`` (§6.1's bounding-volume test): beams that cannot reach the box are culled and each
+    plane is scissored to the texels it accepts. The maps are identical; only the work differs.
+    """
     pair = ctx["pairs"][r][l]
     box, lm = pair.box, pair.lm
     n = int(p["planes"])
     K = ctx["K"]
+    placement, culling = p["placement"], p["culling"]
+    Hc, Wc = box.size
     out = np.zeros(box.size)
     tic = time.perf_counter()
     beams = beams_in_map(ctx["vols"][l], box)
-    cand = cull_beams(beams, box, -box.h / 2.0, box.h / 2.0)
+    if culling == "bounds":
+        cand = cull_beams(beams, box, -box.h / 2.0, box.h / 2.0)
+    else:
+        cand = np.flatnonzero(beams.flux > 0).astype(np.int64)
     st = {"receiver": r, "light": l, "candidate_beams": int(len(cand)), "box": [box.w, box.h, box.d]}
     if variant == "levelmap":
-        pidx = plane_index_map(lm, box, n)
-        zeta, _, eps = slice_planes(box, n)
-        st["eps"] = eps
+        lat = plane_lattice(box, n, placement)
+        st["eps"] = lat.s / 2.0
         t_s = time.perf_counter()
-        if p["smart_slicing"]:
-            keep, sinfo = smart_planes(lm, box, n, int(p["depth_levels"]), pidx)
+        if p["smart_slicing"] and p["smart_spacing"] == "respace":
+            zeta, pidx, sinfo = respaced_planes(lm, box, n, int(p["depth_levels"]), placement)
+            keep = np.arange(len(zeta))
             st["smart"] = {"sub_boxes": sinfo["sub_boxes"], "empty_levels": sinfo["empty_levels"]}
         else:
-            keep = np.arange(n)
+            zeta = lat.zeta
+            pidx = plane_index_map(lm, box, n, placement)
+            if p["smart_slicing"]:
+                keep, sinfo = smart_planes(lm, box, n, int(p["depth_levels"]), pidx, placement)
+                st["smart"] = {"sub_boxes": sinfo["sub_boxes"], "empty_levels": sinfo["empty_levels"]}
+            else:
+                keep = np.arange(n)
         timings["smart_slicing"] = timings.get("smart_slicing", 0.0) + (time.perf_counter() - t_s) * 1e3
-        rects = plane_rects(pidx, n)
+        if culling == "bounds":
+            rects = plane_rects(pidx, len(zeta))
+        else:
+            rects = np.tile(np.array([0, Hc - 1, 0, Wc - 1], np.int64), (len(zeta), 1))
         drawn = 0
-        for i in keep:
-            target = out if per_plane is None else np.zeros(box.size)
+        if per_plane is None:  # all kept planes, a group of planes per kernel launch (Fig. 4-15, step 2)
+            drawn = splat_planes(beams, cand, box, np.asarray(zeta)[keep], K, rects[keep], pidx, keep, lm.depth,
+                                 lm.normal, out)
+        for i in (keep if per_plane is not None else ()):
+            target = np.zeros(box.size)
             drawn += splat_plane(beams, cand, box, zeta[i], K, rects[i], pidx, int(i), lm.depth, lm.normal, target)
-            if per_plane is not None:
-                per_plane.append((int(i), float(zeta[i]), target))
+            per_plane.append((int(i), float(zeta[i]), target))
         if extra is not None:
             extra["zeta"] = np.asarray(zeta, dtype=np.float64)
             extra["used"] = np.asarray(keep, dtype=np.int64)
         st["planes_used"] = int(len(keep))
         st["triangles_drawn"] = drawn
     elif variant == "volumetric":
-        st.update(volumetric_caustics(beams, cand, box, ctx["receivers"], r, pair.sel, pair.setup, n, K, out))
+        st.update(volumetric_caustics(beams, cand, box, ctx["receivers"], r, pair.sel, pair.setup, n, K, out,
+                                      placement, culling != "bounds"))
         st["planes_used"] = n
     else:
+        if culling != "bounds":  # the per-ray search needs beams that reach the box
+            cand = cull_beams(beams, box, -box.h / 2.0, box.h / 2.0)
         st.update(per_ray_caustics(beams, cand, lm, box, K, out))
         st["planes_used"] = 0
     timings["caustics"] = timings.get("caustics", 0.0) + (time.perf_counter() - tic) * 1e3
@@ -273,7 +311,9 @@ def _st_caustics(ctx):
                                              for r in range(len(maps))]
     smart = bool(p["smart_slicing"]) and variant == "levelmap"
     ctx.note({"levelmap": "intersection triangles on every plane, depth-tested against the position map"
-              + (f"; smart slicing over {p['depth_levels']} depth levels" if smart else "; smart slicing off"),
+              + (f"; smart slicing over {p['depth_levels']} depth levels ({p['smart_spacing']})" if smart
+                 else "; smart slicing off")
+              + f"; {p['placement']} plane placement, culling {p['culling']}",
               "volumetric": "one slice image per sample plane (Iwasaki et al.), composited front to back",
               "per_ray": "each beam drawn once where its rays hit (§6.3); planes replaced by a per-ray search"}[variant])
     out = {"maps": maps}
@@ -323,16 +363,38 @@ def _st_casting(ctx):
 
 
 def shade_stage(ctx, casting):
-    """The camera's view of the receivers with their caustics maps (eq. 4-19)."""
+    """The camera's view of the pool (eq. 4-19): through the water (``image``) and directly (``image_direct``).
+
+    ``image`` is the view through the wavy surface (:mod:`.view`): the level
+    map refracts the eye rays at its water mesh (``casting == "casting"``, the
+    ``water`` stage's mesh), the exact reference (``casting == "trace"``) at
+    the analytic surface. ``image_direct`` is the receivers seen without the
+    water (the level map's ``image`` before contract_version 4).
+    """
+    from .view import direct_view, view_through_water
+
     p = ctx.scene.data["levelmap"]
     pairs = ctx.buf["level_map"]["pairs"]
+    pl = ctx.buf["planes"]
     R = len(pairs)
     cam = Camera.from_dict(ctx.scene.data["camera"])
     maps = [ctx.buf[casting][f"caustic_map_{r}"] for r in range(R)]
-    image, mask = shade_image(cam, ctx.buf["planes"]["receivers"], [pairs[r][0].box for r in range(R)], maps,
-                              ctx.buf["planes"]["receivers"].albedo, float(p["ambient"]))
-    ctx.note("eq. 4-19 with ambient " + str(p["ambient"]))
-    return {"image": image, "object_mask": mask}
+    boxes = [pairs[r][0].box for r in range(R)]
+    stacked = np.ascontiguousarray(np.stack(maps), np.float32)
+    rays = cam.primary_rays()
+    direct, mask_direct = direct_view(cam, pl["receivers"], boxes, stacked, float(p["ambient"]), rays=rays)
+    water = pl["water_block"]
+    mesh = ctx.buf["water"]["mesh"] if casting == "casting" else None
+    v = view_through_water(cam, water, pl["eta"], float(water["absorption"]), pl["receivers"], boxes, stacked,
+                           float(p["ambient"]), mesh=mesh, rays=rays)
+    st = v["view_status"]
+    ctx.note(f"eq. 4-19 with ambient {p['ambient']}; seen through the water's "
+             f"{'mesh' if mesh is not None else 'analytic surface'}: {int((st == 1).sum())} pixels through the "
+             f"water, {int((st == 3).sum())} direct, {int((st == 2).sum())} lost, {int((st == 4).sum())} TIR")
+    out = dict(v)
+    out["image_direct"] = direct
+    out["object_mask_direct"] = mask_direct
+    return out
 
 
 def shared_stages(scene):
@@ -342,7 +404,8 @@ def shared_stages(scene):
     return (
         Stage("water", _st_water, reads=("water", "lights", "outside_ior"),
               makes=("water_vertices", "water_normals"), doc="water mesh and illumination volumes (eqs. 2-8, 4-14)"),
-        Stage("planes", _st_planes, reads=("receivers", "lights", "water", "outside_ior", "levelmap.map_size"),
+        Stage("planes", _st_planes, reads=("receivers", "lights", "water", "outside_ior", "levelmap.map_size",
+                                           "levelmap.placement"),
               makes=tuple(f"box_{r}_{l}" for r, l in rl), doc="reference boxes (eqs. 4-1 to 4-9)"),
         Stage("level_map", _st_level_map, reads=("levelmap.shadows",), after=("planes",),
               makes=tuple(f"{k}_{r}_{l}" for r, l in rl for k in ("position", "diffuse", "normal")),
@@ -350,17 +413,25 @@ def shared_stages(scene):
     )
 
 
+#: buffers of the ``image`` stage (the exact water reference's ``image`` stage makes the same)
+IMAGE_BUFFERS = ("image", "object_mask", "image_direct", "object_mask_direct", "view_status", "water_pos",
+                 "water_dir", "receiver_pos", "water_length")
+
+_CAUSTICS_READS = ("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant",
+                   "levelmap.placement", "levelmap.smart_spacing", "levelmap.culling")
+
+
 def _stages(scene):
     R, L = len(scene.data["receivers"]), len(scene.data["lights"])
     return shared_stages(scene) + (
         Stage("caustics", _st_caustics,
-              reads=("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant"),
+              reads=_CAUSTICS_READS,
               after=("water", "planes", "level_map"),
               makes=tuple(f"{k}_{r}_{l}" for r in range(R) for l in range(L)
                           for k in ("caustic_map", "planes", "planes_used")),
               doc="smart slicing, intersection test and caustics map per (receiver, light) (§4.4-4.7)"),
         Stage("plane_maps", _st_plane_maps,
-              reads=("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant"),
+              reads=_CAUSTICS_READS,
               after=("water", "planes", "level_map"), diagnostic=True,
               makes=tuple(f"{k}_{r}_{l}" for r in range(R) for l in range(L) for k in ("plane_maps", "plane_index")),
               doc="each used plane's own caustics map (eq. 4-18); only when kept"),
@@ -368,8 +439,8 @@ def _stages(scene):
               makes=tuple(f"{k}_{r}" for r in range(R) for k in ("caustic_map", "caustic_frame")),
               doc="lights cast into one map (eq. 4-20)"),
         Stage("image", lambda ctx: shade_stage(ctx, "casting"), reads=("camera", "levelmap.ambient"),
-              after=("planes", "level_map", "casting"), makes=("image", "object_mask"),
-              doc="camera view shaded with caustics (eq. 4-19)"),
+              after=("water", "planes", "level_map", "casting"), makes=IMAGE_BUFFERS,
+              doc="camera view through the water and directly, shaded with caustics (eq. 4-19)"),
     )
 
 
@@ -379,8 +450,9 @@ def water_arrays(bufs, maps_stage):
     for r in range(len(bufs["level_map"]["pairs"])):
         for k in ("caustic_map", "caustic_frame"):
             arrays[f"{k}_{r}"] = bufs[maps_stage][f"{k}_{r}"]
-    arrays["image"] = bufs["image"]["image"]
-    arrays["object_mask"] = bufs["image"]["object_mask"]
+    for k in ("image", "object_mask", "image_direct", "object_mask_direct"):
+        if k in bufs["image"]:
+            arrays[k] = bufs["image"][k]
     return arrays
 
 

@@ -18,12 +18,33 @@ Frames used by every pass of the level-map method:
   the depth ``zeta = (p - c).T0`` along the light, from ``-h/2`` (the box face
   nearest the light) to ``+h/2``.
 
-Slicing: the ``n`` planes sit at the centres of ``n`` equal slabs of the box,
-``zeta_i = -h/2 + s (i + 1/2)``, ``s = h / n``; in the thesis's coordinates
-(distance along ``V``) this is ``D_i = D_max - s (i - 1)`` (eqs. 4-7, 4-8) with
-``D_max = h/2 - s/2`` instead of ``h/2`` (eq. 4-9), so that the acceptance
-ranges ``|zeta - zeta_i| < eps = s/2`` (eq. 4-15) tile the box exactly and a
-single plane sits in the middle.
+Placement (``levelmap.placement``; ``levelmap.planes`` counts **planes**, the
+thesis's "Num Plane" of Tables 5-1 to 5-5):
+
+* ``"thesis"`` (the default): the box of eqs. 4-2/4-3 is centred on the
+  receiver's own origin ``P_0`` (its ``transform.translate``: the point the
+  mesh's local origin is placed at; a fitted mesh is centred on its bounding
+  box first), and each extent is twice the distance ``|P_a|`` from ``P_0`` of
+  the vertex lying farthest along axis ``a`` (largest ``|coordinate|``),
+  ``w = 2 |P_x|``, ``h = 2 |P_y|``, ``d = 2 |P_z|`` (eq. 4-3, the distance of
+  eq. 4-2 read literally: the whole vector's length, not only its ``a``
+  component, so the box always encloses the receiver and is larger than the
+  tight box). ``planes = n + 1`` planes slice the box into ``n`` slices
+  (eq. 4-6): ``D_i = D_max - s (i - 1)``, ``s = h / n``, ``D_max = h / 2``
+  (eqs. 4-7 to 4-9), i.e. ``zeta_i = -h/2 + s (i - 1)``, ``i = 1 .. n + 1``,
+  the first and last planes on the box's faces; one plane (``n = 0``) sits
+  at the centre with ``s = h``. Plane ``i`` accepts ``[zeta_i - s/2,
+  zeta_i + s/2)`` (eq. 4-15, ``eps = s / 2``).
+* ``"tight"`` (before contract_version 4): the tight bounding box of the
+  vertices, centred on its middle; the ``planes`` planes sit at the centres
+  of ``planes`` equal slabs, ``zeta_i = -h/2 + s (i + 1/2)``, ``s = h /
+  planes`` (``D_max = h/2 - s/2``), so that the acceptance ranges tile the box
+  exactly.
+
+In both, the acceptance ranges of consecutive planes are half-open and
+contiguous, so a texel is accepted by at most one plane: plane
+``floor((zeta - z_lo) / s)`` with ``z_lo = zeta_1 - s / 2``
+(:func:`plane_lattice`).
 
 References
 ----------
@@ -41,7 +62,10 @@ import numpy as np
 from ..optics import refract
 from ..scene import SceneError
 
-__all__ = ["Box", "refracted_axis", "reference_box", "slice_planes", "to_map", "dir_to_map", "frame_of"]
+__all__ = ["Box", "Lattice", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
+           "plane_lattice", "to_map", "dir_to_map", "frame_of"]
+
+PLACEMENTS = ("thesis", "tight")
 
 
 class Box(NamedTuple):
@@ -128,7 +152,16 @@ def _axes(T0):
     return U, V, W
 
 
-def reference_box(vertices, T0, size):
+def receiver_origin(receiver):
+    """``P_0`` of eq. 4-2: where a receiver's local origin lands in the world (its ``transform.translate``).
+
+    ``p' = R (scale p) + translate`` maps the mesh's origin (after ``fit``'s
+    centring on the bounding-box centre) to ``translate``.
+    """
+    return np.asarray(receiver.get("transform", {}).get("translate", [0.0, 0.0, 0.0]), dtype=np.float64)
+
+
+def reference_box(vertices, T0, size, placement="tight", origin=None):
     """Bounding box of a receiver aligned with ``V = -T0`` (eqs. 4-1 to 4-3).
 
     Parameters
@@ -139,27 +172,76 @@ def reference_box(vertices, T0, size):
         Refracted light direction (:func:`refracted_axis`).
     size : int or (Hc, Wc)
         Texels of the maps.
+    placement : {"tight", "thesis"}
+        ``"tight"``: the tight box of the vertices; ``"thesis"``: centred on
+        ``origin`` with extents ``2 |P_a|`` (eq. 4-3; module docstring).
+    origin : (3,) array_like, optional
+        ``P_0`` (``"thesis"`` only; default the vertices' bounding-box centre).
 
     Returns
     -------
     Box
         Degenerate extents (a flat receiver seen edge-on or face-on) are
         widened to ``1e-6`` of the largest extent so every division is finite.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, eqs. 4-1 to 4-3.
     """
     v = np.asarray(vertices, dtype=np.float64)
     U, V, W = _axes(T0)
     R = np.stack([U, V, W])
-    loc = v @ R.T
-    lo, hi = loc.min(axis=0), loc.max(axis=0)
-    mid = (lo + hi) / 2.0
-    ext = hi - lo
+    if placement == "thesis":
+        o = (v.min(axis=0) + v.max(axis=0)) / 2.0 if origin is None else np.asarray(origin, dtype=np.float64)
+        loc = (v - o) @ R.T
+        far = np.argmax(np.abs(loc), axis=0)  # v_x, v_y, v_z: farthest along each local axis
+        ext = 2.0 * np.linalg.norm(loc[far], axis=1)  # w, h, d = 2 |P_x|, 2 |P_y|, 2 |P_z| (eq. 4-3)
+        centre = o
+    else:
+        loc = v @ R.T
+        lo, hi = loc.min(axis=0), loc.max(axis=0)
+        centre = ((lo + hi) / 2.0) @ R
+        ext = hi - lo
     floor = 1e-6 * max(float(ext.max()), 1e-12)
     ext = np.maximum(ext, floor)
     sz = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
-    return Box(mid @ R, U, V, W, float(ext[0]), float(ext[1]), float(ext[2]), sz)
+    return Box(np.asarray(centre, dtype=np.float64), U, V, W, float(ext[0]), float(ext[1]), float(ext[2]), sz)
 
 
-def slice_planes(box, n):
+class Lattice(NamedTuple):
+    """Equally spaced reference planes and their acceptance slabs.
+
+    Attributes
+    ----------
+    zeta : (n,) float64, plane depths along ``T0`` from the box centre, nearest the light first
+    s : float, spacing (eq. 4-8)
+    zlo : float, lower end of the first plane's acceptance slab: plane ``floor((zeta - zlo) / s)``
+    """
+
+    zeta: np.ndarray
+    s: float
+    zlo: float
+
+
+def plane_lattice(box, n, placement="tight"):
+    """The ``n`` reference planes of ``box`` (eqs. 4-6 to 4-9; module docstring).
+
+    References
+    ----------
+    Tipprasert (2006), eqs. 4-6 to 4-9, 4-15.
+    """
+    n = int(n)
+    if placement == "thesis":
+        if n == 1:
+            return Lattice(np.zeros(1), box.h, -box.h / 2.0)
+        s = box.h / (n - 1)  # n planes, n - 1 slices (eq. 4-8)
+        zeta = -box.h / 2.0 + s * np.arange(n)  # D_i = h/2 - s (i - 1) (eqs. 4-7, 4-9)
+        return Lattice(zeta, s, -box.h / 2.0 - s / 2.0)
+    s = box.h / n
+    return Lattice(-box.h / 2.0 + s * (np.arange(n) + 0.5), s, -box.h / 2.0)
+
+
+def slice_planes(box, n, placement="tight"):
     """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
 
     Returns
@@ -167,13 +249,12 @@ def slice_planes(box, n):
     zeta : (n,) float64
         Plane depths along ``T0`` from the box centre, nearest the light first.
     s : float
-        Spacing ``h / n`` (eq. 4-8).
+        Spacing (eq. 4-8).
     eps : float
         Acceptance threshold ``s / 2`` (eq. 4-15).
     """
-    n = int(n)
-    s = box.h / n
-    return -box.h / 2.0 + s * (np.arange(n) + 0.5), s, s / 2.0
+    lat = plane_lattice(box, n, placement)
+    return lat.zeta, lat.s, lat.s / 2.0
 
 
 def to_map(box, p):

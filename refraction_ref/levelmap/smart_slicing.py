@@ -9,11 +9,22 @@
    the acceptance threshold as a fraction of ``h``; with the ``n`` requested
    planes ``eps = 1 / (2 n)`` so ``n_i = hr_i n``.
 
-The sub-box planes are taken from the lattice of the normal slicing (the
-planes whose acceptance slab meets the sub-box, about ``n_i`` of them), rather
-than re-spaced inside each sub-box: every texel is then accepted by the very
-plane that accepts it under normal slicing, and smart slicing provably changes
-no texel, which is what Table 5-5 reports (intensity difference 0).
+Two ways to place the sub-boxes' planes (``levelmap.smart_spacing``):
+
+* ``"lattice"`` (the default): the planes of the normal slicing whose
+  acceptance slab meets a sub-box (about ``n_i`` of them) are kept and the
+  others dropped, rather than re-spaced: every texel is then accepted by
+  the very plane that accepts it under normal slicing, and smart slicing
+  provably changes no texel. This is what the thesis's Table 5-5 reports
+  (intensity difference 0: "the development of smart slicing is intended for
+  eliminating unnecessary plane", §5.2.4).
+* ``"respace"``: eq. 4-22 as written: each sub-box ``i`` is sliced anew by
+  the plane slicing of §4.2.1 (eqs. 4-6 to 4-9 on the sub-box) into
+  ``n_i = round(hr_i / (2 eps))`` slices, ``eps = s / (2 h)`` the normal
+  slicing's acceptance threshold as a fraction of ``h`` (``n_i = hr_i`` times
+  the normal slicing's slice count); a texel is accepted by the nearest
+  plane of its own sub-box. The planes move, so texels change (measured by
+  eq. 2-9 in the Tipprasert tables).
 
 References
 ----------
@@ -24,23 +35,69 @@ References
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
-__all__ = ["depth_profile", "sub_boxes", "smart_planes"]
+from .planes import plane_lattice
+
+__all__ = ["depth_profile", "sub_boxes", "smart_planes", "respaced_planes", "SPACINGS"]
+
+SPACINGS = ("lattice", "respace")
+
+
+@nb.njit(cache=True, parallel=True)
+def _profile(depth, own, zlo, h, levels, counts):
+    """counts[b, k]: texels of band b of rows in level k (bands in parallel, merged by the caller)."""
+    H, W = depth.shape
+    nbands = counts.shape[0]
+    for b in nb.prange(nbands):
+        for i in range(b * H // nbands, (b + 1) * H // nbands):
+            for j in range(W):
+                z = depth[i, j]
+                if own[i, j] and np.isfinite(z):
+                    k = np.int64(np.floor((z - zlo) / h * levels))
+                    if k >= 0 and k < levels:
+                        counts[b, k] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _respaced_index(depth, own, zlo, h, levels, sub_of, z0, si, n_i, first, thesis, out):
+    """out[i, j]: the plane of the texel's own sub-box nearest to it (eq. 4-22's slicing), -1 for none."""
+    H, W = depth.shape
+    for i in nb.prange(H):
+        for j in range(W):
+            out[i, j] = -1
+            z = depth[i, j]
+            if not (own[i, j] and np.isfinite(z)):
+                continue
+            k = np.int64(np.floor((z - zlo) / h * levels))
+            if k < 0 or k >= levels:
+                continue
+            b = sub_of[k]
+            if b < 0:
+                continue
+            if thesis:
+                q = np.int64(np.floor((z - z0[b]) / si[b] + 0.5))
+                q = min(max(q, 0), n_i[b])
+            else:
+                q = np.int64(np.floor((z - z0[b]) / si[b]))
+                q = min(max(q, 0), n_i[b] - 1)
+            out[i, j] = first[b] + q
 
 
 def depth_profile(lm, box, levels):
     """Texel count per depth level of the receiver's own surface (Fig. 5-9).
 
+    Level ``k`` holds the depths ``[-h/2 + k h / levels, -h/2 + (k + 1) h / levels)``.
+
     Returns
     -------
     (levels,) int64
     """
-    z = lm.depth[lm.own]
-    z = z[np.isfinite(z)]
-    k = np.floor((z + box.h / 2.0) / box.h * levels).astype(np.int64)
-    k = k[(k >= 0) & (k < levels)]
-    return np.bincount(k, minlength=int(levels)).astype(np.int64)
+    nbands = max(1, min(lm.depth.shape[0], 32))
+    counts = np.zeros((nbands, int(levels)), np.int64)
+    _profile(lm.depth, lm.own, -box.h / 2.0, box.h, int(levels), counts)
+    return counts.sum(axis=0)
 
 
 def sub_boxes(profile):
@@ -61,8 +118,8 @@ def sub_boxes(profile):
     return out
 
 
-def smart_planes(lm, box, n, levels, pidx=None):
-    """Indices (into the normal slicing's ``n`` planes) of the planes smart slicing keeps.
+def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
+    """Indices (into the normal slicing's ``n`` planes) of the planes smart slicing keeps (``"lattice"``).
 
     Parameters
     ----------
@@ -75,6 +132,8 @@ def smart_planes(lm, box, n, levels, pidx=None):
     pidx : (Hc, Wc) int32, optional
         The plane index map; planes it uses are always kept (a guard against
         rounding at level boundaries; they are within the sub-boxes anyway).
+    placement : {"tight", "thesis"}
+        The normal slicing's lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
 
     Returns
     -------
@@ -83,23 +142,101 @@ def smart_planes(lm, box, n, levels, pidx=None):
     info : dict
         ``profile`` (counts per level), ``sub_boxes`` (list of
         ``[h_i, hr_i, n_i]`` with ``n_i`` from eq. 4-22), ``empty_levels``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, eqs. 4-21, 4-22.
     """
     prof = depth_profile(lm, box, levels)
     boxes = sub_boxes(prof)
-    s = box.h / n
+    lat = plane_lattice(box, n, placement)
+    s, zlo = lat.s, lat.zlo
+    slices = _slices(n, placement)
     keep = np.zeros(int(n), bool)
     sb = []
     for a, e in boxes:
         z0 = -box.h / 2.0 + box.h * a / levels
         z1 = -box.h / 2.0 + box.h * e / levels
-        # planes whose slab [zeta_i - s/2, zeta_i + s/2) meets [z0, z1)
-        i0 = max(int(np.floor((z0 + box.h / 2.0) / s)), 0)
-        i1 = min(int(np.ceil((z1 + box.h / 2.0) / s)), int(n))
+        # planes whose slab [zlo + s i, zlo + s (i + 1)) meets [z0, z1)
+        i0 = max(int(np.floor((z0 - zlo) / s)), 0)
+        i1 = min(int(np.ceil((z1 - zlo) / s)), int(n))
         keep[i0:i1] = True
         hr = (e - a) / levels
-        sb.append([box.h * hr, hr, hr * n])  # h_i (eq. 4-21), hr_i, n_i = hr_i / (2 eps) (eq. 4-22)
+        sb.append([box.h * hr, hr, hr * slices])  # h_i (eq. 4-21), hr_i, n_i = hr_i / (2 eps) (eq. 4-22)
     if pidx is not None:
         used = np.unique(pidx[pidx >= 0])
         keep[used[used < n]] = True
     return np.flatnonzero(keep).astype(np.int64), {
+        "profile": prof.tolist(), "sub_boxes": sb, "empty_levels": int(np.count_nonzero(prof == 0))}
+
+
+def _slices(n, placement):
+    """Slices of the normal slicing: ``planes - 1`` (thesis, eq. 4-6) or ``planes`` (tight slabs)."""
+    return max(int(n) - 1, 1) if placement == "thesis" else int(n)
+
+
+def respaced_planes(lm, box, n, levels, placement="tight"):
+    """Eq. 4-22: each sub-box sliced anew into ``n_i = round(hr_i / (2 eps))`` slices (``"respace"``).
+
+    Parameters
+    ----------
+    lm : LevelMap
+    box : Box
+    n : int
+        Planes requested (the normal slicing; its ``eps`` sets ``n_i``).
+    levels : int
+        Depth levels of the profile.
+    placement : {"tight", "thesis"}
+        ``"thesis"``: ``n_i + 1`` planes from the sub-box's top face to its
+        bottom face, spacing ``h_i / n_i`` (one plane at its centre when
+        ``n_i = 0``); ``"tight"``: ``max(n_i, 1)`` planes at slab centres.
+
+    Returns
+    -------
+    zeta : (k,) float64
+        The planes' depths, nearest the light first.
+    pidx : (Hc, Wc) int32
+        The plane accepting each texel (the nearest of its sub-box), -1 for none.
+    info : dict
+        As :func:`smart_planes`, ``n_i`` the slices actually used.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, eqs. 4-21, 4-22; §4.2.1, eqs. 4-6 to 4-9.
+    """
+    levels = int(levels)
+    prof = depth_profile(lm, box, levels)
+    boxes = sub_boxes(prof)
+    slices = _slices(n, placement)
+    thesis = placement == "thesis"
+    sub_of = np.full(levels, -1, np.int64)
+    z0 = np.zeros(max(len(boxes), 1))
+    si = np.ones(max(len(boxes), 1))
+    n_i = np.zeros(max(len(boxes), 1), np.int64)
+    first = np.zeros(max(len(boxes), 1), np.int64)
+    zeta, sb = [], []
+    for b, (a, e) in enumerate(boxes):
+        sub_of[a:e] = b
+        lo = -box.h / 2.0 + box.h * a / levels
+        hi = -box.h / 2.0 + box.h * e / levels
+        hr = (e - a) / levels
+        k = int(round(hr * slices))  # n_i = hr_i / (2 eps) (eq. 4-22)
+        first[b] = len(zeta)
+        z0[b] = lo
+        if thesis:
+            if k == 0:  # one plane at the sub-box's centre, accepting all of it
+                zeta.append((lo + hi) / 2.0)
+                z0[b], si[b] = (lo + hi) / 2.0, 2.0 * (hi - lo) + 1.0
+            else:
+                si[b] = (hi - lo) / k
+                zeta.extend(lo + si[b] * np.arange(k + 1))
+        else:
+            k = max(k, 1)
+            si[b] = (hi - lo) / k
+            zeta.extend(lo + si[b] * (np.arange(k) + 0.5))
+        n_i[b] = k
+        sb.append([box.h * hr, hr, k])
+    pidx = np.empty(lm.depth.shape, np.int32)
+    _respaced_index(lm.depth, lm.own, -box.h / 2.0, box.h, levels, sub_of, z0, si, n_i, first, thesis, pidx)
+    return np.asarray(zeta, np.float64), pidx, {
         "profile": prof.tolist(), "sub_boxes": sb, "empty_levels": int(np.count_nonzero(prof == 0))}

@@ -36,11 +36,12 @@ import numpy as np
 from ..raster import rasterize_ortho
 from .caustics_map import splat_plane
 from .intersection import plane_rects
+from .planes import plane_lattice
 
 __all__ = ["volumetric_caustics"]
 
 
-def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out):
+def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out, placement="tight", full=False):
     """Caustics of receiver ``r`` with one slice image per sample plane.
 
     Parameters
@@ -60,6 +61,11 @@ def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out):
     K : float
     out : (Hc, Wc) float64
         Receives the illumination map (overwritten where lit).
+    placement : {"tight", "thesis"}
+        The sample planes (:func:`~refraction_ref.levelmap.planes.plane_lattice`), as the level map's.
+    full : bool
+        Draw every intersection triangle over the whole map (``levelmap.culling = "none"``), or only
+        over the slice's texels (``"bounds"``).
 
     Returns
     -------
@@ -67,8 +73,9 @@ def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out):
         ``slices`` rendered, ``triangles`` drawn, ``memory_bytes`` of a GPU slice stack (16-bit).
     """
     Hc, Wc = box.size
-    ztop = -box.h / 2.0
-    s = box.h / n
+    lat = plane_lattice(box, n, placement)
+    ztop, s = lat.zlo, lat.s
+    whole = np.array([0, Hc - 1, 0, Wc - 1], np.int64)
     # slice of everything between the water and the box (occluders)
     _, ids = rasterize_ortho(setup, box.size, slab=(ztop, s, -np.inf, -1.0))
     filled = ids >= 0
@@ -82,8 +89,8 @@ def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out):
         normal = receivers.normals[tri]
         accept = show.astype(np.int32)
         cbuf[...] = 0.0
-        rect = plane_rects(np.where(show, 0, -1).astype(np.int32), 1)[0]
-        zp = ztop + s * (i + 0.5)
+        rect = whole if full else plane_rects(np.where(show, 0, -1).astype(np.int32), 1)[0]
+        zp = float(lat.zeta[i])
         drawn += splat_plane(beams, cand, box, zp, K, rect, accept, 1, d_i, normal, cbuf)
         out[show] = cbuf[show]
         filled |= nonempty
