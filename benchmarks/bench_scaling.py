@@ -4,7 +4,7 @@
 
 For each method's default scene (the image-space bunny 512^2, the caustics
 scene, the level-map pool, the volumetric bunny, the exact reference of the
-bunny), renders after warm-up at each thread count (``numba.set_num_threads``;
+bunny, the exact photon reference of the caustics scene), renders after warm-up at each thread count (``numba.set_num_threads``;
 the exact reference's Embree thread pool follows it), thread counts
 alternating render by render so a slow spell of the machine hits every count
 alike, and takes the median time of every stage. The serial fraction ``s`` of
@@ -55,6 +55,10 @@ def scenes(quick):
         ("volumetric", rr.load_scene(None, {**cam, "volumetric.resolution": 64 if quick else 128,
                                             "volumetric.photons": 256 if quick else 1024}), "volumetric"),
         ("exact", rr.load_scene(None, cam), "exact"),
+        # the exact photon reference's caustic stages (receiver hits, splat, final pass: shared with the above)
+        ("caustics_exact", rr.load_scene(os.path.join(data, "caustics_default.json"),
+                                         {**cam, "exact.photons": 512 if quick else 1024,
+                                          **({"imagespace.caustic_map": 256} if quick else {})}), "exact"),
     ]
 
 
@@ -96,7 +100,7 @@ def main(argv=None):
     ap.add_argument("--threads", default=",".join(map(str, default)))
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", help="comma list of: imagespace, caustics, levelmap, volumetric, exact")
+    ap.add_argument("--only", help="comma list of: imagespace, caustics, levelmap, volumetric, exact, caustics_exact")
     a = ap.parse_args(argv)
     threads = sorted({int(x) for x in a.threads.split(",") if int(x) <= ncpu} | {1})
     rows, fits = [], []

@@ -39,6 +39,7 @@ __all__ = ["embree_scene", "mesh_scene", "soup_scene", "commit", "nearest_hits",
            "thread_count"]
 
 _SOUPS = {}
+_SOUP_CONTENT = {}  # (shape, digest of the float32 triangles) -> committed scene, the last few soups
 _MESHES = {}       # content digest -> committed scene, the last few meshes traced
 _MESH_LOCK = threading.Lock()
 
@@ -99,18 +100,39 @@ def soup_scene(tris, cache=True):
     """An ``embreex`` scene of a triangle soup (T, 3, 3): primitive k is ``tris[k]``.
 
     With ``cache``, the scene is reused while the same array object is passed
-    again (the receivers of one render, the objects' shadow test).
+    again (the receivers of one render, the objects' shadow test), and while
+    triangles with the same float32 coordinates come again (a BLAKE2 digest,
+    as :func:`mesh_scene`: the receivers of the next render, rebuilt from
+    the scene every render, skip embreex's copy and the BVH build, which
+    runs on Embree's own TBB threads beside Numba's). A cached scene answers
+    every query as a new one would.
     """
     key = (id(tris), tris.shape)
     hit = _SOUPS.get(key) if cache else None
     if hit is not None and hit[0] is tris:
         return hit[1]
     v = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
+    ckey = None
+    if cache:
+        h = hashlib.blake2b(digest_size=20)
+        h.update(v.tobytes())
+        ckey = (v.shape, h.digest())
+        with _MESH_LOCK:
+            scene = _SOUP_CONTENT.pop(ckey, None)
+            if scene is not None:
+                _SOUP_CONTENT[ckey] = scene  # most recently used last
+        if scene is not None:
+            _SOUPS[key] = (tris, scene)
+            return scene
     scene = embree_scene(v, np.arange(len(v), dtype=np.int32).reshape(-1, 3))
     if cache:
         if len(_SOUPS) >= 4:  # a few scenes per render: receivers, objects
             _SOUPS.pop(next(iter(_SOUPS)))
         _SOUPS[key] = (tris, scene)
+        with _MESH_LOCK:
+            while len(_SOUP_CONTENT) >= 4:
+                _SOUP_CONTENT.pop(next(iter(_SOUP_CONTENT)))
+            _SOUP_CONTENT[ckey] = scene
     return scene
 
 

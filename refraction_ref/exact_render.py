@@ -25,8 +25,8 @@ import numpy as np
 from .camera import Camera
 from .environment import environment_lookup
 from .graph import Method, Stage, register_method, run_graph
-from .meshes import (corner_normals, crease_edge_angles, eye_inside, file_vertex_normals, load_mesh,
-                     rotation_matrix, scene_geometry, vertex_normals)
+from .exact import mesh_normals
+from .meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
 from .scene import SceneError
 from .status import MISSED
 
@@ -38,8 +38,13 @@ def _object_label(k, o):
     return f"objects[{k}] ({m if isinstance(m, str) else 'arrays'})"
 
 
-def shading_normals(scene, geom, mode, crease_deg, vn=None):
+def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
     """The shading normals of the merged objects for ``exact.normals = mode``.
+
+    ``mesh``: the :class:`~refraction_ref.exact.MeshNormals` of ``geom`` with corner
+    normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
+    computed here (on every thread, bit-identical to the serial functions of
+    :mod:`refraction_ref.meshes`).
 
     Returns
     -------
@@ -55,14 +60,16 @@ def shading_normals(scene, geom, mode, crease_deg, vn=None):
     f = geom.faces
     if mode == "face":
         return None, False, "face normals (flat facets)"
-    ang = crease_edge_angles(geom.vertices, f)
+    if mesh is None or (mesh.corner is None and mode != "smooth"):
+        mesh = mesh_normals(geom.vertices, f, None if mode == "smooth" else crease_deg)
+    ang = mesh.edge_angles
     sharp = int(np.count_nonzero(ang > crease_deg - 1e-6))  # at the crease angle is sharp (corner_normals)
     edges = f"{sharp:,} of the scene's {len(ang):,} edges at {crease_deg:g} deg or sharper"
     if mode == "smooth":
-        vn = vertex_normals(geom.vertices, f) if vn is None else vn
+        vn = mesh.vertex if vn is None else vn
         warn = (f"; they round {edges} (exact.normals=crease keeps them sharp)" if sharp else "")
         return vn, True, "smooth normals: area-weighted vertex normals across every edge" + warn
-    cn = corner_normals(geom.vertices, f, crease_deg)
+    cn = mesh.corner
     crease = (f"crease normals (smooth where face normals differ by less than {crease_deg:g} deg, "
               f"face normals across sharper edges; {edges})")
     if mode == "crease":
@@ -101,9 +108,12 @@ def _st_geometry(ctx):
     geom = scene_geometry(ctx.scene)
     ctx.stats["triangles"] = int(len(geom.faces))
     p = ctx.scene.data["exact"]
-    vn = vertex_normals(geom.vertices, geom.faces) if len(geom.faces) else None
+    # vertex normals, crease normals and edge angles in one pass on every thread (exact.mesh_normals)
+    crease = None if p["normals"] in ("face", "smooth") else float(p["crease_deg"])
+    mesh = mesh_normals(geom.vertices, geom.faces, crease) if len(geom.faces) else None
+    vn = mesh.vertex if mesh is not None else None
     if len(geom.faces):
-        normals, smooth, rule = shading_normals(ctx.scene, geom, p["normals"], float(p["crease_deg"]), vn)
+        normals, smooth, rule = shading_normals(ctx.scene, geom, p["normals"], float(p["crease_deg"]), vn, mesh)
     else:
         normals, smooth, rule = None, p["normals"] != "face", "no triangles"
     return {"geom": geom, "vertex_normals": vn, "normals": normals, "smooth": smooth, "normals_rule": rule}
@@ -205,7 +215,7 @@ def _st_water_trace(ctx):
 
 
 def _water_stages(scene):
-    from .levelmap.pipeline import shade_stage, shared_stages
+    from .levelmap.pipeline import IMAGE_BUFFERS, shade_stage, shared_stages
 
     R = len(scene.data["receivers"])
     return shared_stages(scene) + (
@@ -214,8 +224,8 @@ def _water_stages(scene):
               after=("water", "planes", "level_map"), makes=tuple(f"caustic_map_{r}" for r in range(R)),
               doc="exact water photons: jittered samples of the analytic surface, Embree first hits"),
         Stage("image", lambda ctx: shade_stage(ctx, "trace"), reads=("camera", "levelmap.ambient"),
-              after=("planes", "level_map", "trace"), makes=("image", "object_mask"),
-              doc="eq. 4-19 with the exact maps"),
+              after=("planes", "level_map", "trace"), makes=IMAGE_BUFFERS,
+              doc="eq. 4-19 with the exact maps, seen through the analytic water surface and directly"),
     )
 
 

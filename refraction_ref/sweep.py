@@ -24,6 +24,37 @@ or null for the bundled default. ``grid`` keys are dotted overrides whose
 values are listed; ``base`` overrides apply to every task. A ``camera.*``
 key in the grid changes the reference too.
 
+Optional keys (one knob at a time, references of their own, measurements
+that are not renders):
+
+``families``
+    In place of ``grid``: a list of ``{"name": ..., "grid": {...}}``, each
+    its own product of values around ``base``; the tasks are the families'
+    in order and every row has a ``family`` column (e.g. iterations 1..10,
+    then slices 64..512, each with the other knobs at their defaults).
+linked keys
+    A grid key naming several dotted keys joined by ``,`` takes lists of
+    as many values, which vary together: ``"camera.width,camera.height":
+    [[256, 256], [512, 512]]``. The row gets one column per key.
+``reference_base``
+    Overrides of the reference render only (e.g. ``{"exact.photons": 1536}``).
+``reference_follows``
+    Grid keys besides ``camera.*`` that the reference follows (it is
+    rendered once per distinct value: e.g. ``["levelmap.map_size"]``, so
+    the maps compared have one size).
+``task``
+    ``"FILE.py:FUNCTION"`` (FILE relative to the spec): each grid point
+    calls ``FUNCTION(**params)`` (``params``: ``base`` with the point's
+    values, keys as written) instead of rendering, and its returned dict
+    (scalars only) is the row (no ``scenes``, ``methods`` or reference). A
+    worker process's first call is repeated, the first one untimed (it
+    compiles the kernels). The file must be readable at the same path on
+    every worker.
+``error``, ``time``
+    The row columns the plot shows (default: the first of
+    ``exit_dir_median_deg``, ``image_rmse``, ``*_rel_l1`` the rows have,
+    against ``total_ms``).
+
 Output (``--out DIR``): ``NAME.csv`` (one row per task: scene, method, the
 grid's values, error statistics, median stage timings, total, worker, thread
 count, status), ``NAME.parquet`` where pyarrow is installed, and
@@ -38,7 +69,7 @@ import json
 import os
 import time
 
-__all__ = ["load_spec", "tasks_of", "run_task", "run_reference", "sweep", "SweepError"]
+__all__ = ["load_spec", "tasks_of", "run_task", "run_function", "run_reference", "sweep", "SweepError"]
 
 
 class SweepError(ValueError):
@@ -60,7 +91,8 @@ def load_spec(src):
         base_dir = os.path.dirname(os.path.abspath(path))
     else:
         spec = dict(src)
-    known = {"name", "scenes", "methods", "grid", "base", "repeats", "threads", "reference"}
+    known = {"name", "scenes", "methods", "grid", "base", "repeats", "threads", "reference", "families",
+             "reference_base", "reference_follows", "task", "error", "time"}
     bad = sorted(set(spec) - known)
     if bad:
         raise SweepError(f"sweep: unknown spec key {', '.join(repr(b) for b in bad)}; known: {', '.join(sorted(known))}")
@@ -74,11 +106,42 @@ def load_spec(src):
     spec.setdefault("repeats", 3)
     spec.setdefault("threads", 1)
     spec.setdefault("reference", "exact")
-    for m in spec["methods"]:
+    spec.setdefault("reference_base", {})
+    spec.setdefault("reference_follows", [])
+    if "families" in spec:
+        if spec["grid"]:
+            raise SweepError("sweep: give either 'grid' or 'families', not both")
+        fams = spec["families"]
+        if not isinstance(fams, list) or not all(isinstance(f, dict) and set(f) <= {"name", "grid"}
+                                                 and isinstance(f.get("grid", {}), dict) for f in fams):
+            raise SweepError("sweep: 'families' must be a list of "
+                             "{\"name\": ..., \"grid\": {...}}")
+        for k, f in enumerate(fams):
+            f.setdefault("name", f"family {k}")
+            f.setdefault("grid", {})
+    grids = [f["grid"] for f in spec["families"]] if "families" in spec else [spec["grid"]]
+    for g in grids:
+        if not isinstance(g, dict) or not all(isinstance(v, list) and v for v in g.values()):
+            raise SweepError("sweep: 'grid' must map dotted keys to non-empty lists of values")
+        for k, vals in g.items():
+            n = len(k.split(","))
+            if n > 1 and not all(isinstance(v, list) and len(v) == n for v in vals):
+                raise SweepError(f"sweep: the linked grid key {k!r} takes lists of {n} values")
+    if spec.get("task") is not None:
+        t = str(spec["task"])
+        if ":" not in t:
+            raise SweepError("sweep: 'task' must be 'FILE.py:FUNCTION'")
+        f, fn = t.rsplit(":", 1)
+        f = f if os.path.isabs(f) else os.path.normpath(os.path.join(base_dir, f))
+        if not os.path.isfile(f):
+            raise SweepError(f"sweep: the task file '{f}' does not exist")
+        spec["task"] = f"{f}:{fn}"
+        spec["scenes"] = {"-": None}
+        spec["methods"] = ["task"]
+        spec["reference"] = None
+    for m in ([] if spec.get("task") else spec["methods"]):
         if m not in method_names():
             raise SweepError(f"sweep: methods lists {m!r}; choose from {', '.join(method_names())}")
-    if not isinstance(spec["grid"], dict) or not all(isinstance(v, list) and v for v in spec["grid"].values()):
-        raise SweepError("sweep: 'grid' must map dotted keys to non-empty lists of values")
     if int(spec["repeats"]) < 1 or int(spec["threads"]) < 1:
         raise SweepError("sweep: 'repeats' and 'threads' must be at least 1")
     scenes = {}
@@ -89,8 +152,10 @@ def load_spec(src):
     spec["scenes"] = scenes
     from .scene import SceneError, load_scene
 
+    if spec.get("task"):
+        return spec
     for name, s in scenes.items():  # refuse a bad scene or override before any task is sent
-        for combo in _combos(spec["grid"]):
+        for _, combo in _family_combos(spec):
             try:
                 load_scene(s, {**spec["base"], **combo})
             except SceneError as e:
@@ -99,18 +164,88 @@ def load_spec(src):
 
 
 def _combos(grid):
+    """The grid's points in order; a linked key ``"a,b"`` sets ``a`` and ``b`` together."""
     keys = list(grid)
-    return [dict(zip(keys, vals)) for vals in itertools.product(*(grid[k] for k in keys))] or [{}]
+    out = []
+    for vals in itertools.product(*(grid[k] for k in keys)):
+        c = {}
+        for k, v in zip(keys, vals):
+            if "," in k:
+                c.update(zip(k.split(","), v))
+            else:
+                c[k] = v
+        out.append(c)
+    return out or [{}]
 
 
-def _ref_key(combo):
-    return json.dumps({k: v for k, v in sorted(combo.items()) if k.startswith("camera.")}, sort_keys=True)
+def _family_combos(spec):
+    """(family name or None, point) of every grid point, families in order."""
+    if "families" in spec:
+        return [(f["name"], c) for f in spec["families"] for c in _combos(f["grid"])]
+    return [(None, c) for c in _combos(spec["grid"])]
+
+
+def _grid_keys(spec):
+    """Every dotted key a grid point may set (linked keys split)."""
+    grids = [f["grid"] for f in spec["families"]] if "families" in spec else [spec["grid"]]
+    return list(dict.fromkeys(x for g in grids for k in g for x in k.split(",")))
+
+
+def _ref_key(combo, follows=()):
+    return json.dumps({k: v for k, v in sorted(combo.items()) if k.startswith("camera.") or k in follows},
+                      sort_keys=True)
 
 
 def tasks_of(spec):
-    """Every (scene, method, overrides) of the grid, in a fixed order."""
-    return [{"scene_name": sn, "scene": s, "method": m, "overrides": combo}
-            for sn, s in spec["scenes"].items() for m in spec["methods"] for combo in _combos(spec["grid"])]
+    """Every (scene, method, overrides) of the grid, in a fixed order (``family`` set with ``families``)."""
+    return [{"scene_name": sn, "scene": s, "method": m, "overrides": combo,
+             **({"family": fam} if fam is not None else {})}
+            for sn, s in spec["scenes"].items() for m in spec["methods"] for fam, combo in _family_combos(spec)]
+
+
+def _load_task(task):
+    """The function of ``"FILE.py:FUNCTION"`` (its folder on ``sys.path`` for its own imports)."""
+    import importlib.util
+    import sys
+
+    f, fn = task.rsplit(":", 1)
+    d = os.path.dirname(f)
+    if d not in sys.path:
+        sys.path.insert(0, d)
+    name = "_sweep_task_" + os.path.splitext(os.path.basename(f))[0]
+    mod = sys.modules.get(name)
+    if mod is None or getattr(mod, "__file__", None) != f:
+        sp = importlib.util.spec_from_file_location(name, f)
+        mod = importlib.util.module_from_spec(sp)
+        sp.loader.exec_module(mod)
+        sys.modules[name] = mod
+    return getattr(mod, fn)
+
+
+_WARM = set()  # task functions already called in this process
+
+
+def run_function(task, fn, base, threads):
+    """A grid point of a ``task`` spec: ``fn(**{**base, **overrides})``'s dict is the row."""
+    row = {**({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
+    try:
+        import distributed
+
+        row["worker"] = distributed.get_worker().address
+    except (ImportError, ValueError):
+        row["worker"] = "local"
+    try:
+        row["threads"] = _pin_threads(threads)
+        f = _load_task(fn)
+        params = {**base, **task["overrides"]}
+        if fn not in _WARM:  # the first call in a process compiles: called once more, untimed
+            f(**params)
+            _WARM.add(fn)
+        out = f(**params)
+        row.update({k: v for k, v in out.items() if not isinstance(v, (list, dict))})
+    except Exception as e:  # a failed task is a row, not the end of the sweep
+        row["status"] = f"failed: {type(e).__name__}: {e}"
+    return row
 
 
 def _pin_threads(n):
@@ -142,7 +277,8 @@ def run_task(task, base, repeats, threads, reference=None):
 
     from .compare import compare_arrays
 
-    row = {"scene": task["scene_name"], "method": task["method"], **task["overrides"], "status": "ok"}
+    row = {"scene": task["scene_name"], "method": task["method"],
+           **({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
     try:
         import distributed
 
@@ -211,13 +347,19 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
     try:
         refs = {}
         futures = []
+        follows = tuple(spec.get("reference_follows", ()))
         for t in tasks:
+            if spec.get("task"):
+                futures.append(client.submit(run_function, t, spec["task"], spec["base"], spec["threads"],
+                                             pure=False))
+                continue
             ref = None
             if spec["reference"] and t["method"] != spec["reference"]:
-                rk = (t["scene_name"], _ref_key(t["overrides"]))
+                rk = (t["scene_name"], _ref_key(t["overrides"], follows))
                 if rk not in refs:
-                    cam = {k: v for k, v in t["overrides"].items() if k.startswith("camera.")}
-                    refs[rk] = client.submit(run_reference, t["scene"], spec["reference"], {**spec["base"], **cam},
+                    cam = {k: v for k, v in t["overrides"].items() if k.startswith("camera.") or k in follows}
+                    refs[rk] = client.submit(run_reference, t["scene"], spec["reference"],
+                                             {**spec["base"], **cam, **spec.get("reference_base", {})},
                                              spec["threads"], pure=False)
                 ref = refs[rk]
             futures.append(client.submit(run_task, t, spec["base"], spec["repeats"], spec["threads"], ref,
@@ -238,17 +380,20 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
             client.close()
             if cluster is not None:
                 cluster.close()
-    order = {json.dumps([t["scene_name"], t["method"], t["overrides"]], sort_keys=True): i
-             for i, t in enumerate(tasks)}
-    rows.sort(key=lambda r: order.get(json.dumps([r.get("scene"), r.get("method"),
-                                                  {k: r[k] for k in spec["grid"] if k in r}], sort_keys=True), 1e9))
+    keys = _grid_keys(spec)
+    fn = bool(spec.get("task"))
+    order = {json.dumps([None if fn else t["scene_name"], None if fn else t["method"], t.get("family"),
+                         t["overrides"]], sort_keys=True): i for i, t in enumerate(tasks)}
+    rows.sort(key=lambda r: order.get(json.dumps([r.get("scene"), r.get("method"), r.get("family"),
+                                                  {k: r[k] for k in keys if k in r}], sort_keys=True), 1e9))
     wall = time.perf_counter() - t0
-    paths = write_rows(rows, out, spec["name"])
+    paths = write_rows(rows, out, spec["name"], spec.get("error"), spec.get("time") or "total_ms")
     return rows, paths, wall
 
 
-def write_rows(rows, out, name):
-    """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot."""
+def write_rows(rows, out, name, err_key=None, time_key="total_ms"):
+    """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot
+    (``err_key`` against ``time_key``, one colour per method or family)."""
     from .files import atomic_open, savefig_atomic
 
     os.makedirs(out, exist_ok=True)
@@ -271,8 +416,9 @@ def write_rows(rows, out, name):
         paths.append(p)
     except ImportError:
         pass
-    ok = [r for r in rows if r.get("status") == "ok" and "total_ms" in r]
-    err_key = next((k for k in ("exit_dir_median_deg", "image_rmse") if any(k in r for r in ok)), None)
+    ok = [r for r in rows if r.get("status") == "ok" and time_key in r]
+    if not err_key:
+        err_key = next((k for k in ("exit_dir_median_deg", "image_rmse") if any(k in r for r in ok)), None)
     if not err_key:
         err_key = next((k for r in ok for k in r if k.endswith("_rel_l1")), None)
     if ok and err_key:
@@ -282,14 +428,16 @@ def write_rows(rows, out, name):
         fig = Figure(figsize=(7, 4.5))
         FigureCanvasAgg(fig)
         ax = fig.subplots()
-        for m in sorted({r["method"] for r in ok}):
-            pts = [(r["total_ms"], r[err_key]) for r in ok if r["method"] == m and err_key in r]
+        group = "family" if any("family" in r for r in ok) else "method"
+        for m in list(dict.fromkeys(r.get(group) for r in ok)):
+            pts = [(r[time_key], r[err_key]) for r in ok if r.get(group) == m and err_key in r]
             if pts:
-                ax.scatter(*zip(*pts), label=m)
-        ax.set_xlabel("median render time (ms)")
+                ax.scatter(*zip(*pts), label=m, s=14)
+        ax.set_xlabel("median render time (ms)" if time_key == "total_ms" else time_key)
         ax.set_ylabel(err_key.replace("_", " "))
-        ax.set_title(f"sweep {name}: error against the exact reference versus run time")
-        ax.legend()
+        ax.set_title(f"sweep {name}: error against the exact reference versus run time" if time_key == "total_ms"
+                     else f"sweep {name}: {err_key} against {time_key}")
+        ax.legend(fontsize=7)
         fig.tight_layout()
         paths.append(savefig_atomic(fig, os.path.join(out, f"{name}.png"), dpi=90))
     return paths

@@ -37,21 +37,31 @@ triangles (:func:`~refraction_ref.exact.trace_exact`), meets the receivers
 with Embree and splats them into the same maps without gathering; the
 relative L1 difference of its two interleaved halves (blurred one texel),
 halved, is its own noise, reported per receiver in ``meta['caustics']``.
+
+Threads: every stage runs on ``numba.get_num_threads()`` threads and gives
+the same bits whatever their number. Per-photon and per-pixel kernels write
+only their own rows (the march, the map look-ups, the shadow-map test, the
+shading sums); the splat gives each band of map rows to one thread, which
+adds its photons in index order; both passes of the gathering own rows of
+their output; Embree's receiver hits and shadow rays run in fixed chunks on
+the shared thread pool (:func:`refraction_ref.embree.run_chunks`). The final
+pass shades the receivers seen directly and both passes' rays in one call.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..embree import mesh_scene
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
 from ..optics import beer_lambert, refract
 from ..status import EXITED
 from .light import texel_flux, window_samples
-from .receivers import eye_buffers, hit_exact, map_position, march_eyespace, receiver_set
+from .receivers import IndexedTriangles, eye_buffers, hit_exact, map_position, march_eyespace, receiver_set
 from .shade import exact_visibility, shade_points, shadow_map_visibility
-from .splat import gather_gaussian, splat_bilinear
+from .splat import accumulate_light, channel_mean, finite_maps, gather_gaussian, splat_bilinear
 
 __all__ = ["has_caustics", "imagespace_caustic_stages", "exact_caustic_stages", "caustic_arrays", "receiver_hits",
            "splat_maps", "merge_caustics", "skip_reason", "camera_array"]
@@ -105,9 +115,18 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
     return P, face
 
 
-def splat_maps(rs, P, face, flux, size):
-    """Irradiance maps (Hc, Wc, C) per receiver from photon hits (see :mod:`.splat`)."""
+def splat_maps(rs, P, face, flux, size, groups=None):
+    """Irradiance maps (Hc, Wc, C) per receiver from photon hits (see :mod:`.splat`).
+
+    ``groups`` (N,) int, optional: also the maps of the photons of each group
+    ``0 .. groups.max()`` alone (the exact reference's two interleaved halves),
+    from the same map positions and values (every photon's are its own, so
+    they are those of ``splat_maps`` on the group's photons alone); then
+    returns ``(maps, [maps of group 0, maps of group 1, ...])``.
+    """
     maps = []
+    ng = 0 if groups is None else int(np.max(groups, initial=-1)) + 1
+    per_group = [[] for _ in range(ng)]
     flux = np.asarray(flux, dtype=np.float64)
     if flux.ndim == 1:
         flux = flux[:, None]
@@ -118,7 +137,10 @@ def splat_maps(rs, P, face, flux, size):
         col, row = map_position(rs, r, P[sel])
         val = flux[sel] * (cosv / box.texel_area)[:, None]
         maps.append(splat_bilinear(col, row, val, box.size))
-    return maps
+        for h in range(ng):
+            m = groups[sel] == h
+            per_group[h].append(splat_bilinear(col[m], row[m], val[m], box.size))
+    return maps if groups is None else (maps, per_group)
 
 
 def _photon_stats(flux0, status, trans_exit, landed):
@@ -154,13 +176,12 @@ def _collect(lights, rs, per_light, arrays, gather):
             m = maps[r]
             if gather > 1:
                 m = gather_gaussian(m, gather)
-            unit += m.mean(axis=2)
-            rgb += m * np.asarray(lights[l]["radiance"], dtype=np.float64)
-        unit = np.nan_to_num(unit, nan=0.0, posinf=0.0, neginf=0.0)
-        rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-        arrays[f"caustic_map_{r}"] = unit.astype(np.float32)
+            accumulate_light(m, lights[l]["radiance"], unit, rgb)  # unit += mean over channels, rgb += m L
+        unit, unit32 = finite_maps(unit)  # NaN and infinities to 0 (np.nan_to_num), on every thread
+        rgb, rgb32 = finite_maps(rgb)
+        arrays[f"caustic_map_{r}"] = unit32
         arrays[f"caustic_frame_{r}"] = rs.frame(r).astype(np.float64)
-        arrays[f"caustic_rgb_{r}"] = rgb.astype(np.float32)
+        arrays[f"caustic_rgb_{r}"] = rgb32
         rgb_maps.append(rgb)
     return rgb_maps
 
@@ -300,13 +321,16 @@ def _st_splat(ctx, reference):
             continue
         P, face = hit
         flux = L["flux0"][L["ex"], None] * L["trans"]
-        maps.append(splat_maps(rs, P, face, flux, size))
+        if reference:  # the maps and those of the two interleaved halves, from one set of map positions
+            m, hm = splat_maps(rs, P, face, flux, size, groups=L["half"])
+            maps.append(m)
+            halves.append((hm[0] if len(hm) > 0 else [np.zeros(b.size + (3,)) for b in rs.boxes],
+                           hm[1] if len(hm) > 1 else [np.zeros(b.size + (3,)) for b in rs.boxes]))
+        else:
+            maps.append(splat_maps(rs, P, face, flux, size))
         s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
         s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
         if reference:
-            hv = L["half"]
-            halves.append((splat_maps(rs, P, np.where(hv == 0, face, -1), flux, size),
-                           splat_maps(rs, P, np.where(hv == 1, face, -1), flux, size)))
             s["photons"] = [int(d["exact"]["photons"])] * 2
         else:
             s["photon_texture"] = [L["cam"].width, L["cam"].width]
@@ -327,15 +351,15 @@ def _reference_noise(rs, halves):
 
     noise = []
     for r in range(len(rs.boxes)):
-        a = sum(h[0][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
-        b = sum(h[1][r].mean(axis=2) for h in halves) if halves else np.zeros(rs.boxes[r].size)
+        a = sum(channel_mean(h[0][r]) for h in halves) if halves else np.zeros(rs.boxes[r].size)
+        b = sum(channel_mean(h[1][r]) for h in halves) if halves else np.zeros(rs.boxes[r].size)
         noise.append(0.5 * relative_l1(a, b, blur=1.0) if np.abs(b).sum() > 0 else 0.0)
     return noise
 
 
 def _splat_buffers(maps, R):
     """The splatted maps before gathering, summed over lights and channels' mean: ``splat_r`` (Hc, Wc)."""
-    return {f"splat_{r}": np.sum([m[r].mean(axis=2) for m in maps], axis=0).astype(np.float32) for r in range(R)}
+    return {f"splat_{r}": np.sum([channel_mean(m[r]) for m in maps], axis=0).astype(np.float32) for r in range(R)}
 
 
 def _st_final_is(ctx):
@@ -410,17 +434,27 @@ def caustic_arrays(scene, method, bufs, stats):
     return arrays, info
 
 
-def _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis):
-    """Colour seen along world rays: the receiver they meet (shaded), else the environment."""
+def _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
+    """Colour seen along world rays: the receiver they meet (shaded), else the environment.
+
+    ``direct``: (points, faces, ray directions) of receiver points seen directly, shaded in
+    the same call (every point's colour is its own); then returns ``(rays' colours, theirs)``.
+    """
     out = np.zeros((len(o), 3))
-    if len(o) == 0:
-        return out
-    P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
-    hit = face >= 0
-    out[hit] = shade_points(rs, scene.data["lights"], rgb_maps, P[hit], face[hit], d[hit], vis)
+    if len(o):
+        P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
+        hit = face >= 0
+    else:
+        P, face, hit = np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, bool)
+    pts, fcs, drs = P[hit], face[hit], d[hit]
+    if direct is not None:
+        pts, fcs, drs = (np.concatenate([a, b]) for a, b in zip((pts, fcs, drs), direct))
+    c = shade_points(rs, scene.data["lights"], rgb_maps, pts, fcs, drs, vis)
+    nh = int(hit.sum())
+    out[hit] = c[:nh]
     if (~hit).any():
         out[~hit] = environment_lookup(scene.data["environment"], d[~hit], scene.base_dir)
-    return out
+    return out if direct is None else (out, c[nh:])
 
 
 def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
@@ -436,46 +470,53 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
     obj &= ~rec
     base = np.zeros((H, W, 3))
-    # receivers seen directly
-    if rec.any():
-        dirs = rdir[rec]
-        fwd = -cam.basis[2]
-        P = origin[rec] + dirs * (rdepth[rec] / (dirs @ fwd))[:, None]
-        base[rec] = shade_points(rs, scene.data["lights"], rgb_maps, P, rtri[rec], dirs, vis)
+    # receivers seen directly: shaded with the object's rays below (one call)
+    dirs = rdir[rec]
+    fwd = -cam.basis[2]
+    direct = (origin[rec] + dirs * (rdepth[rec] / (dirs @ fwd))[:, None], rtri[rec], dirs)
     bg = ~rec & ~obj
     if bg.any():
         base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
+    if not obj.any():
+        _, base[rec] = _shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
+                                   direct)
+        return base.astype(np.float32), base.astype(np.float32)
+    # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
+    st = tr["status"]
+    ex = obj & (st == 1)
+    trans = beer_lambert(absorption, tr["path_length"][obj], ior)  # per pixel: only the object's
+    o_full = tr["exit_pos"][ex]  # world space (layered_trace)
+    d_full = tr["exit_dir"][ex]
+    # the thesis's final pass: refraction at the front surface only
+    nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
+    dv = cam.primary_rays_view()[obj]
+    t, _ = refract(dv, nrm[obj], outside / ior)
+    t = np.where(np.all(np.isfinite(t), axis=1)[:, None], t, dv)
+    ii, jj = np.nonzero(obj)  # row-major, the order of a boolean mask
+    xs = jj + 0.5
+    ys = ii + 0.5
+    x = (xs / W * 2.0 - 1.0) * cam.sx
+    y = (1.0 - ys / H * 2.0) * cam.sy
+    dfront = zfront[obj]
+    if cam.ortho:
+        pv = np.stack([x, y, -dfront], axis=1)
+    else:
+        pv = np.stack([x * dfront, y * dfront, -dfront], axis=1)
+    # both passes' rays in one march and one shading: each ray's colour is its own, and one call
+    # instead of two halves the serial work around the kernels
+    n_full = len(o_full)
+    c, base[rec] = _shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
+                               np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis,
+                               direct)
     full = base.copy()
     single = base.copy()
-    if obj.any():
-        # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
-        st = tr["status"]
-        ex = obj & (st == 1)
-        trans = beer_lambert(absorption, tr["path_length"], ior)
-        if ex.any():
-            o = tr["exit_pos"][ex]  # world space (layered_trace)
-            d = tr["exit_dir"][ex]
-            full[ex] = _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis)
-        stuck = obj & (st != 1)
-        if stuck.any():
-            full[stuck] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
-        full[obj] *= trans[obj]
-        # the thesis's final pass: refraction at the front surface only
-        nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
-        dv = cam.primary_rays_view()[obj]
-        t, _ = refract(dv, nrm[obj], outside / ior)
-        t = np.where(np.all(np.isfinite(t), axis=1)[:, None], t, dv)
-        xs = (np.arange(W) + 0.5)[None, :].repeat(H, 0)[obj]
-        ys = (np.arange(H) + 0.5)[:, None].repeat(W, 1)[obj]
-        x = (xs / W * 2.0 - 1.0) * cam.sx
-        y = (1.0 - ys / H * 2.0) * cam.sy
-        dfront = zfront[obj]
-        if cam.ortho:
-            pv = np.stack([x, y, -dfront], axis=1)
-        else:
-            pv = np.stack([x * dfront, y * dfront, -dfront], axis=1)
-        single[obj] = _shade_rays(scene, rs, cam, cam.view_to_world(pv), cam.dir_view_to_world(t), mode, eyebuf,
-                                  rgb_maps, vis)
+    if n_full:
+        full[ex] = c[:n_full]
+    stuck = obj & (st != 1)
+    if stuck.any():
+        full[stuck] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
+    full[obj] *= trans
+    single[obj] = c[n_full:]
     return full.astype(np.float32), single.astype(np.float32)
 
 
@@ -521,10 +562,14 @@ def _st_final_exact(ctx):
     rgb_maps = b["gather"]["rgb_maps"]
     eye_tr = b["trace"]["flat"]
     origin, rdir = b["trace"]["ray_origin"], b["trace"]["ray_dir"]
-    obj_tris = geom.vertices[geom.faces] if len(geom.faces) else np.zeros((0, 3, 3))
+    # the objects' triangles read in place, and the exact tracer's scene of them (cached by
+    # content: primitive k is face k); building vertices[faces] was serial work every render
+    obj_tris = IndexedTriangles(geom.vertices, geom.faces)
+    obj_scene = mesh_scene(geom.vertices, geom.faces) if len(geom.faces) else None
+    scale = max(obj_tris.abs_max(), 1.0)
 
     def vis(l, pts, nrm):
-        return exact_visibility(obj_tris, lights[l], pts, nrm)
+        return exact_visibility(obj_tris, lights[l], pts, nrm, scene=obj_scene, scale=scale)
 
     H, W = origin.shape[:2]
     o = origin.reshape(-1, 3)

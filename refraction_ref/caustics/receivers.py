@@ -45,12 +45,13 @@ import numba as nb
 import numpy as np
 
 from ..camera import project_point
-from ..embree import soup_scene
+from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..levelmap.planes import frame_of, reference_box, to_map
 from ..receivers import receiver_soup
 from ..raster import clip_near, rasterize
 
-__all__ = ["ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position"]
+__all__ = ["ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position",
+           "IndexedTriangles"]
 
 
 class ReceiverSet(NamedTuple):
@@ -284,19 +285,73 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
     pix = np.empty((len(O), 2), np.int64)
     if len(O):
         W, H, sx, sy = cam.kernel_args()
-        _march_kernel(_Rays(O, D), np.ascontiguousarray(depth, dtype=np.float64),
-                      _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
-                      _Knobs(float(rel_thick), int(max_samples)), _Hits(t, pix))
+        # marches differ in length by orders of magnitude (a ray crossing the image against one
+        # that leaves at once): rays go to the threads in small chunks as they free up
+        with nb.parallel_chunksize(64):
+            _march_kernel(_Rays(O, D), np.ascontiguousarray(depth, dtype=np.float64),
+                          _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
+                          _Knobs(float(rel_thick), int(max_samples)), _Hits(t, pix))
     return t, pix
 
 
-def hit_exact(tris, origins, dirs):
+@nb.njit(cache=True, parallel=True)
+def _abs_max_kernel(vertices, faces):
+    # max |vertices[faces]| (max is exact: the same whatever the order)
+    m = 0.0
+    for f0 in nb.prange(faces.shape[0]):
+        f = np.int64(f0)
+        for k in range(3):
+            for c in range(3):
+                m = max(m, abs(vertices[faces[f, k], c]))
+    return m
+
+
+class IndexedTriangles:
+    """The triangles ``vertices[faces]`` without building them: what :func:`hit_exact` and
+    :func:`~refraction_ref.caustics.shade.exact_visibility` read of them.
+
+    ``tris[f, k]`` (``f`` indices, ``k`` a corner) is ``vertices[faces[f, k]]``, the values
+    ``vertices[faces][f, k]`` holds; ``len`` is the number of faces; ``np.asarray`` builds
+    the (F, 3, 3) array.
+    """
+
+    def __init__(self, vertices, faces):
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.shape = (len(self.faces), 3, 3)
+
+    def __len__(self):
+        return len(self.faces)
+
+    def __getitem__(self, key):
+        f, k = key
+        return self.vertices[self.faces[f, k]]
+
+    def __array__(self, dtype=None, copy=None):
+        a = self.vertices[self.faces]
+        return a if dtype is None else a.astype(dtype)
+
+    def abs_max(self):
+        """``np.abs(vertices[faces]).max()`` on every thread (0 without faces)."""
+        return float(_abs_max_kernel(self.vertices, self.faces)) if len(self.faces) else 0.0
+
+
+def hit_exact(tris, origins, dirs, scene=None):
     """Nearest hit of world rays with triangles (Embree), t recomputed in float64.
+
+    The rays are traced in fixed chunks of :data:`~refraction_ref.embree.HIT_CHUNK`
+    on ``numba.get_num_threads()`` threads (:func:`~refraction_ref.embree.run_chunks`):
+    each ray's hit is computed on its own, so the result does not depend on the
+    chunks or the threads.
 
     Parameters
     ----------
-    tris : (T, 3, 3) float64
+    tris : (T, 3, 3) float64 or IndexedTriangles
     origins, dirs : (N, 3) float64
+    scene : embreex scene, optional
+        An Embree scene whose primitive ``k`` is ``tris[k]`` (e.g. the indexed mesh
+        ``embree.mesh_scene(vertices, faces)`` with ``tris = vertices[faces]``);
+        default the cached soup of ``tris``.
 
     Returns
     -------
@@ -312,42 +367,81 @@ def hit_exact(tris, origins, dirs):
     face = np.full(n, -1, np.int64)
     if n == 0 or len(tris) == 0:
         return t, face
-    scene = soup_scene(tris)
-    ok = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(d), axis=1)
-    idx = np.flatnonzero(ok)
-    for c0 in range(0, len(idx), 1 << 18):
-        ii = idx[c0:c0 + (1 << 18)]
-        res = scene.run(np.ascontiguousarray(o[ii], dtype=np.float32),
-                        np.ascontiguousarray(d[ii], dtype=np.float32), output=1)
-        prim = np.asarray(res["primID"], dtype=np.int64)
-        hit = prim >= 0
-        if not hit.any():
-            continue
-        hi = ii[hit]
-        f = prim[hit]
-        # float64 Möller-Trumbore on the triangle Embree found
-        v0, v1, v2 = tris[f, 0], tris[f, 1], tris[f, 2]
-        e1, e2 = v1 - v0, v2 - v0
-        dd = d[hi]
-        pv = np.cross(dd, e2)
-        det = np.einsum("ij,ij->i", e1, pv)
-        tv = o[hi] - v0
-        qv = np.cross(tv, e1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tt = np.einsum("ij,ij->i", e2, qv) / det
-        tf = np.asarray(res["tfar"], dtype=np.float64)[hit]
-        tt = np.where(np.isfinite(tt) & (tt > 0), tt, tf)
-        t[hi] = tt
-        face[hi] = f
+    scene = commit(soup_scene(np.asarray(tris)) if scene is None else scene)  # built before the threads query it
+
+    VF = _indexed(tris)
+
+    def one(a, b):
+        # rays [a, b): the finite ones are traced (the test too runs in the chunk's thread)
+        ok = np.all(np.isfinite(o[a:b]), axis=1) & np.all(np.isfinite(d[a:b]), axis=1)
+        _hit_rows(VF, scene, o, d, a + np.flatnonzero(ok), t, face)
+
+    run_chunks(one, n, chunk_length(n, HIT_CHUNK))
     return t, face
 
 
-def occluded(tris, origins, dirs, tmax=None):
-    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test, (N,) bool."""
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _mt_kernel(V, F, o, d, ii, prim, tfar, t, face):
+    # the float64 Moller-Trumbore distance on the triangle Embree found, for rays ii: the
+    # NumPy code it replaced (np.cross; einsum('ij,ij->i'), whose order _einsum_dot keeps),
+    # operation for operation; compiled nogil, so the chunks' threads run it at once
+    for m in range(ii.shape[0]):
+        f = np.int64(prim[m])
+        if f < 0:
+            continue
+        i = ii[m]
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        e1x, e1y, e1z = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+        e2x, e2y, e2z = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        px = dy * e2z - dz * e2y
+        py = dz * e2x - dx * e2z
+        pz = dx * e2y - dy * e2x
+        det = _einsum_dot(e1x, e1y, e1z, px, py, pz)
+        tx, ty, tz = o[i, 0] - V[a, 0], o[i, 1] - V[a, 1], o[i, 2] - V[a, 2]
+        qx = ty * e1z - tz * e1y
+        qy = tz * e1x - tx * e1z
+        qz = tx * e1y - ty * e1x
+        tt = _einsum_dot(e2x, e2y, e2z, qx, qy, qz) / det
+        if not (math.isfinite(tt) and tt > 0):
+            tt = np.float64(tfar[m])
+        t[i] = tt
+        face[i] = f
+
+
+@nb.njit(cache=True, inline="always")
+def _einsum_dot(ax, ay, az, bx, by, bz):
+    """``np.einsum('ij,ij->i')``'s sum of one row, in its order (see ``exact._dot3``)."""
+    return (ax * bx + az * bz) + ay * by
+
+
+def _indexed(tris):
+    """(V, F) with ``tris[f, k] == V[F[f, k]]``: an IndexedTriangles' arrays, or a soup's corners."""
+    if isinstance(tris, IndexedTriangles):
+        return tris.vertices, tris.faces
+    V = np.ascontiguousarray(tris, dtype=np.float64).reshape(-1, 3)
+    return V, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+
+
+def _hit_rows(VF, scene, o, d, ii, t, face):
+    """Rays ``ii``: Embree's nearest triangle, then t in float64 on it (rows ``ii`` of ``t``, ``face``)."""
+    if len(ii) == 0:
+        return
+    res = scene.run(np.ascontiguousarray(o[ii], dtype=np.float32),
+                    np.ascontiguousarray(d[ii], dtype=np.float32), output=1)
+    _mt_kernel(VF[0], VF[1], o, d, np.ascontiguousarray(ii, dtype=np.int64), np.asarray(res["primID"]),
+               np.asarray(res["tfar"]), t, face)
+
+
+def occluded(tris, origins, dirs, tmax=None, scene=None):
+    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test, (N,) bool.
+
+    ``scene``: as for :func:`hit_exact`.
+    """
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     if len(o) == 0 or len(tris) == 0:
         return np.zeros(len(o), bool)
-    t, _ = hit_exact(tris, o, dirs)
+    t, _ = hit_exact(tris, o, dirs, scene)
     hit = np.isfinite(t)
     if tmax is not None:
         hit &= t < np.asarray(tmax)

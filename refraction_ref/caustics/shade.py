@@ -28,13 +28,90 @@ References
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
+import numba as nb
 import numpy as np
 
-from ..embree import run_chunks, soup_scene
+from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
 __all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility"]
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_bilinear_kernel(E, col, row, sel, out):
+    # out[sel[k]] += the bilinear look-up of E at (col[k], row[k]): sample_bilinear's
+    # operations in its order, one point per iteration
+    Hc, Wc, C = E.shape
+    for k0 in nb.prange(col.shape[0]):
+        k = np.int64(k0)
+        x = min(max(col[k] - 0.5, 0.0), Wc - 1.0)
+        y = min(max(row[k] - 0.5, 0.0), Hc - 1.0)
+        if math.isnan(col[k]):
+            x = 0.0
+        if math.isnan(row[k]):
+            y = 0.0
+        j0 = min(np.int64(math.floor(x)), Wc - 1)
+        i0 = min(np.int64(math.floor(y)), Hc - 1)
+        j1 = min(j0 + 1, Wc - 1)
+        i1 = min(i0 + 1, Hc - 1)
+        fx = x - j0
+        fy = y - i0
+        q = sel[k]
+        for c in range(C):
+            out[q, c] += ((1 - fy) * ((1 - fx) * E[i0, j0, c] + fx * E[i0, j1, c])
+                          + fy * ((1 - fx) * E[i1, j0, c] + fx * E[i1, j1, c]))
+
+
+@nb.njit(cache=True, inline="always")
+def _einsum_dot(ax, ay, az, bx, by, bz):
+    """``np.einsum('ij,ij->i')``'s sum of one row, in its order (see ``exact._dot3``)."""
+    return (ax * bx + az * bz) + ay * by
+
+
+@nb.njit(cache=True, parallel=True)
+def _facing_normals_kernel(normals, faces, ray_dirs, n):
+    # n = normals[faces], negated where it faces along the ray (NumPy's einsum > 0)
+    for k0 in nb.prange(faces.shape[0]):
+        k = np.int64(k0)
+        f = faces[k]
+        x, y, z = normals[f, 0], normals[f, 1], normals[f, 2]
+        if _einsum_dot(x, y, z, ray_dirs[k, 0], ray_dirs[k, 1], ray_dirs[k, 2]) > 0:
+            x, y, z = -x, -y, -z
+        n[k, 0] = x
+        n[k, 1] = y
+        n[k, 2] = z
+
+
+@nb.njit(cache=True, parallel=True)
+def _cosine_kernel(n, L, cos):
+    # cos = np.maximum(0, -einsum(n, L)) (NaN stays NaN, as np.maximum keeps it)
+    for k0 in nb.prange(n.shape[0]):
+        k = np.int64(k0)
+        c = -_einsum_dot(n[k, 0], n[k, 1], n[k, 2], L[k, 0], L[k, 1], L[k, 2])
+        cos[k] = c if (c > 0.0 or c != c) else 0.0
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_direct_kernel(radiance, cos, fall, v, light_sum):
+    # light_sum += radiance[None, :] * (cos * fall * v)[:, None], term for term
+    for k0 in nb.prange(cos.shape[0]):
+        k = np.int64(k0)
+        w = cos[k] * fall[k] * v[k]
+        for c in range(3):
+            light_sum[k, c] += radiance[c] * w
+
+
+@nb.njit(cache=True, parallel=True)
+def _albedo_kernel(albedo, owner, light_sum, out):
+    # out = albedo[owner] * light_sum
+    for k0 in nb.prange(owner.shape[0]):
+        k = np.int64(k0)
+        for c in range(3):
+            out[k, c] = albedo[owner[k], c] * light_sum[k, c]
 
 
 def sample_bilinear(E, col, row):
@@ -54,6 +131,39 @@ def sample_bilinear(E, col, row):
             + fy * ((1 - fx) * E[i1, j0] + fx * E[i1, j1]))
 
 
+class _LightView(NamedTuple):
+    """The light camera's projection (Camera.to_screen) and the depth bias of the shadow test."""
+
+    sx: float
+    sy: float
+    ortho: bool
+    width: float
+    height: float
+    bias: float
+
+
+@nb.njit(cache=True, parallel=True)
+def _shadow_map_kernel(pv, zmin, view, out):
+    # Camera.to_screen and the depth test, per point, in their operations' order
+    sx, sy, ortho, width, height, bias = view.sx, view.sy, view.ortho, view.width, view.height, view.bias
+    H, W = zmin.shape
+    for k0 in nb.prange(pv.shape[0]):
+        k = np.int64(k0)
+        d = -pv[k, 2]
+        s = 1.0 if ortho else d
+        col = (pv[k, 0] / (s * sx) * 0.5 + 0.5) * width
+        row = (0.5 - pv[k, 1] / (s * sy) * 0.5) * height
+        out[k] = 1.0
+        if not (math.isfinite(col) and math.isfinite(row) and col >= 0 and col < W and row >= 0 and row < H
+                and d > 0):
+            continue  # outside the light's window: lit (the window covers the objects)
+        i = min(max(np.int64(math.floor(row)), 0), H - 1)
+        j = min(max(np.int64(math.floor(col)), 0), W - 1)
+        z = zmin[i, j]
+        if math.isfinite(z) and d > z + bias:
+            out[k] = 0.0
+
+
 def shadow_map_visibility(lcam, zmin, points, bias):
     """Visibility of a light at world points from its min-depth image (1 lit, 0 shadowed).
 
@@ -62,42 +172,60 @@ def shadow_map_visibility(lcam, zmin, points, bias):
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0:
         return np.ones(0)
-    col, row, d = lcam.to_screen(lcam.world_to_view(p))
-    H, W = zmin.shape
-    inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < W) & (row >= 0) & (row < H) & (d > 0)
-    i = np.where(inside, np.floor(np.nan_to_num(row)), 0).astype(np.int64).clip(0, H - 1)
-    j = np.where(inside, np.floor(np.nan_to_num(col)), 0).astype(np.int64).clip(0, W - 1)
-    z = zmin[i, j]
-    shadow = inside & np.isfinite(z) & (d > z + bias)
-    return (~shadow).astype(np.float64)
+    pv = lcam.world_to_view(p)
+    out = np.empty(len(p))
+    _shadow_map_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64),
+                       _LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width),
+                                  float(lcam.height), float(bias)), out)
+    return out
 
 
-def exact_visibility(obj_tris, light, points, normals, chunk=1 << 15):
+def exact_visibility(obj_tris, light, points, normals, chunk=None, scene=None, scale=None):
     """Visibility of a light at world points past the refractive triangles (Embree shadow rays).
 
-    The points are tested in fixed chunks of ``chunk`` on ``numba.get_num_threads()``
-    threads (:func:`refraction_ref.embree.run_chunks`); every ray is tested on its own,
-    so the result does not depend on the chunks or the threads.
+    The points are tested in fixed chunks (``chunk`` points, default
+    :func:`~refraction_ref.embree.chunk_length` of their number: eight or more
+    equal chunks) on ``numba.get_num_threads()`` threads
+    (:func:`refraction_ref.embree.run_chunks`), each chunk from its points to
+    its rays' hits; every ray is tested on its own, so the result does not
+    depend on the chunks or the threads.
+
+    Parameters
+    ----------
+    obj_tris : (T, 3, 3) float64 or IndexedTriangles
+        The refractive triangles.
+    light : dict
+    points, normals : (M, 3) array_like
+    chunk : int, optional
+    scene : embreex scene, optional
+        An Embree scene of the same triangles in the same order (the exact
+        tracer's cached ``embree.mesh_scene(vertices, faces)``, which saves
+        building a soup of the objects' triangles every render); default the
+        cached soup of ``obj_tris``.
+    scale : float, optional
+        ``max(|obj_tris|.max(), 1)``, the scale of the push off the surface,
+        when known.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0 or len(obj_tris) == 0:
         return np.ones(len(p))
-    L, _ = light_direction_at(light, p)
-    to_light = -np.asarray(L)
+    if scale is None:
+        scale = max(obj_tris.abs_max() if hasattr(obj_tris, "abs_max") else float(np.abs(obj_tris).max()), 1.0)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    side = np.where(np.einsum("ij,ij->i", n, to_light) >= 0, 1.0, -1.0)[:, None]
-    scale = max(float(np.abs(obj_tris).max()), 1.0)
-    o = p + 1e-6 * scale * (to_light + side * n)
-    tmax = None
-    if light["type"] == "point":
-        tmax = np.linalg.norm(np.asarray(light["position"], dtype=np.float64) - o, axis=1)
-    soup_scene(obj_tris)  # built (and cached) once, before the threads query it
+    pos = np.asarray(light["position"], dtype=np.float64) if light["type"] == "point" else None
+    scene = commit(soup_scene(np.asarray(obj_tris)) if scene is None else scene)  # built before the threads query it
     hit = np.empty(len(p), dtype=bool)
 
     def one(a, b):
-        hit[a:b] = occluded(obj_tris, o[a:b], to_light[a:b], None if tmax is None else tmax[a:b])
+        # every step is row by row: a chunk's rows are those the whole array would have
+        L, _ = light_direction_at(light, p[a:b])
+        to_light = -np.asarray(L)
+        side = np.where(np.einsum("ij,ij->i", n[a:b], to_light) >= 0, 1.0, -1.0)[:, None]
+        o = p[a:b] + 1e-6 * scale * (to_light + side * n[a:b])
+        tmax = None if pos is None else np.linalg.norm(pos - o, axis=1)
+        hit[a:b] = occluded(obj_tris, o, to_light, tmax, scene)
 
-    run_chunks(one, len(p), chunk)
+    run_chunks(one, len(p), chunk_length(len(p), HIT_CHUNK) if chunk is None else int(chunk))
     return (~hit).astype(np.float64)
 
 
@@ -129,22 +257,26 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     if M == 0:
         return out
     faces = np.asarray(faces, dtype=np.int64)
-    n = rs.normals[faces].copy()
-    flip = np.einsum("ij,ij->i", n, np.asarray(ray_dirs, dtype=np.float64).reshape(-1, 3)) > 0
-    n[flip] = -n[flip]
+    n = np.empty((M, 3))
+    _facing_normals_kernel(rs.normals, faces, np.ascontiguousarray(ray_dirs, dtype=np.float64).reshape(-1, 3), n)
     owner = rs.owner[faces]
     light_sum = np.zeros((M, 3))
+    cos = np.empty(M)
     for l, lt in enumerate(lights):
         L, fall = light_direction_at(lt, P)
-        cos = np.maximum(0.0, -np.einsum("ij,ij->i", n, L))
+        _cosine_kernel(n, L, cos)
         lit = cos > 0
         v = np.zeros(M)
         if lit.any():
             v[lit] = visibility(l, P[lit], n[lit])
-        light_sum += np.asarray(lt["radiance"], dtype=np.float64)[None, :] * (cos * fall * v)[:, None]
+        _add_direct_kernel(np.asarray(lt["radiance"], dtype=np.float64), cos, fall, v, light_sum)
     for r in range(len(rs.boxes)):
-        sel = owner == r
-        if sel.any():
+        sel = np.flatnonzero(owner == r)
+        if len(sel):
             col, row = map_position(rs, r, P[sel])
-            light_sum[sel] += sample_bilinear(maps_rgb[r], col, row)
-    return rs.albedo[owner] * light_sum
+            # light_sum[sel] += sample_bilinear(maps_rgb[r], col, row), on every thread
+            _add_bilinear_kernel(np.ascontiguousarray(maps_rgb[r], dtype=np.float64),
+                                 np.ascontiguousarray(col, dtype=np.float64),
+                                 np.ascontiguousarray(row, dtype=np.float64), sel, light_sum)
+    _albedo_kernel(rs.albedo, owner, light_sum, out)
+    return out

@@ -19,7 +19,8 @@ Gather
 Determinism: photons are binned into bands of 8 map rows (in photon index
 order, as the rasterizer bins triangles) and each band is owned by one
 thread, which adds its photons in index order; the gather computes each
-texel independently. Results are bit-identical whatever the thread count.
+texel independently (both passes of the separable filter own rows of their
+output). Results are bit-identical whatever the thread count.
 
 References
 ----------
@@ -39,7 +40,7 @@ import numpy as np
 
 from ..raster import BAND, bin_bands
 
-__all__ = ["splat_bilinear", "gather_gaussian", "gaussian_weights"]
+__all__ = ["splat_bilinear", "gather_gaussian", "gaussian_weights", "accumulate_light", "channel_mean", "finite_maps"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -130,7 +131,10 @@ def splat_bilinear(col, row, values, shape, out=None):
     fy = np.empty(n)
     _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
     counts, items = bin_bands(rows, Hc, BAND)
-    _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, BAND, out)
+    # caustics crowd photons into a few bands: the threads take bands one at a time (dynamic
+    # scheduling), not equal runs of bands; which thread adds a band does not change its sums
+    with nb.parallel_chunksize(1):
+        _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, BAND, out)
     return out
 
 
@@ -169,6 +173,114 @@ def _fold_rows(a, w, out):
                 out[i, j, c] = s
 
 
+@nb.njit(cache=True, parallel=True)
+def _fold_cols(a, w, out):
+    """out[i, j] = sum_k w[k] a[i - k + r, j] with mirror folding at the ends of each column.
+
+    :func:`_fold_rows` applied to ``a.transpose(1, 0, 2)`` and transposed back, term for
+    term in the same order (the same bits), without the two transposed copies: each
+    thread owns rows of ``out`` and reads along rows of ``a``.
+    """
+    N, Wc, C = a.shape
+    r = (w.shape[0] - 1) // 2
+    for i0 in nb.prange(N):
+        i = np.int64(i0)
+        # each texel's sum starts at 0 and takes the terms in _fold_rows's order (t, then the two
+        # mirrors); whole rows at a time, so the inner loop runs along memory
+        for j in range(Wc):
+            for c in range(C):
+                out[i, j, c] = 0.0
+        for t in range(-r, r + 1):
+            wt = w[t + r]
+            for src in (i - t, -1 - i - t, 2 * N - 1 - i - t):
+                if 0 <= src < N:
+                    for j in range(Wc):
+                        for c in range(C):
+                            out[i, j, c] += wt * a[src, j, c]
+
+
+@nb.njit(cache=True, parallel=True)
+def _accumulate_kernel(m, radiance, unit, rgb):
+    # unit += m.mean(axis=2) (NumPy sums the three channels in order, then divides), rgb += m * L
+    H, W, C = m.shape
+    for i0 in nb.prange(H):
+        i = np.int64(i0)
+        for j in range(W):
+            s = 0.0
+            for c in range(C):
+                s += m[i, j, c]
+                rgb[i, j, c] += m[i, j, c] * radiance[c]
+            unit[i, j] += s / C
+
+
+@nb.njit(cache=True, parallel=True)
+def _channel_mean_kernel(m, out):
+    H, W, C = m.shape
+    for i0 in nb.prange(H):
+        i = np.int64(i0)
+        for j in range(W):
+            s = 0.0
+            for c in range(C):
+                s += m[i, j, c]
+            out[i, j] = s / C
+
+
+def channel_mean(m):
+    """``m.mean(axis=2)`` of an (Hc, Wc, C) map on every thread, bit for bit NumPy's
+    (the channels summed in order, then divided by ``C``)."""
+    m = np.ascontiguousarray(m, dtype=np.float64)
+    out = np.empty(m.shape[:2])
+    _channel_mean_kernel(m, out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _finite_kernel(a, out32):
+    # np.nan_to_num(a, nan=0, posinf=0, neginf=0) in place, and its float32 copy
+    for i0 in nb.prange(a.shape[0]):
+        i = np.int64(i0)
+        for j in range(a.shape[1]):
+            x = a[i, j]
+            if not math.isfinite(x):
+                x = 0.0
+                a[i, j] = 0.0
+            out32[i, j] = np.float32(x)
+
+
+def finite_maps(a):
+    """``a`` with NaN and infinities set to 0, in place, and as float32 (the maps' output dtype).
+
+    Parameters
+    ----------
+    a : (Hc, Wc) or (Hc, Wc, C) float64, C-contiguous
+
+    Returns
+    -------
+    a, a32
+        The same array, and its float32 copy.
+    """
+    flat = a.reshape(a.shape[0], -1)
+    out = np.empty(flat.shape, np.float32)
+    _finite_kernel(flat, out)
+    return a, out.reshape(a.shape)
+
+
+def accumulate_light(m, radiance, unit, rgb):
+    """``unit += m.mean(axis=2)`` and ``rgb += m * radiance`` in place, on every thread.
+
+    Parameters
+    ----------
+    m : (Hc, Wc, 3) float64
+        One light's map of one receiver (a unit light).
+    radiance : (3,) array_like
+        The light's RGB radiance.
+    unit : (Hc, Wc) float64
+    rgb : (Hc, Wc, 3) float64
+    """
+    _accumulate_kernel(np.ascontiguousarray(m, dtype=np.float64), np.asarray(radiance, dtype=np.float64),
+                       unit, rgb)
+
+
 def gather_gaussian(E, window=7):
     """Image-space photon gathering: a separable, flux-conserving Gaussian (Wyman & Davis 2006).
 
@@ -199,9 +311,8 @@ def gather_gaussian(E, window=7):
     if r < (len(w) - 1) // 2:
         w = w[(len(w) - 1) // 2 - r: (len(w) - 1) // 2 + r + 1]
         w = w / w.sum()
-    tmp = np.empty_like(a)
+    tmp = np.empty(a.shape)
     _fold_rows(np.ascontiguousarray(a), w, tmp)
-    out = np.empty((a.shape[1], a.shape[0], a.shape[2]))
-    _fold_rows(np.ascontiguousarray(tmp.transpose(1, 0, 2)), w, out)
-    out = np.ascontiguousarray(out.transpose(1, 0, 2))
+    out = np.empty(a.shape)
+    _fold_cols(tmp, w, out)
     return out[..., 0] if squeeze else out

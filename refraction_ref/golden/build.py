@@ -12,6 +12,13 @@ Layout of a suite (``docs/oracle.md``, "Conformance")::
 Deterministic: two builds on one machine and one set of versions give
 identical hashes (results are bit-identical whatever the thread count);
 across machines only the tolerances are promised.
+
+On a cluster (``--scheduler tcp://HOST:PORT``, or ``--workers N`` for a
+``LocalCluster`` of N single-thread worker processes) every case is one
+Dask task: the worker renders the case into a folder of its own and sends
+its files back, and this process writes them and the manifest, so the
+workers need no shared file system and the suite is the one a local build
+writes (the same arrays, hashes and manifest entries but ``build_s``).
 """
 
 from __future__ import annotations
@@ -152,22 +159,38 @@ def photon_quantum(scene):
 
 
 def _save_npz(path, arrays):
+    # keys in sorted order: the order stages finish in (which may follow the thread count) does not
+    # reach the file, so a build on any worker writes the same bytes
     with atomic_path(path) as tmp:
-        np.savez_compressed(tmp, **arrays)
+        np.savez_compressed(tmp, **dict(sorted(arrays.items())))
 
 
-def build(folder, only=None, progress=False, log=print):
+def build(folder, only=None, progress=False, log=print, scheduler=None, workers=None, threads=1, client=None):
     """Render the catalogue (or ``only`` those cases) into a golden suite in ``folder``.
+
+    Parameters
+    ----------
+    folder : str
+    only : str or list of str, optional
+        Case names (the other cases of an existing suite are kept).
+    progress : bool
+    log : callable
+        Called with one line per case built.
+    scheduler : str, optional
+        Address of a Dask cluster (``tcp://HOST:PORT``): the cases are its tasks.
+    workers : int, optional
+        Without ``scheduler``: a ``LocalCluster`` of this many worker processes
+        (``threads`` threads each) builds the cases; None builds them here.
+    threads : int
+        Numba threads of each case on a cluster (results do not depend on it).
+    client : distributed.Client, optional
+        Use this client (tests).
 
     Returns
     -------
     dict
         The manifest written to ``folder/manifest.json``.
     """
-    import refraction_ref as rr
-
-    from ..graph import get_method
-
     cases = catalogue(only)
     os.makedirs(folder, exist_ok=True)
     mpath = os.path.join(folder, "manifest.json")
@@ -177,44 +200,104 @@ def build(folder, only=None, progress=False, log=print):
             old = json.load(f)
         if old.get("contract_version") == CONTRACT_VERSION:
             manifest["cases"] = old.get("cases", {})
-    for case in cases:
-        t0 = time.perf_counter()
-        d = os.path.join(folder, case["name"])
-        scene = case_scene(case, d)
-        method = case["method"]
-        res = rr.render(scene, method=method, keep="stages", progress=progress)
-        stages = get_method(method).stages(scene)
-        noisy = bool(case.get("batches"))
-        keys = {}
-        for k, a in sorted(res.arrays.items()):
-            keys[k] = {"sha256": array_sha256(a), "shape": list(a.shape), "dtype": a.dtype.str,
-                       "stage": key_stage(k, stages), "tolerance": tolerance_for(k, noisy=noisy)}
-        _save_npz(os.path.join(d, "golden.npz"), res.arrays)
-        entry = {"method": method, "purpose": case["purpose"], "stages": [s.name for s in stages] + ["output"],
-                 "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
-        if noisy:
-            K = int(case["batches"])
-            sk = _seed_key(scene)
-            maps = {}
-            for b in range(K):
-                r = rr.render(scene, method=method, overrides={sk: b})
-                for k, a in r.arrays.items():
-                    if k.startswith("caustic_map_"):
-                        maps.setdefault(k, []).append(a)
-            _save_npz(os.path.join(d, "batches.npz"), {k: np.stack(v) for k, v in maps.items()})
-            q = photon_quantum(scene)
-            for k in maps:
-                keys[k]["tolerance"]["quantum"] = q
-            entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
-            entry["files"].append("batches.npz")
-        if case.get("reference"):
-            ref = rr.render(scene, method=case["reference"])
-            _save_npz(os.path.join(d, "reference.npz"), ref.arrays)
-            entry["reference"] = case["reference"]
-            entry["files"].append("reference.npz")
-        entry["build_s"] = time.perf_counter() - t0
-        manifest["cases"][case["name"]] = entry
-        log(f"  {case['name']}: {method}, {len(keys)} arrays, {entry['build_s']:.1f} s")
+
+    def done(name, entry):
+        manifest["cases"][name] = entry
+        log(f"  {name}: {entry['method']}, {len(entry['keys'])} arrays, {entry['build_s']:.1f} s")
         with atomic_open(mpath, "w") as f:  # after every case: an interrupted build keeps what it made
             json.dump(manifest, f, indent=1, sort_keys=True)
+
+    if scheduler is None and workers is None and client is None:
+        for case in cases:
+            done(case["name"], _build_case(case, os.path.join(folder, case["name"]), progress))
+        return manifest
+    from distributed import Client, LocalCluster, as_completed
+
+    own = client is None
+    cluster = None
+    if own:
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            client = Client(cluster)
+    try:
+        futures = [client.submit(_case_task, case, int(threads), pure=False) for case in cases]
+        for fu in as_completed(futures):
+            name, entry, files = fu.result()
+            d = os.path.join(folder, name)
+            os.makedirs(d, exist_ok=True)
+            for rel, data in sorted(files.items()):
+                with atomic_path(os.path.join(d, rel)) as tmp:
+                    with open(tmp, "wb") as f:
+                        f.write(data)
+            done(name, entry)
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
     return manifest
+
+
+def _case_task(case, threads=1):
+    """One case built on a Dask worker into a folder of its own: (name, manifest entry, {file: bytes})."""
+    import tempfile
+
+    import numba
+
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    with tempfile.TemporaryDirectory(prefix="golden-") as tmp:
+        d = os.path.join(tmp, case["name"])
+        entry = _build_case(case, d)
+        files = {}
+        for root, _, fs in os.walk(d):
+            for fn in fs:
+                p = os.path.join(root, fn)
+                with open(p, "rb") as f:
+                    files[os.path.relpath(p, d)] = f.read()
+    return case["name"], entry, files
+
+
+def _build_case(case, d, progress=False):
+    """Render one case into folder ``d``; its manifest entry."""
+    import refraction_ref as rr
+
+    from ..graph import get_method
+
+    t0 = time.perf_counter()
+    scene = case_scene(case, d)
+    method = case["method"]
+    res = rr.render(scene, method=method, keep="stages", progress=progress)
+    stages = get_method(method).stages(scene)
+    noisy = bool(case.get("batches"))
+    keys = {}
+    for k, a in sorted(res.arrays.items()):
+        keys[k] = {"sha256": array_sha256(a), "shape": list(a.shape), "dtype": a.dtype.str,
+                   "stage": key_stage(k, stages), "tolerance": tolerance_for(k, noisy=noisy)}
+    _save_npz(os.path.join(d, "golden.npz"), res.arrays)
+    entry = {"method": method, "purpose": case["purpose"], "stages": [s.name for s in stages] + ["output"],
+             "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
+    if noisy:
+        K = int(case["batches"])
+        sk = _seed_key(scene)
+        maps = {}
+        for b in range(K):
+            r = rr.render(scene, method=method, overrides={sk: b})
+            for k, a in r.arrays.items():
+                if k.startswith("caustic_map_"):
+                    maps.setdefault(k, []).append(a)
+        _save_npz(os.path.join(d, "batches.npz"), {k: np.stack(v) for k, v in maps.items()})
+        q = photon_quantum(scene)
+        for k in maps:
+            keys[k]["tolerance"]["quantum"] = q
+        entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
+        entry["files"].append("batches.npz")
+    if case.get("reference"):
+        ref = rr.render(scene, method=case["reference"])
+        _save_npz(os.path.join(d, "reference.npz"), ref.arrays)
+        entry["reference"] = case["reference"]
+        entry["files"].append("reference.npz")
+    entry["build_s"] = time.perf_counter() - t0
+    return entry

@@ -47,7 +47,7 @@ TOLERANCES = [
     ("*status", {"kind": "exact", "fraction": 0.005}),
     ("*interfaces", {"kind": "exact", "fraction": 0.005}),
     ("*hit", {"kind": "exact", "fraction": 0.005}),
-    ("*object_mask", {"kind": "exact", "fraction": 0.005}),
+    ("*object_mask*", {"kind": "exact", "fraction": 0.005}),
     ("*.octree.level", {"kind": "exact", "fraction": 0.0}),
     ("*plane_index*", {"kind": "exact"}),
     ("*planes_used*", {"kind": "exact"}),

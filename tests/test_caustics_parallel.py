@@ -1,0 +1,296 @@
+"""The caustic stages and the exact reference's geometry on several threads: bit-identical
+whatever the thread count, and equal to the NumPy code they replaced.
+
+Every buffer the caustic stages keep (``keep="stages"``: receiver depth, photon
+trace, receiver hits, splat, gather, the final pass) is compared between 1 and
+2 Numba threads for the image-space method (eye-space and Embree receiver
+hits) and the exact photon reference. The kernels that replaced NumPy code
+(the gather's second pass, the channel means, the bilinear look-ups, the
+shadow-map test, the chunked Embree receiver hits, the parallel vertex and
+crease normals and edge angles) are checked against that code, kept here as
+the reference (measured: bit-identical).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import refraction_ref as rr
+from refraction_ref.caustics import shade, splat
+from refraction_ref.caustics.receivers import hit_exact
+from refraction_ref.exact import mesh_normals
+from refraction_ref.meshes import corner_normals, crease_edge_angles, load_mesh, vertex_normals
+
+DATA = os.path.join(os.path.dirname(rr.__file__), "data")
+SCENE = os.path.join(DATA, "caustics_default.json")
+SMALL = {"camera.width": 96, "camera.height": 96, "imagespace.photons": 64, "imagespace.caustic_map": 64,
+         "exact.photons": 96}
+
+
+def _same(a, b):
+    """Every array of ``a`` equals ``b``'s bit for bit (NaN where NaN)."""
+    assert a.keys() == b.keys()
+    for k in a:
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        assert x.dtype == y.dtype and x.shape == y.shape, k
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+
+
+def _arrays(res):
+    return {k: v for k, v in res.arrays.items() if isinstance(v, np.ndarray)}
+
+
+@pytest.mark.parametrize("method, over", [
+    ("imagespace", {}),
+    ("imagespace", {"imagespace.receiver_hit": "exact", "imagespace.gather": 5}),
+    ("exact", {}),
+])
+def test_every_caustic_stage_buffer_is_the_same_on_one_and_two_threads(on_one_and_two_threads, method, over):
+    sc = rr.load_scene(SCENE, {**SMALL, **over})
+    a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method=method, keep="stages")))
+    stages = {k.split(".")[1] for k in a if k.startswith("stage.")}
+    want = {"receivers", "photon_trace", "receiver_hit", "splat", "gather", "caustic_final"}
+    if method == "imagespace" and "receiver_hit" not in over:
+        want.add("receiver_depth")
+    assert want <= stages
+    assert a["caustic_map_0"].sum() > 0  # photons reached the floor
+    _same(a, b)
+
+
+def _odd_mesh():
+    """A bunny patch with a zero-area face, a face using one vertex twice, a non-manifold edge and a
+    boundary: every branch of the edge and normal kernels."""
+    v, f = load_mesh("teapot")
+    f = np.asarray(f, dtype=np.int64)[:400].copy()
+    v = np.asarray(v, dtype=np.float64)
+    extra = np.array([[f[0, 0], f[0, 1], len(v)],          # a third face on edge (f0, f1): non-manifold
+                      [f[1, 0], f[1, 0], f[1, 2]],          # a vertex used twice: zero area
+                      [f[2, 0], f[2, 1], len(v) + 1]])      # a face of zero area (collinear)
+    v2 = np.vstack([v, v[f[0, 0]] + [0.0, 0.0, 0.3], 2.0 * v[f[2, 1]] - v[f[2, 0]]])
+    return v2, np.vstack([f, extra])
+
+
+@pytest.mark.parametrize("mesh", ["bunny", "fandisk", "odd"])
+def test_parallel_mesh_normals_equal_the_serial_functions_on_any_thread_count(on_one_and_two_threads, mesh):
+    v, f = _odd_mesh() if mesh == "odd" else load_mesh(mesh)
+    a, b = on_one_and_two_threads(lambda: mesh_normals(v, f, 60.0))
+    for x, y in zip(a, b):
+        assert np.array_equal(x, y)
+    assert np.array_equal(a.vertex, vertex_normals(np.asarray(v, float), np.asarray(f, np.int64)))
+    assert np.array_equal(a.corner, corner_normals(v, f, 60.0))
+    assert np.array_equal(np.sort(a.edge_angles), np.sort(crease_edge_angles(v, f)))
+    assert np.array_equal(mesh_normals(v, f, 180.0).corner, corner_normals(v, f, 180.0))
+    assert mesh_normals(v, f).corner is None
+
+
+def test_the_exact_reference_is_the_same_on_one_and_two_threads_for_every_normals_rule(on_one_and_two_threads):
+    for normals in ("crease", "smooth", "file"):
+        sc = rr.load_scene(None, {"camera.width": 48, "camera.height": 48, "exact.normals": normals})
+        a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method="exact", keep="stages")))
+        _same(a, b)
+
+
+def _gather_transposed(E, window):
+    """The gather as it was: _fold_rows, a transposed copy, _fold_rows again, transposed back."""
+    a = np.asarray(E, dtype=np.float64)
+    w = splat.gaussian_weights(window)
+    tmp = np.empty_like(a)
+    splat._fold_rows(np.ascontiguousarray(a), w, tmp)
+    out = np.empty((a.shape[1], a.shape[0], a.shape[2]))
+    splat._fold_rows(np.ascontiguousarray(tmp.transpose(1, 0, 2)), w, out)
+    return np.ascontiguousarray(out.transpose(1, 0, 2))
+
+
+def test_map_kernels_equal_numpy(on_one_and_two_threads):
+    rng = np.random.default_rng(3)
+    E = rng.random((37, 53, 3)) * rng.integers(0, 2, (37, 53, 1))
+    for window in (3, 7, 11):
+        a, b = on_one_and_two_threads(lambda: splat.gather_gaussian(E, window))
+        assert np.array_equal(a, b) and np.array_equal(a, _gather_transposed(E, window))
+        assert abs(a.sum() - E.sum()) < 1e-9 * E.sum()  # flux kept
+    assert np.array_equal(splat.channel_mean(E), E.mean(axis=2))
+    F = E.copy()
+    F[0, :3, 0], F[1, 1, :], F[2, 2, 1] = np.nan, np.inf, -np.inf
+    want = np.nan_to_num(F, nan=0.0, posinf=0.0, neginf=0.0)
+    got, got32 = splat.finite_maps(F.copy())
+    assert np.array_equal(got, want) and np.array_equal(got32, want.astype(np.float32)) and got32.dtype == np.float32
+    unit, rgb = np.ones(E.shape[:2]), np.full(E.shape, 0.5)
+    L = np.array([0.3, 1.7, 0.9])
+    splat.accumulate_light(E, L, unit, rgb)
+    assert np.array_equal(unit, 1.0 + E.mean(axis=2)) and np.array_equal(rgb, 0.5 + E * L)
+    # splat: the same map whatever the threads (bands owned by one thread each)
+    col, row = rng.uniform(-3, 56, 5000), rng.uniform(-3, 40, 5000)
+    col[::97] = np.nan
+    val = rng.random((5000, 3))
+    a, b = on_one_and_two_threads(lambda: splat.splat_bilinear(col, row, val, (37, 53)))
+    assert np.array_equal(a, b)
+    assert np.allclose(a.sum(axis=(0, 1)), val[np.isfinite(col)].sum(axis=0))
+
+
+def test_receiver_lookups_equal_numpy(on_one_and_two_threads):
+    rng = np.random.default_rng(5)
+    E = rng.random((20, 30, 3))
+    col, row = rng.uniform(-5, 35, 4000), rng.uniform(-5, 25, 4000)
+    col[::50], row[::77] = np.nan, np.inf
+    sel = np.arange(4000)
+    out = np.zeros((4000, 3))
+    shade._add_bilinear_kernel(E, col, row, sel, out)
+    assert np.array_equal(out, shade.sample_bilinear(E, col, row))
+
+    from refraction_ref.camera import Camera
+
+    for ortho in (True, False):
+        lcam = Camera.from_dict({"eye": [0.3, 3.0, 0.2], "target": [0, 0, 0], "up": [0, 0, 1], "fov_y": 40,
+                                 "width": 32, "height": 32, "near": 0.1, "far": 10, "ortho": ortho,
+                                 **({"ortho_height": 2.0} if ortho else {})})
+        zmin = rng.uniform(2.5, 3.5, (32, 32))
+        zmin[rng.random((32, 32)) < 0.2] = np.inf
+        p = rng.uniform(-1.5, 1.5, (3000, 3))
+        a, b = on_one_and_two_threads(lambda: shade.shadow_map_visibility(lcam, zmin, p, 0.01))
+        col_, row_, d = lcam.to_screen(lcam.world_to_view(p))
+        inside = np.isfinite(col_) & np.isfinite(row_) & (col_ >= 0) & (col_ < 32) & (row_ >= 0) & (row_ < 32) & (d > 0)
+        i = np.where(inside, np.floor(np.nan_to_num(row_)), 0).astype(np.int64).clip(0, 31)
+        j = np.where(inside, np.floor(np.nan_to_num(col_)), 0).astype(np.int64).clip(0, 31)
+        z = zmin[i, j]
+        ref = (~(inside & np.isfinite(z) & (d > z + 0.01))).astype(np.float64)
+        assert np.array_equal(a, b) and np.array_equal(a, ref) and 0 < ref.sum() < len(ref)
+
+
+def test_chunked_receiver_hits_equal_one_embree_call(on_one_and_two_threads):
+    from refraction_ref.embree import soup_scene
+
+    rng = np.random.default_rng(7)
+    tris = rng.uniform(-1, 1, (300, 3, 3))
+    o = rng.uniform(-2, 2, (20000, 3))
+    d = rng.normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o[5] = np.nan
+    a, b = on_one_and_two_threads(lambda: hit_exact(tris, o, d))
+    assert np.array_equal(a[0], b[0], equal_nan=True) and np.array_equal(a[1], b[1])
+    # one call for every ray, the float64 recomputation as it was
+    res = soup_scene(tris).run(o[np.isfinite(o[:, 0])].astype(np.float32),
+                               d[np.isfinite(o[:, 0])].astype(np.float32), output=1)
+    face = np.asarray(res["primID"], dtype=np.int64)
+    assert np.array_equal(np.delete(a[1], 5), face) and (face >= 0).sum() > 1000
+    # the float64 distance as the NumPy code computed it (np.cross, einsum)
+    ok = np.flatnonzero(np.isfinite(o[:, 0]))
+    hit = face >= 0
+    hi, f = ok[hit], face[hit]
+    v0, v1, v2 = tris[f, 0], tris[f, 1], tris[f, 2]
+    e1, e2 = v1 - v0, v2 - v0
+    pv = np.cross(d[hi], e2)
+    det = np.einsum("ij,ij->i", e1, pv)
+    qv = np.cross(o[hi] - v0, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tt = np.einsum("ij,ij->i", e2, qv) / det
+    tf = np.asarray(res["tfar"], dtype=np.float64)[hit]
+    want = np.full(len(o), np.nan)
+    want[hi] = np.where(np.isfinite(tt) & (tt > 0), tt, tf)
+    assert np.array_equal(a[0], want, equal_nan=True)
+    # triangles read in place (IndexedTriangles) give the same bits
+    from refraction_ref.caustics.receivers import IndexedTriangles
+
+    V = tris.reshape(-1, 3)
+    c = hit_exact(IndexedTriangles(V, np.arange(len(V)).reshape(-1, 3)), o, d, soup_scene(tris))
+    assert np.array_equal(c[0], a[0], equal_nan=True) and np.array_equal(c[1], a[1])
+
+
+def _shade_points_numpy(rs, lights, maps_rgb, P, faces, ray_dirs, visibility):
+    """shade_points as it was (NumPy), the reference of its kernels."""
+    from refraction_ref.caustics.receivers import map_position
+    from refraction_ref.lights import light_direction_at
+
+    M = len(P)
+    n = rs.normals[faces].copy()
+    flip = np.einsum("ij,ij->i", n, ray_dirs) > 0
+    n[flip] = -n[flip]
+    owner = rs.owner[faces]
+    light_sum = np.zeros((M, 3))
+    for l, lt in enumerate(lights):
+        L, fall = light_direction_at(lt, P)
+        cos = np.maximum(0.0, -np.einsum("ij,ij->i", n, L))
+        lit = cos > 0
+        v = np.zeros(M)
+        if lit.any():
+            v[lit] = visibility(l, P[lit], n[lit])
+        light_sum += np.asarray(lt["radiance"], dtype=np.float64)[None, :] * (cos * fall * v)[:, None]
+    for r in range(len(rs.boxes)):
+        sel = owner == r
+        if sel.any():
+            col, row = map_position(rs, r, P[sel])
+            light_sum[sel] += shade.sample_bilinear(maps_rgb[r], col, row)
+    return rs.albedo[owner] * light_sum
+
+
+def test_shade_points_equals_numpy_for_directional_and_point_lights(on_one_and_two_threads):
+    from refraction_ref.caustics.receivers import receiver_set
+
+    import json
+
+    with open(SCENE) as f:
+        raw = json.load(f)
+    raw["lights"] = [{"type": "directional", "direction": [0.2, -1.0, -0.1], "radiance": [1, 0.5, 0.25]},
+                     {"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}]
+    raw["receivers"] = [{"mesh": "plane", "size": [4, 4], "transform": {"translate": [0, -0.5, 0]}},
+                        {"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, 0.3, -1.0],
+                                                                        "rotate": [90, 0, 0]}}]
+    sc = rr.load_scene(raw)
+    rs = receiver_set(sc, sc.data["lights"][0], 32)
+    rng = np.random.default_rng(11)
+    M = 5000
+    faces = rng.integers(0, len(rs.tris), M)
+    b = rng.dirichlet([1, 1, 1], M)
+    P = np.einsum("ij,ijk->ik", b, rs.tris[faces])
+    d = rng.normal(size=(M, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    maps = [rng.random(box.size + (3,)) for box in rs.boxes]
+
+    def vis(l, p, nrm):
+        return (p[:, 0] + 0.1 * l > 0).astype(np.float64)
+
+    want = _shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
+    a, b2 = on_one_and_two_threads(lambda: shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, vis))
+    assert np.array_equal(a, b2) and np.array_equal(a, want) and want.std() > 0
+
+
+def _exact_visibility_numpy(obj_tris, light, p, n):
+    """exact_visibility as it was (NumPy, one Embree call), the reference of the chunked one."""
+    from refraction_ref.caustics.receivers import occluded
+    from refraction_ref.lights import light_direction_at
+
+    L, _ = light_direction_at(light, p)
+    to_light = -np.asarray(L)
+    side = np.where(np.einsum("ij,ij->i", n, to_light) >= 0, 1.0, -1.0)[:, None]
+    scale = max(float(np.abs(obj_tris).max()), 1.0)
+    o = p + 1e-6 * scale * (to_light + side * n)
+    tmax = None
+    if light["type"] == "point":
+        tmax = np.linalg.norm(np.asarray(light["position"], dtype=np.float64) - o, axis=1)
+    return (~occluded(obj_tris, o, to_light, tmax)).astype(np.float64)
+
+
+def test_exact_shadow_rays_equal_numpy_with_indexed_triangles_and_any_chunks(on_one_and_two_threads):
+    from refraction_ref.caustics.receivers import IndexedTriangles
+    from refraction_ref.embree import mesh_scene
+
+    v, f = load_mesh("teapot")
+    v = np.asarray(v, dtype=np.float64)
+    v = (v - v.mean(axis=0)) / np.abs(v).max()
+    f = np.asarray(f, dtype=np.int64)
+    tris = v[f]
+    rng = np.random.default_rng(13)
+    p = rng.uniform(-1.2, 1.2, (30000, 3))
+    p[:, 1] = -1.1
+    n = np.tile([0.0, 1.0, 0.0], (len(p), 1))
+    it = IndexedTriangles(v, f)
+    assert it.abs_max() == np.abs(tris).max() and np.array_equal(np.asarray(it), tris)
+    for light in ({"type": "directional", "direction": [0.1, -1.0, 0.2]},
+                  {"type": "point", "position": [0.2, 2.0, -0.1]}):
+        want = _exact_visibility_numpy(tris, light, p, n)
+        assert 0 < want.sum() < len(want)
+        a, b = on_one_and_two_threads(lambda: shade.exact_visibility(it, light, p, n, scene=mesh_scene(v, f)))
+        assert np.array_equal(a, want) and np.array_equal(b, want)
+        assert np.array_equal(shade.exact_visibility(tris, light, p, n, chunk=777), want)
