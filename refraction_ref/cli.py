@@ -91,7 +91,8 @@ def _cmd_golden_build(a):
 
     print(f"building the golden suite in {a.dir}" + (f" (cases {a.only})" if a.only else ""))
     t0 = time.perf_counter()
-    m = build(a.dir, only=a.only, progress=not a.quiet and sys.stderr.isatty())
+    m = build(a.dir, only=a.only, progress=not a.quiet and sys.stderr.isatty(), scheduler=a.scheduler,
+              workers=a.workers)
     size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(a.dir) for f in fs)
     print(f"{len(m['cases'])} cases in {a.dir} ({size / 2**20:.1f} MiB), {time.perf_counter() - t0:.1f} s")
     return 0
@@ -181,6 +182,10 @@ def main(argv=None):
     gb.add_argument("dir")
     gb.add_argument("--only", metavar="NAME,...", help="only these cases (the others in DIR are kept)")
     gb.add_argument("--quiet", action="store_true")
+    gb.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                    help="build the cases as tasks of this Dask cluster (the suite is the same as a local build's)")
+    gb.add_argument("--workers", type=int, metavar="N",
+                    help="build the cases on a LocalCluster of N single-thread worker processes")
     gb.set_defaults(fn=_cmd_golden_build)
     k = sub.add_parser("check", help="judge a backend's outputs against a golden suite; exit 1 on any failure")
     k.add_argument("candidate", help="folder with <case>/result.npz per case")

@@ -53,13 +53,15 @@ MUTATIONS = {
     "exact": {"normals": "face", "crease_deg": 30.0, "max_bounces": 2, "photons": 12, "photon_seed": 1,
               "record": 2},
     "levelmap": {"planes": 7, "smart_slicing": False, "depth_levels": 8, "variant": "volumetric",
-                 "map_size": 20, "shadows": False, "ambient": 0.3, "exact_samples": 20, "exact_seed": 1},
+                 "map_size": 20, "shadows": False, "ambient": 0.3, "exact_samples": 20, "exact_seed": 1,
+                 "placement": "tight", "smart_spacing": "respace", "culling": "bounds"},
     "water": {"ior": 1.4, "height": 0.05, "resolution": 6, "absorption": 0.2, "size": [2.2, 2.0],
               "waves": [{"amplitude": 0.03, "wavelength": 0.5}]},
     "volumetric": {"resolution": 14, "photons": 10, "ds_min": 0.5, "ds_max": 4.0, "eps": 0.01, "eps2": 0.03,
                    "integrator": "rk4", "phase_g": 0.3, "scattering": 0.3, "absorption": 0.1,
                    "supersample": 3, "blur": 5, "padding": 3, "bounds": [[-0.8, -0.8, -0.8], [0.8, 0.8, 0.8]],
-                   "max_steps": 40, "min_radiance": 0.01, "stop_fraction": 0.01, "stiff": 0.5},
+                   "max_steps": 40, "min_radiance": 0.01, "stop_fraction": 0.01, "stiff": 0.5,
+                   "stepping": "robust", "proxy": "box", "proxy_inflate": 3.0},
     "volume": {},  # the volumetric input block: covered by tests/test_volumetric.py
 }
 #: scene keys shared by the methods, mutated on every (method, scene) below
