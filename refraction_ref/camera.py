@@ -36,6 +36,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .vec3 import affine
+
 __all__ = ["Camera", "project_point", "unproject_pixel"]
 
 
@@ -194,21 +196,9 @@ class Camera:
         return self.width, self.height, self.sx, self.sy
 
 
-@nb.njit(cache=True, parallel=True)
-def _affine_kernel(p, m, t, out):
-    for k in nb.prange(p.shape[0]):
-        x, y, z = p[k, 0], p[k, 1], p[k, 2]
-        for c in range(3):
-            out[k, c] = x * m[0, c] + y * m[1, c] + z * m[2, c] + t[c]
-
-
 def _affine(p, m, t):
-    """``p @ m + t`` for points (..., 3) in one pass."""
-    p = np.asarray(p, dtype=np.float64)
-    flat = np.ascontiguousarray(p).reshape(-1, 3)
-    out = np.empty_like(flat)
-    _affine_kernel(flat, np.ascontiguousarray(m, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64), out)
-    return out.reshape(p.shape)
+    """``p @ m + t`` for points (..., 3) in one pass (:func:`refraction_ref.vec3.affine`: no BLAS)."""
+    return affine(p, m, t)
 
 
 @nb.njit(cache=True, inline="always")

@@ -29,6 +29,7 @@ from .exact import mesh_normals
 from .meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
 from .scene import SceneError
 from .status import MISSED
+from .vec3 import affine
 
 __all__ = ["render_exact", "shading_normals", "METHOD"]
 
@@ -89,7 +90,7 @@ def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
                    ("sphere", "plane") else "generated or given as arrays: no mesh file")
         if n_file is not None and len(n_file) == nv:
             # fit and the uniform scale do not turn normals; the rotation does (p' = R s p + t)
-            nw = n_file @ rotation_matrix(o["transform"]["rotate"]).T
+            nw = affine(n_file, rotation_matrix(o["transform"]["rotate"]).T)
             sel = np.flatnonzero(geom.face_object == k)
             cn[sel] = nw[f[sel] - off]
             used.append(_object_label(k, o))

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .camera import _affine
 from .scene import SceneError
+from .vec3 import affine, dot
 
 __all__ = ["BUILTIN_MESHES", "Geometry", "corner_normals", "crease_edge_angles", "eye_inside", "file_vertex_normals",
            "load_mesh", "object_mesh", "scene_geometry", "rotation_matrix", "sine_displacement"]
@@ -299,9 +299,9 @@ def _file_normals(path, mtime):
             return None
         T = np.asarray(T, dtype=np.float64)
         M = T[:3, :3]
-        n = np.asarray(g._cache["vertex_normals"], dtype=np.float64) @ np.linalg.inv(M)  # inverse transpose
+        n = affine(g._cache["vertex_normals"], np.linalg.inv(M))  # inverse transpose
         parts.append(n)
-        pos.append(np.asarray(g.vertices, dtype=np.float64) @ M.T + T[:3, 3])
+        pos.append(affine(g.vertices, M.T, T[:3, 3]))
     if not parts:
         return None
     n = np.concatenate(parts)
@@ -348,7 +348,7 @@ def sine_displacement(v, normals, amplitude, wavelength, direction, phase):
     """
     u = np.asarray(direction, dtype=np.float64)
     u = u / np.linalg.norm(u)
-    s = amplitude * np.sin(2.0 * np.pi / wavelength * (v @ u) + phase)
+    s = amplitude * np.sin(2.0 * np.pi / wavelength * dot(v, u) + phase)
     return v + s[:, None] * normals
 
 
@@ -385,7 +385,7 @@ def object_mesh(obj, base_dir=".", deform_fn=None):
     # p' = R (s p) + t, in a Numba kernel: a BLAS matmul here would start OpenBLAS's
     # worker threads, which then spin against Numba's threads on a small machine
     R = rotation_matrix(t["rotate"]) * float(t["scale"])
-    v = _affine(v, R.T, np.asarray(t["translate"], dtype=np.float64))
+    v = affine(v, R.T, np.asarray(t["translate"], dtype=np.float64))
     d = obj.get("deform")
     if deform_fn is not None:
         v = np.asarray(deform_fn(v.copy(), vertex_normals(v, f)), dtype=np.float64)
@@ -503,7 +503,7 @@ def eye_inside(geom, eye):
         lo, hi = fv.reshape(-1, 3).min(0), fv.reshape(-1, 3).max(0)
         if not (np.all(lo < 0) and np.all(hi > 0)):
             continue
-        a, b, c = (fv[:, m] @ np.stack([p, q, u], axis=1) for m in range(3))
+        a, b, c = (affine(fv[:, m], np.stack([p, q, u], axis=1)) for m in range(3))
 
         def cr(s, t):
             return s[:, 0] * t[:, 1] - s[:, 1] * t[:, 0]

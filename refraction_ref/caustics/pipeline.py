@@ -58,6 +58,7 @@ from ..graph import Stage
 from ..lights import light_camera
 from ..optics import beer_lambert, refract
 from ..status import EXITED
+from ..vec3 import dot
 from .light import texel_flux, window_samples
 from .receivers import IndexedTriangles, eye_buffers, hit_exact, map_position, march_eyespace, receiver_set
 from .shade import exact_visibility, shade_points, shadow_map_visibility
@@ -133,7 +134,7 @@ def splat_maps(rs, P, face, flux, size, groups=None):
     for r, box in enumerate(rs.boxes):
         sel = (face >= 0)
         sel[sel] = rs.owner[face[sel]] == r
-        cosv = np.abs(rs.normals[face[sel]] @ box.V)
+        cosv = np.abs(dot(rs.normals[face[sel]], box.V))
         col, row = map_position(rs, r, P[sel])
         val = flux[sel] * (cosv / box.texel_area)[:, None]
         maps.append(splat_bilinear(col, row, val, box.size))
@@ -473,7 +474,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # receivers seen directly: shaded with the object's rays below (one call)
     dirs = rdir[rec]
     fwd = -cam.basis[2]
-    direct = (origin[rec] + dirs * (rdepth[rec] / (dirs @ fwd))[:, None], rtri[rec], dirs)
+    direct = (origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None], rtri[rec], dirs)
     bg = ~rec & ~obj
     if bg.any():
         base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)

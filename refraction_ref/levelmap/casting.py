@@ -29,6 +29,7 @@ import numpy as np
 
 from ..raster import rasterize
 from .planes import from_map, to_map
+from ..vec3 import dot
 
 __all__ = ["cast_between", "shade_image"]
 
@@ -51,7 +52,7 @@ def cast_between(E_l, box_l, lm_l, box_0, lm_0, out):
     i = np.floor(q[:, 1]).astype(np.int64)
     inside = (i >= 0) & (i < Hc) & (j >= 0) & (j < Wc)
     i, j = np.where(inside, i, 0), np.where(inside, j, 0)
-    cosv = np.abs(lm_0.normal[ii, jj] @ box_l.V)
+    cosv = np.abs(dot(lm_0.normal[ii, jj], box_l.V))
     tol = 2.0 * max(box_l.texel_size, box_0.texel_size) / np.maximum(cosv, 0.05)
     ok = inside & lm_l.own[i, j] & (np.abs(q[:, 2] - lm_l.depth[i, j]) <= tol)
     out[ii[ok], jj[ok]] += E_l[i[ok], j[ok]]
@@ -98,7 +99,7 @@ def shade_image(camera, receivers, boxes, maps, albedo, ambient):
         if not sel.any():
             continue
         dirs = rd[sel]
-        pts = np.asarray(camera.eye) + dirs * (best[sel] / (dirs @ fwd))[:, None]
+        pts = np.asarray(camera.eye) + dirs * (best[sel] / dot(dirs, fwd))[:, None]
         q = to_map(boxes[r], pts)
         Hc, Wc = boxes[r].size
         j = np.clip(np.floor(q[:, 0]).astype(np.int64), 0, Wc - 1)

@@ -39,6 +39,7 @@ from ..embree import nearest_hits, run_chunks, soup_scene
 from ..optics import refract3
 from .planes import to_map
 from .water import incident_directions, surface_normals, wave_gradient, wave_height
+from ..vec3 import dot
 
 __all__ = ["render_water_exact", "trace_water_photons"]
 
@@ -168,7 +169,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
             jn = np.clip(np.floor(q[:, 0]).astype(np.int64), 0, Wc - 1)
             in_ = np.clip(np.floor(q[:, 1]).astype(np.int64), 0, Hc - 1)
             nrm = rec.normals[prim[m]]
-            cosv = np.abs(nrm @ box.V)
+            cosv = np.abs(dot(nrm, box.V))
             tol = 2.0 * box.texel_size / np.maximum(cosv, 0.05)
             seen = lm.own[in_, jn] & (np.abs(q[:, 2] - lm.depth[in_, jn]) <= tol)
             w = flux[m] * np.exp(-K * dist[m]) * cosv / box.texel_area

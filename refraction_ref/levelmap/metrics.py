@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..vec3 import affine
+
 __all__ = ["rgb_to_luv", "luv_difference", "relative_l1"]
 
 _RGB2XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
@@ -31,7 +33,7 @@ def rgb_to_luv(rgb):
         ``L`` in [0, 100]; black has ``u = v = 0``.
     """
     c = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64)), 0.0, 1.0)
-    xyz = c @ _RGB2XYZ.T
+    xyz = affine(c, _RGB2XYZ.T)
     X, Y, Z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
     yr = Y / _WHITE[1]
     L = np.where(yr > (6 / 29) ** 3, 116.0 * np.cbrt(yr) - 16.0, (29 / 3) ** 3 * yr)

@@ -61,6 +61,7 @@ import numpy as np
 
 from ..optics import refract
 from ..scene import SceneError
+from ..vec3 import affine, dot
 
 __all__ = ["Box", "Lattice", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
            "plane_lattice", "to_map", "dir_to_map", "frame_of"]
@@ -193,12 +194,12 @@ def reference_box(vertices, T0, size, placement="tight", origin=None):
     R = np.stack([U, V, W])
     if placement == "thesis":
         o = (v.min(axis=0) + v.max(axis=0)) / 2.0 if origin is None else np.asarray(origin, dtype=np.float64)
-        loc = (v - o) @ R.T
+        loc = affine(v - o, R.T)
         far = np.argmax(np.abs(loc), axis=0)  # v_x, v_y, v_z: farthest along each local axis
         ext = 2.0 * np.linalg.norm(loc[far], axis=1)  # w, h, d = 2 |P_x|, 2 |P_y|, 2 |P_z| (eq. 4-3)
         centre = o
     else:
-        loc = v @ R.T
+        loc = affine(v, R.T)
         lo, hi = loc.min(axis=0), loc.max(axis=0)
         centre = ((lo + hi) / 2.0) @ R
         ext = hi - lo
@@ -261,9 +262,9 @@ def to_map(box, p):
     """World points (..., 3) to map coordinates (col, row, zeta), (..., 3)."""
     q = np.asarray(p, dtype=np.float64) - box.center
     Hc, Wc = box.size
-    col = (q @ box.U / box.w + 0.5) * Wc
-    row = (q @ box.W / box.d + 0.5) * Hc
-    zeta = -(q @ box.V)
+    col = (dot(q, box.U) / box.w + 0.5) * Wc
+    row = (dot(q, box.W) / box.d + 0.5) * Hc
+    zeta = -dot(q, box.V)
     return np.stack([col, row, zeta], axis=-1)
 
 
@@ -271,7 +272,7 @@ def dir_to_map(box, t):
     """World directions (..., 3) to map-space rates (dcol, drow, dzeta) per unit length."""
     t = np.asarray(t, dtype=np.float64)
     Hc, Wc = box.size
-    return np.stack([t @ box.U * (Wc / box.w), t @ box.W * (Hc / box.d), -(t @ box.V)], axis=-1)
+    return np.stack([dot(t, box.U) * (Wc / box.w), dot(t, box.W) * (Hc / box.d), -dot(t, box.V)], axis=-1)
 
 
 def from_map(box, col, row, zeta):
