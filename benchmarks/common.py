@@ -299,52 +299,6 @@ def _bunny_arrays():
     return np.array(v, np.float64, order="C"), np.array(f, np.int64, order="C")  # writable copies
 
 
-def decimate_quadric(v, f, target):
-    """trimesh's quadric decimation (needs the optional package fast-simplification)."""
-    import trimesh
-
-    m = trimesh.Trimesh(v, f, process=False)
-    d = m.simplify_quadric_decimation(face_count=int(target))
-    return np.asarray(d.vertices, np.float64), np.asarray(d.faces, np.int64)
-
-
-def _cluster(v, f, cell):
-    lo = v.min(axis=0)
-    key = np.floor((v - lo) / cell).astype(np.int64)
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    n = int(inv.max()) + 1
-    cnt = np.bincount(inv, minlength=n).astype(np.float64)
-    nv = np.stack([np.bincount(inv, weights=v[:, k], minlength=n) / cnt for k in range(3)], axis=1)
-    nf = inv[f]
-    ok = (nf[:, 0] != nf[:, 1]) & (nf[:, 1] != nf[:, 2]) & (nf[:, 0] != nf[:, 2])
-    nf = nf[ok]
-    _, keep = np.unique(np.sort(nf, axis=1), axis=0, return_index=True)  # drop duplicate triangles
-    nf = nf[np.sort(keep)]
-    used = np.unique(nf)
-    remap = np.full(n, -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return nv[used], remap[nf]
-
-
-def decimate_cluster(v, f, target):
-    """Vertex clustering on a uniform grid (numpy), cell size bisected to land near ``target`` faces."""
-    ext = float(np.max(v.max(axis=0) - v.min(axis=0)))
-    lo, hi = ext * 1e-4, ext * 0.2          # small cell -> many faces, large cell -> few
-    best = (v, f)
-    for _ in range(30):
-        cell = np.sqrt(lo * hi)
-        nv, nf = _cluster(v, f, cell)
-        best = (nv, nf) if abs(len(nf) - target) < abs(len(best[1]) - target) else best
-        if abs(len(nf) - target) <= 0.02 * target:
-            break
-        if len(nf) > target:
-            lo = cell
-        else:
-            hi = cell
-    return best
-
-
 def lowpoly_bunny_path(target=LOWPOLY_FACES):
     """PLY of the built-in bunny decimated to ~``target`` triangles, cached in ``results/``.
 
@@ -360,15 +314,10 @@ def lowpoly_bunny_path(target=LOWPOLY_FACES):
         if os.path.isfile(p):
             _LOWPOLY[target] = (p, method)
             return p
-    v, f = _bunny_arrays()
-    try:
-        import fast_simplification  # noqa: F401  (trimesh's quadric decimation needs it)
+    from refraction_ref.tables.chaudhari_report import decimate  # quadric if installed, else clustering
 
-        nv, nf = decimate_quadric(v, f, target)
-        method = "quadric"
-    except ImportError:
-        nv, nf = decimate_cluster(v, f, target)
-        method = "cluster"
+    v, f = _bunny_arrays()
+    nv, nf, method = decimate(v, f, target)
     p = results_path(f"bunny_lowpoly_{target}_{method}.ply")
     trimesh.Trimesh(nv, nf, process=False).export(p)
     _LOWPOLY[target] = (p, method)
