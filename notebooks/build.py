@@ -1,0 +1,224 @@
+"""Re-execute the teaching notebooks with a real Jupyter kernel and store their outputs.
+
+    python notebooks/build.py                     # every notebook, at its default resolution
+    python notebooks/build.py caustics_walkthrough error_vs_time
+    python notebooks/build.py --set "N = 48" --dry-run   # a quick run that rewrites nothing
+
+Each notebook is run top to bottom by ``nbclient`` on the ``python3`` kernel
+(ipykernel; jupyter_client starts it with this interpreter, ``sys.executable``),
+with the notebooks folder as its working directory, and written back
+atomically (a temporary file beside it, then ``os.replace``) with its outputs,
+so that it reads on a code-hosting site without running it. A notebook that
+raises is not rewritten; the error names the cell (index and first line).
+
+The first PNG output of the cell tagged ``learn`` is also written to
+``docs/learn/<notebook>.png``: the picture the README's "Learn" section shows.
+
+The tests (``tests/test_notebooks.py``) use :func:`execute` with a small
+resolution injected after each notebook's ``parameters`` cell.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+LEARN = os.path.join(os.path.dirname(HERE), "docs", "learn")
+
+#: in reading order (the README's "Learn" section lists them so)
+NOTEBOOKS = ["imagespace_walkthrough", "caustics_walkthrough", "volumetric_walkthrough", "levelmap_walkthrough",
+             "error_vs_time", "check_a_backend"]
+
+#: what the final injected cell prints before its JSON (see :func:`execute`)
+KEY_MARK = "@@KEY_NUMBERS@@"
+
+
+class NotebookError(RuntimeError):
+    """A cell raised; the message names the notebook, the cell index and its first source line."""
+
+
+def parameters_index(nb):
+    """Index of the first code cell tagged ``parameters`` (papermill's convention)."""
+    for i, c in enumerate(nb.cells):
+        if c.cell_type == "code" and "parameters" in c.get("metadata", {}).get("tags", []):
+            return i
+    raise NotebookError("no code cell is tagged 'parameters'")
+
+
+def _is_injected(cell, injected):
+    return any(cell is c for c in injected)
+
+
+def _first_line(src):
+    return next((ln for ln in src.splitlines() if ln.strip()), "")
+
+
+def execute(path, overrides=None, timeout=600, key_numbers=False, cwd=HERE):
+    """Run a notebook with a fresh ``python3`` kernel; returns ``(nb, seconds, key)``.
+
+    Parameters
+    ----------
+    path : str
+        The ``.ipynb`` file (read, never written here).
+    overrides : str, optional
+        Python source run right after the ``parameters`` cell, as a cell of
+        its own tagged ``injected-parameters`` (e.g. ``"N = 48"``).
+    timeout : float
+        Hang guard for the whole notebook in seconds (not a speed target).
+    key_numbers : bool
+        Append a cell that prints the notebook's ``key`` dict (and the
+        kernel's interpreter) as JSON; it is returned as ``key``, with
+        ``key["_executable"]``.
+    cwd : str
+        The kernel's working directory.
+
+    Raises
+    ------
+    NotebookError
+        When a cell raises or the notebook runs past ``timeout``.
+    """
+    import nbformat
+    from nbclient import NotebookClient
+    from nbclient.exceptions import CellExecutionError, CellTimeoutError, DeadKernelError
+
+    nb = nbformat.read(path, as_version=4)
+    name = os.path.basename(path)
+    injected = []
+    if overrides:
+        i = parameters_index(nb)
+        cell = nbformat.v4.new_code_cell(overrides, metadata={"tags": ["injected-parameters"]})
+        nb.cells.insert(i + 1, cell)
+        injected.append(cell)
+    if key_numbers:
+        cell = nbformat.v4.new_code_cell(
+            "import json as _json, sys as _sys\n"
+            f"print({KEY_MARK!r} + _json.dumps({{'key': globals().get('key'), '_executable': _sys.executable}}, "
+            "default=float))")
+        nb.cells.append(cell)
+        injected.append(cell)
+    deadline = time.monotonic() + timeout
+    running = {}
+
+    def on_start(cell=None, cell_index=None, **_):
+        running["index"] = cell_index
+
+    client = NotebookClient(nb, kernel_name="python3", timeout=int(timeout), startup_timeout=120,
+                            timeout_func=lambda cell: max(1, int(deadline - time.monotonic())),
+                            record_timing=False, resources={"metadata": {"path": cwd}}, on_cell_start=on_start)
+    t0 = time.perf_counter()
+    try:
+        client.execute()
+    except (CellExecutionError, CellTimeoutError, DeadKernelError) as e:
+        idx = running.get("index")
+        if idx is None:
+            raise NotebookError(f"{name}: {type(e).__name__}: {str(e)[-500:]}") from None
+        cell = nb.cells[idx]
+        stored = idx - sum(1 for c in nb.cells[:idx] if _is_injected(c, injected))  # the index as stored
+        errs = [o for o in cell.get("outputs", []) if o.get("output_type") == "error"]
+        if isinstance(e, DeadKernelError):
+            what = "killed the kernel"
+        elif isinstance(e, CellTimeoutError) or not errs:
+            what = f"did not finish within the hang guard of {timeout:g} s"
+        else:
+            what = f"raised {errs[0].get('ename')}: {errs[0].get('evalue')}"
+        where = "an injected cell" if _is_injected(cell, injected) else f"cell {stored}"
+        raise NotebookError(f"{name}: {where} ('{_first_line(cell.source)}') {what}") from None
+    seconds = time.perf_counter() - t0
+    key = None
+    if key_numbers:
+        text = "".join(o.get("text", "") for o in nb.cells[-1].get("outputs", []) if o.get("output_type") == "stream")
+        line = next((ln for ln in text.splitlines() if ln.startswith(KEY_MARK)), None)
+        if line is None:
+            raise NotebookError(f"{name}: the key-numbers cell printed nothing")
+        d = json.loads(line[len(KEY_MARK):])
+        key = d["key"]
+        if isinstance(key, dict):
+            key["_executable"] = d["_executable"]
+    nb.cells = [c for c in nb.cells if not _is_injected(c, injected)]
+    return nb, seconds, key
+
+
+def _umask_mode():
+    """The mode an ordinary new file gets (``mkstemp`` makes 0600 files)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def write_atomic(nb, path):
+    """Write a notebook through a temporary file in its folder, then ``os.replace``."""
+    import nbformat
+
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".build-", suffix=".ipynb")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            nbformat.write(nb, f)
+        os.chmod(tmp, _umask_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def learn_picture(nb):
+    """The first PNG of the cell tagged ``learn`` (bytes), or None."""
+    import base64
+
+    for c in nb.cells:
+        if c.cell_type == "code" and "learn" in c.get("metadata", {}).get("tags", []):
+            for o in c.get("outputs", []):
+                png = o.get("data", {}).get("image/png")
+                if png:
+                    return base64.b64decode(png)
+    return None
+
+
+def write_bytes_atomic(data, path):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), prefix=".build-")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    os.chmod(tmp, _umask_mode())
+    os.replace(tmp, path)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", help=f"notebooks to run (default: all: {', '.join(NOTEBOOKS)})")
+    ap.add_argument("--set", dest="overrides", default=None,
+                    help="Python source run after the parameters cell, e.g. 'N = 48'")
+    ap.add_argument("--dry-run", action="store_true", help="run, but rewrite nothing")
+    ap.add_argument("--timeout", type=float, default=900, help="hang guard per notebook, seconds")
+    a = ap.parse_args(argv)
+    names = [n[:-6] if n.endswith(".ipynb") else n for n in (a.names or NOTEBOOKS)]
+    failed = 0
+    for n in names:
+        path = os.path.join(HERE, n + ".ipynb")
+        try:
+            nb, s, _ = execute(path, a.overrides, a.timeout)
+        except NotebookError as e:
+            print(f"FAIL {e}", file=sys.stderr)
+            failed += 1
+            continue
+        if a.overrides is None and not a.dry_run:
+            write_atomic(nb, path)
+            png = learn_picture(nb)
+            if png:
+                write_bytes_atomic(png, os.path.join(LEARN, n + ".png"))
+            print(f"  {n}: {s:.1f} s, {os.path.getsize(path) / 1e6:.2f} MB written"
+                  + (f", docs/learn/{n}.png" if png else ""))
+        else:
+            print(f"  {n}: {s:.1f} s (not written)")
+    total = sum(os.path.getsize(os.path.join(HERE, f)) for f in os.listdir(HERE))
+    print(f"notebooks/ holds {total / 1e6:.2f} MB")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
