@@ -234,3 +234,37 @@ def test_a_suite_of_another_contract_version_is_refused(suite, tmp_path, capsys)
     assert "contract_version 0" in capsys.readouterr().err
     with pytest.raises(CheckError):
         check(str(tmp_path), str(tmp_path / "nowhere"))
+
+
+def test_report_rows_and_panels_show_what_failed(suite, tmp_path):
+    """A rotated exit direction and a flipped bitmask bit: the report's rows keep their columns
+    (a ``|c|`` in a detail is escaped) and the panels show the angle and the differing bits."""
+    import imageio.v3 as iio
+
+    from refraction_ref.golden.check import _panel, _popcount
+
+    case = "is_diamond_2_4"
+
+    def bug(a):
+        d = a["exit_dir"]
+        ok = np.all(np.isfinite(d), axis=-1)
+        d[ok] = d[ok][:, [1, 2, 0]]  # every exiting direction turned
+        w = a["stage.voxelize.bits"]
+        w[w.shape[0] // 2, w.shape[1] // 2, 0] ^= np.uint32(1)
+
+    cand = _candidate(suite, tmp_path, case, bug)
+    out = check(cand, suite, cases=[case], report=str(tmp_path / "rep"))
+    keys = out["cases"][case]["keys"]
+    assert not keys["exit_dir"]["ok"] and keys["exit_dir"]["panel"]
+    md = (tmp_path / "rep" / "report.md").read_text()
+    row = next(line for line in md.splitlines() if line.startswith("| `exit_dir`"))
+    assert row.count(" | ") == 5 and "\\|" in row  # six cells, the |c| escaped
+    with np.load(os.path.join(suite, case, "golden.npz")) as z:
+        g_dir, g_bits = z["exit_dir"], z["stage.voxelize.bits"]
+    with np.load(os.path.join(cand, case, "result.npz")) as z:
+        c_dir, c_bits = z["exit_dir"], z["stage.voxelize.bits"]
+    # the bit panel's difference is the popcount of the XOR: one bit, in one pixel
+    diff = _popcount(c_bits ^ g_bits)
+    assert diff.sum() == 1 and diff[g_bits.shape[0] // 2, g_bits.shape[1] // 2] == 1
+    p = _panel(str(tmp_path / "dir.png"), "exit_dir", c_dir, g_dir, None, "angle")
+    assert iio.imread(p).ndim == 3

@@ -59,10 +59,26 @@ def _dtype_problem(c, spec):
     return None
 
 
-def _panel(path, key, c, g, bad):
-    """Candidate, golden and |difference| of a failing array (2D slices of what can be shown)."""
+def _popcount(words):
+    """Set bits per pixel of (H, W, K) unsigned words."""
+    w = np.ascontiguousarray(words)
+    return np.unpackbits(w.view(np.uint8).reshape(w.shape[:-1] + (-1,)), axis=-1).sum(axis=-1)
+
+
+def _panel(path, key, c, g, bad, kind=None):
+    """Candidate, golden and their difference for a failing array (2D pictures of what can be shown).
+
+    Bit words (H, W, K) show the set bits per pixel and the bits that differ
+    (popcount of XOR); unit vectors (``kind == 'angle'``, (..., 3)) show the
+    directions as colours and the angle between them in degrees; anything
+    else its middle 2D slice (vectors by their norm) and ``|c - g|``.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    c, g = np.asarray(c), np.asarray(g)
+    if c.shape != g.shape or c.ndim < 2:
+        return None
 
     def img(a):
         a = np.asarray(a, np.float64)
@@ -72,20 +88,43 @@ def _panel(path, key, c, g, bad):
             a = np.linalg.norm(np.nan_to_num(a), axis=-1)
         return np.atleast_2d(a)
 
-    ci, gi = img(c), img(g)
-    if ci.ndim != 2 or ci.shape != gi.shape:
-        return None
+    rgb = None
+    if np.issubdtype(c.dtype, np.unsignedinteger) and c.ndim == 3:
+        ci, gi, diff = _popcount(c), _popcount(g), _popcount(c ^ g)
+        names = ("set bits per pixel", "bits that differ")
+    elif kind == "angle" and c.shape[-1] == 3 and c.ndim in (2, 3):
+        cf, gf = np.asarray(c, np.float64), np.asarray(g, np.float64)
+        if c.ndim == 2:  # (N, 3): a strip
+            cf, gf = cf[None], gf[None]
+        unit = lambda a: a / np.maximum(np.linalg.norm(np.nan_to_num(a), axis=-1, keepdims=True), 1e-300)  # noqa: E731
+        cos = np.clip(np.sum(unit(np.nan_to_num(cf)) * unit(np.nan_to_num(gf)), axis=-1), -1.0, 1.0)
+        diff = np.degrees(np.arccos(cos))
+        diff[~(np.all(np.isfinite(cf), -1) & np.all(np.isfinite(gf), -1))] = np.nan
+        rgb = [np.clip(0.5 + 0.5 * np.nan_to_num(unit(a)), 0.0, 1.0) for a in (cf, gf)]
+        ci = gi = None
+        names = ("direction as colour", "angle between them (deg)")
+    else:
+        ci, gi = img(c), img(g)
+        if ci.ndim != 2 or ci.shape != gi.shape:
+            return None
+        diff = np.abs(ci - gi)
+        names = ("", "|candidate - golden|")
     fig = Figure(figsize=(12, 4))
     FigureCanvasAgg(fig)
     ax = fig.subplots(1, 3)
-    fin = np.isfinite(gi)
-    lo, hi = (float(np.min(gi[fin])), float(np.max(gi[fin]))) if fin.any() else (0.0, 1.0)
-    for x, a, t in ((ax[0], ci, "candidate"), (ax[1], gi, "golden")):
-        im = x.imshow(a, vmin=lo, vmax=hi if hi > lo else lo + 1, cmap="viridis", interpolation="nearest")
-        x.set_title(f"{t}: {key}")
-        fig.colorbar(im, ax=x, fraction=0.046)
-    im = ax[2].imshow(np.abs(ci - gi), cmap="magma", interpolation="nearest")
-    ax[2].set_title("|candidate - golden|")
+    if rgb is not None:
+        for x, a, t in ((ax[0], rgb[0], "candidate"), (ax[1], rgb[1], "golden")):
+            x.imshow(a, interpolation="nearest")
+            x.set_title(f"{t}: {key}\n{names[0]}", fontsize=9)
+    else:
+        fin = np.isfinite(gi)
+        lo, hi = (float(np.min(gi[fin])), float(np.max(gi[fin]))) if fin.any() else (0.0, 1.0)
+        for x, a, t in ((ax[0], ci, "candidate"), (ax[1], gi, "golden")):
+            im = x.imshow(a, vmin=lo, vmax=hi if hi > lo else lo + 1, cmap="viridis", interpolation="nearest")
+            x.set_title(f"{t}: {key}" + (f"\n{names[0]}" if names[0] else ""), fontsize=9)
+            fig.colorbar(im, ax=x, fraction=0.046)
+    im = ax[2].imshow(diff, cmap="magma", interpolation="nearest")
+    ax[2].set_title(names[1], fontsize=9)
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     for x in ax:
         x.set_xticks([])
@@ -184,7 +223,7 @@ def check(candidate, golden, require=(), report=None, panels=True, cases=None):
                 j.update(r)
                 if not r["ok"] and panels and bad is not None:
                     os.makedirs(report, exist_ok=True)
-                    pp = _panel(os.path.join(report, f"{name}__{k}.png"), k, c, g, bad)
+                    pp = _panel(os.path.join(report, f"{name}__{k}.png"), k, c, g, bad, j["kind"])
                     if pp:
                         j["panel"] = os.path.basename(pp)
             if not j["ok"]:
@@ -225,6 +264,7 @@ def format_report(out):
             for k, j in c["keys"].items():
                 frac = (f"{100 * j['failing']:.3g}% / {100 * j['allowed']:.3g}%" if "failing" in j else "")
                 panel = f" ([panel]({j['panel']}))" if j.get("panel") else ""
-                lines.append(f"| `{k}` | {j['stage']} | {j['kind']} | {j.get('detail', '')} | {frac} | "
+                detail = j.get("detail", "").replace("|", "\\|")  # |c| in a detail must not split the row
+                lines.append(f"| `{k}` | {j['stage']} | {j['kind']} | {detail} | {frac} | "
                              f"{'pass' if j['ok'] else '**FAIL**'}{panel} |")
     return "\n".join(lines) + "\n"
