@@ -7,8 +7,9 @@ trace, receiver hits, splat, gather, the final pass) is compared between 1 and
 hits) and the exact photon reference. The kernels that replaced NumPy code
 (the gather's second pass, the channel means, the bilinear look-ups, the
 shadow-map test, the chunked Embree receiver hits, the parallel vertex and
-crease normals and edge angles) are checked against that code, kept here as
-the reference (measured: bit-identical).
+crease normals and edge angles, the chunked photon stream, the grouped splat,
+the kernel blur of ``relative_l1``, the map positions) are checked against
+that code, kept here as the reference (measured: bit-identical).
 """
 
 from __future__ import annotations
@@ -294,3 +295,111 @@ def test_exact_shadow_rays_equal_numpy_with_indexed_triangles_and_any_chunks(on_
         a, b = on_one_and_two_threads(lambda: shade.exact_visibility(it, light, p, n, scene=mesh_scene(v, f)))
         assert np.array_equal(a, want) and np.array_equal(b, want)
         assert np.array_equal(shade.exact_visibility(tris, light, p, n, chunk=777), want)
+
+
+def _window_samples_numpy(cam, n, seed):
+    """window_samples as it was: one generator, the whole grid in NumPy."""
+    rng = np.random.default_rng(int(seed))
+    jj, ii = np.meshgrid(np.arange(n), np.arange(n))
+    u = (jj + rng.random((n, n))) / n
+    v = (ii + rng.random((n, n))) / n
+    x = (u * 2.0 - 1.0) * cam.sx
+    y = (1.0 - v * 2.0) * cam.sy
+    b = cam.basis
+    if cam.ortho:
+        o = np.asarray(cam.eye) + x[..., None] * b[0] + y[..., None] * b[1]
+        d = np.broadcast_to(-b[2], o.shape).copy()
+        flux = np.full(n * n, (2.0 * cam.sx / n) * (2.0 * cam.sy / n))
+    else:
+        d = x[..., None] * b[0] + y[..., None] * b[1] - b[2]
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        o = np.broadcast_to(np.asarray(cam.eye, dtype=np.float64), d.shape).copy()
+        flux = ((2.0 * cam.sx / n) * (2.0 * cam.sy / n) / (1.0 + x * x + y * y) ** 1.5).ravel()
+    half = ((ii + jj) % 2).astype(np.int8).ravel()
+    return o.reshape(-1, 3), d.reshape(-1, 3), flux, half
+
+
+@pytest.mark.parametrize("light", [{"type": "directional", "direction": [0.2, -1.0, -0.1]},
+                                   {"type": "point", "position": [0.5, 3.0, 0.3]}])
+def test_window_samples_chunked_stream_equals_one_generator(on_one_and_two_threads, light):
+    from refraction_ref.caustics.light import window_samples
+    from refraction_ref.lights import light_camera
+
+    v, _ = load_mesh("bunny")
+    for n in (1, 5, 96, 301):
+        cam = light_camera(light, v, n)
+        want = _window_samples_numpy(cam, n, 7)
+        a, b = on_one_and_two_threads(lambda: window_samples(cam, n, 7))
+        for x, y, w in zip(a, b, want):
+            assert x.dtype == w.dtype and x.shape == w.shape
+            assert np.array_equal(x, w) and np.array_equal(y, w)
+
+
+def test_grouped_splat_equals_one_splat_per_group(on_one_and_two_threads):
+    rng = np.random.default_rng(17)
+    n = 6000
+    col, row = rng.uniform(-3, 56, n), rng.uniform(-3, 40, n)
+    row[:3000] = rng.normal(20, 1.5, 3000)  # a crowded band, as a caustic makes
+    col[::97] = np.nan
+    val = rng.random((n, 3))
+    grp = rng.integers(-1, 3, n)  # group -1: in no group's map
+    a, b = on_one_and_two_threads(lambda: splat.splat_bilinear_groups(col, row, val, (37, 53), grp, 3))
+    assert np.array_equal(a, b) and a.shape == (4, 37, 53, 3)
+    assert np.array_equal(a[0], splat.splat_bilinear(col, row, val, (37, 53)))
+    for g in range(3):
+        m = grp == g
+        assert np.array_equal(a[1 + g], splat.splat_bilinear(col[m], row[m], val[m], (37, 53)))
+    assert np.array_equal(splat.splat_bilinear_groups(col, row, val, (37, 53), None, 0)[0], a[0])
+
+
+def _relative_l1_scipy(test, ref, mask=None, blur=1.0):
+    """relative_l1 as it was (SciPy's gaussian_filter, NumPy)."""
+    from scipy.ndimage import gaussian_filter
+
+    a = np.nan_to_num(np.asarray(test, dtype=np.float64))
+    b = np.nan_to_num(np.asarray(ref, dtype=np.float64))
+    if mask is not None:
+        m = np.asarray(mask, bool)
+        a, b = np.where(m, a, 0.0), np.where(m, b, 0.0)
+    if blur > 0:
+        a, b = gaussian_filter(a, blur, mode="constant"), gaussian_filter(b, blur, mode="constant")
+    if mask is not None:
+        a, b = a[m], b[m]
+    den = np.abs(b).sum()
+    return float(np.abs(a - b).sum() / den) if den > 0 else float(np.abs(a).sum() > 0)
+
+
+def test_relative_l1_kernel_blur_equals_scipy(on_one_and_two_threads):
+    from scipy.ndimage import gaussian_filter
+
+    from refraction_ref.levelmap.metrics import _gaussian_filter_constant, relative_l1
+
+    rng = np.random.default_rng(19)
+    for shape in ((64, 48), (5, 3), (1, 9)):
+        a = rng.random(shape) * (rng.random(shape) < 0.4) - 0.1 * (rng.random(shape) < 0.1)
+        b = rng.random(shape) * (rng.random(shape) < 0.4)
+        a.flat[0], b.flat[-1] = np.nan, np.inf
+        for blur in (0.0, 0.5, 1.0, 2.5):
+            g1, g2 = on_one_and_two_threads(lambda: _gaussian_filter_constant(np.nan_to_num(a), blur or 1.0))
+            want = gaussian_filter(np.nan_to_num(a), blur or 1.0, mode="constant")
+            assert np.array_equal(g1, want) and np.array_equal(g2, want)
+            for mask in (None, rng.random(shape) < 0.7):
+                x, y = on_one_and_two_threads(lambda: relative_l1(a, b, mask, blur))
+                assert x == y == _relative_l1_scipy(a, b, mask, blur)
+        assert relative_l1(a, np.zeros(shape)) == _relative_l1_scipy(a, np.zeros(shape))
+
+
+def test_map_position_kernel_equals_to_map(on_one_and_two_threads):
+    from refraction_ref.caustics.receivers import map_position, receiver_set
+    from refraction_ref.levelmap.planes import to_map
+
+    sc = rr.load_scene(SCENE, SMALL)
+    rs = receiver_set(sc, sc.data["lights"][0], 64)
+    p = np.random.default_rng(23).uniform(-3, 3, (5000, 3))
+    p[7] = np.nan
+    (c, r), (c2, r2) = on_one_and_two_threads(lambda: map_position(rs, 0, p))
+    q = to_map(rs.boxes[0], p)
+    for x in (c, c2):
+        assert np.array_equal(x, q[:, 0], equal_nan=True)
+    for x in (r, r2):
+        assert np.array_equal(x, q[:, 1], equal_nan=True)

@@ -30,8 +30,10 @@ References
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
+from ..embree import chunk_length, run_chunks
 
 __all__ = ["light_camera", "texel_flux", "light_direction_at", "window_samples"]
 
@@ -80,22 +82,79 @@ def window_samples(cam, n, seed):
     half : (n * n,) int8
         Checkerboard of the cells (0 / 1): two interleaved halves whose maps
         estimate the reference's own noise.
+
+    Notes
+    -----
+    The jitter is the stream of ``np.random.default_rng(seed)``: ``u`` its
+    first ``n * n`` doubles, ``v`` the next, row-major. Fixed chunks of rows
+    draw theirs on ``numba.get_num_threads()`` threads, each from a copy of
+    the generator advanced to its first draw (``PCG64.advance``), so the
+    samples are the same bits whatever the thread count.
     """
-    rng = np.random.default_rng(int(seed))
-    jj, ii = np.meshgrid(np.arange(n), np.arange(n))
-    u = (jj + rng.random((n, n))) / n
-    v = (ii + rng.random((n, n))) / n
-    x = (u * 2.0 - 1.0) * cam.sx
-    y = (1.0 - v * 2.0) * cam.sy
-    b = cam.basis
+    n = int(n)
+    N = n * n
+    o = np.empty((N, 3))
+    d = np.empty((N, 3))
+    flux = np.empty(N)
+    half = np.empty(N, np.int8)
+    if N == 0:
+        return o, d, flux, half
+    # the stream of np.random.default_rng(seed): u's jitter is its draws [0, N), v's its draws
+    # [N, 2N), row-major. Each chunk of rows jumps a copy of the generator to its own draws
+    # (PCG64.advance: one draw per double; Generator.random releases the GIL): the same numbers
+    # as one generator drawing them all, on every thread
+    state = np.random.PCG64(int(seed)).state
+    ru = np.empty(N)
+    rv = np.empty(N)
+
+    def draws(r0, r1):
+        for start, out in ((r0 * n, ru), (N + r0 * n, rv)):
+            bg = np.random.PCG64()
+            bg.state = state
+            bg.advance(start)
+            a = start % N
+            np.random.Generator(bg).random(out=out[a:a + (r1 - r0) * n])
+
+    run_chunks(draws, n, chunk_length(n, 32, min_chunk=1))
+    b = np.ascontiguousarray(cam.basis, dtype=np.float64)
+    eye = np.asarray(cam.eye, dtype=np.float64)
     if cam.ortho:
-        o = np.asarray(cam.eye) + x[..., None] * b[0] + y[..., None] * b[1]
-        d = np.broadcast_to(-b[2], o.shape).copy()
-        flux = np.full(n * n, (2.0 * cam.sx / n) * (2.0 * cam.sy / n))
-    else:
-        d = x[..., None] * b[0] + y[..., None] * b[1] - b[2]
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
-        o = np.broadcast_to(np.asarray(cam.eye, dtype=np.float64), d.shape).copy()
-        flux = ((2.0 * cam.sx / n) * (2.0 * cam.sy / n) / (1.0 + x * x + y * y) ** 1.5).ravel()
-    half = ((ii + jj) % 2).astype(np.int8).ravel()
-    return o.reshape(-1, 3), d.reshape(-1, 3), flux, half
+        _ortho_samples_kernel(ru, rv, n, float(cam.sx), float(cam.sy), eye, b, o, d, half)
+        flux[:] = (2.0 * cam.sx / n) * (2.0 * cam.sy / n)
+        return o, d, flux, half
+
+    def rows(r0, r1):  # the NumPy expressions on rows [r0, r1) alone (all per cell)
+        m = r1 - r0
+        jj, ii = np.meshgrid(np.arange(n), np.arange(r0, r1))
+        sl = slice(r0 * n, r1 * n)
+        u = (jj + ru[sl].reshape(m, n)) / n
+        v = (ii + rv[sl].reshape(m, n)) / n
+        x = (u * 2.0 - 1.0) * cam.sx
+        y = (1.0 - v * 2.0) * cam.sy
+        dd = x[..., None] * b[0] + y[..., None] * b[1] - b[2]
+        dd /= np.linalg.norm(dd, axis=-1, keepdims=True)
+        d[sl] = dd.reshape(-1, 3)
+        o[sl] = eye
+        flux[sl] = ((2.0 * cam.sx / n) * (2.0 * cam.sy / n) / (1.0 + x * x + y * y) ** 1.5).ravel()
+        half[sl] = ((ii + jj) % 2).astype(np.int8).ravel()
+
+    run_chunks(rows, n, chunk_length(n, 32, min_chunk=1))
+    return o, d, flux, half
+
+
+@nb.njit(cache=True, parallel=True)
+def _ortho_samples_kernel(ru, rv, n, sx, sy, eye, b, o, d, half):
+    # window_samples's NumPy expressions per cell (i, j), operation for operation:
+    # u = (j + ru) / n, x = (2u - 1) sx, o = eye + x b0 + y b1, d = -b2
+    for i0 in nb.prange(n):
+        i = np.int64(i0)
+        for j in range(n):
+            k = i * n + j
+            u = (j + ru[k]) / n
+            vv = (i + rv[k]) / n
+            x = (u * 2.0 - 1.0) * sx
+            y = (1.0 - vv * 2.0) * sy
+            for c in range(3):
+                o[k, c] = eye[c] + x * b[0, c] + y * b[1, c]
+                d[k, c] = -b[2, c]
+            half[k] = (i + j) % 2

@@ -45,11 +45,23 @@ shading sums); the splat gives each band of map rows to one thread, which
 adds its photons in index order; both passes of the gathering own rows of
 their output; Embree's receiver hits and shadow rays run in fixed chunks on
 the shared thread pool (:func:`refraction_ref.embree.run_chunks`). The final
-pass shades the receivers seen directly and both passes' rays in one call.
+pass shades the receivers seen directly and both passes' rays in one call
+(both methods). The exact reference's jittered photons come from one random
+stream, drawn in fixed chunks that each jump to their own draws
+(:func:`~.light.window_samples`); its splat makes the whole map and the two
+halves' maps from one footprint and binning, the halves' blur for the noise
+estimate is a kernel (:func:`~refraction_ref.levelmap.metrics.relative_l1`),
+and the rows that NumPy's boolean masks and fancy indexing gathered or
+scattered (exited photons, receiver pixels, the energy book-keeping's
+subsets) are gathered by kernels in the same order. Sums that cross threads
+stay NumPy's, over the same arrays.
 """
 
 from __future__ import annotations
 
+import math
+
+import numba as nb
 import numpy as np
 
 from ..embree import mesh_scene
@@ -58,14 +70,175 @@ from ..graph import Stage
 from ..lights import light_camera
 from ..optics import beer_lambert, refract
 from ..status import EXITED
-from ..vec3 import dot
 from .light import texel_flux, window_samples
-from .receivers import IndexedTriangles, eye_buffers, hit_exact, map_position, march_eyespace, receiver_set
-from .shade import exact_visibility, shade_points, shadow_map_visibility
-from .splat import accumulate_light, channel_mean, finite_maps, gather_gaussian, splat_bilinear
+from .receivers import IndexedTriangles, eye_buffers, hit_exact, march_eyespace, receiver_set
+from .shade import _take_rows, exact_visibility, shade_points, shadow_map_visibility
+from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
+                    splat_bilinear, splat_bilinear_groups)
 
 __all__ = ["has_caustics", "imagespace_caustic_stages", "exact_caustic_stages", "caustic_arrays", "receiver_hits",
            "splat_maps", "merge_caustics", "skip_reason", "camera_array"]
+
+
+@nb.njit(cache=True, parallel=True)
+def _ray_points_kernel(o, t, d, idx, out):
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        for c in range(3):
+            out[k, c] = o[i, c] + t[i] * d[i, c]
+
+
+def _ray_points(o, t, d, idx):
+    """``o[idx] + t[idx, None] * d[idx]`` on every thread."""
+    out = np.empty((len(idx), 3))
+    if len(idx):
+        _ray_points_kernel(o, np.ascontiguousarray(t, dtype=np.float64), d, np.ascontiguousarray(idx, np.int64),
+                           out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _put_rows_kernel(a, idx, vals, scale):
+    # a[idx] = vals (scale False) or a[idx] *= vals[idx] (scale True)
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        for c in range(a.shape[1]):
+            if scale:
+                a[i, c] *= vals[i, c]
+            else:
+                a[i, c] = vals[k, c]
+
+
+def _put_rows(a, idx, vals):
+    """``a[idx] = vals`` (rows of an (N, C) float64 array), on every thread."""
+    if len(idx):
+        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64), False)
+
+
+@nb.njit(cache=True, parallel=True)
+def _mul_rows_kernel(a, idx, vals):
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        for c in range(a.shape[1]):
+            a[idx[k], c] *= vals[k, c]
+
+
+def _mul_rows(a, idx, vals):
+    """``a[idx] *= vals`` (rows of an (N, C) float64 array), on every thread."""
+    if len(idx):
+        _mul_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
+
+
+@nb.njit(cache=True, parallel=True)
+def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
+    # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        s = rdepth[i] / (rdir[i, 0] * fwd[0] + rdir[i, 1] * fwd[1] + rdir[i, 2] * fwd[2])
+        for c in range(3):
+            out[k, c] = origin[i, c] + rdir[i, c] * s
+
+
+def _depth_points(origin, rdir, rdepth, idx, fwd):
+    out = np.empty((len(idx), 3))
+    if len(idx):
+        _depth_points_kernel(origin, rdir, rdepth, np.ascontiguousarray(idx, np.int64),
+                             np.ascontiguousarray(fwd, dtype=np.float64), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _front_points_kernel(t, dv, oi, zfront, W, H, sx, sy, ortho, pv):
+    # t = where(all(isfinite(t)), t, dv) in place; pv: _final_imagespace's NumPy expressions
+    for k0 in nb.prange(oi.shape[0]):
+        k = np.int64(k0)
+        if not (math.isfinite(t[k, 0]) and math.isfinite(t[k, 1]) and math.isfinite(t[k, 2])):
+            for c in range(3):
+                t[k, c] = dv[k, c]
+        p = oi[k]
+        ii = p // W
+        jj = p - ii * W
+        xs = jj + 0.5
+        ys = ii + 0.5
+        x = (xs / W * 2.0 - 1.0) * sx
+        y = (1.0 - ys / H * 2.0) * sy
+        dfront = zfront[p]
+        if ortho:
+            pv[k, 0] = x
+            pv[k, 1] = y
+        else:
+            pv[k, 0] = x * dfront
+            pv[k, 1] = y * dfront
+        pv[k, 2] = -dfront
+
+
+def _scale_rows(a, idx, vals):
+    """``a[idx] *= vals[idx]`` on every thread."""
+    if len(idx):
+        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), vals, True)
+
+
+@nb.njit(cache=True, parallel=True)
+def _row_means_kernel(a, out):
+    # a.mean(axis=1) of an (N, C) array: NumPy adds the C values in order, then divides by C
+    C = a.shape[1]
+    for k0 in nb.prange(a.shape[0]):
+        k = np.int64(k0)
+        s = 0.0
+        for c in range(C):
+            s += a[k, c]
+        out[k] = s / C
+
+
+@nb.njit(cache=True, parallel=True)
+def _exit_flux_kernel(flux0, ex, trans, out):
+    for k0 in nb.prange(ex.shape[0]):
+        k = np.int64(k0)
+        f = flux0[ex[k]]
+        for c in range(trans.shape[1]):
+            out[k, c] = f * trans[k, c]
+
+
+def _exit_flux(flux0, ex, trans):
+    """``flux0[ex, None] * trans``, on every thread when both are float64 ((N,) and (len(ex), C))."""
+    if not (isinstance(flux0, np.ndarray) and flux0.dtype == np.float64 and flux0.ndim == 1
+            and _f64_rows(trans) and len(trans) == len(ex)):
+        return flux0[ex, None] * trans
+    out = np.empty(trans.shape)
+    if len(ex):
+        _exit_flux_kernel(flux0, np.ascontiguousarray(ex, dtype=np.int64), np.ascontiguousarray(trans), out)
+    return out
+
+
+def _f64_rows(a):
+    """An (N, C >= 1) float64 array: its row means are :func:`_row_means`'s."""
+    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 2 and a.shape[1] > 0
+
+
+def _row_means(a):
+    """``a.mean(axis=1)`` of an (N, C) float64 array (C >= 1), bit for bit, on every thread."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    out = np.empty(len(a))
+    if len(a):
+        _row_means_kernel(a, out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _distance_kernel(hp, o, out):
+    # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf): sqrt((x x + y y) + z z)
+    for k0 in nb.prange(hp.shape[0]):
+        k = np.int64(k0)
+        if not math.isfinite(hp[k, 0]):
+            out[k] = np.inf
+            continue
+        x = hp[k, 0] - o[k, 0]
+        y = hp[k, 1] - o[k, 1]
+        z = hp[k, 2] - o[k, 2]
+        out[k] = np.sqrt((x * x + y * y) + z * z)
 
 
 def has_caustics(scene):
@@ -111,9 +284,21 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
         ok = pix[:, 0] >= 0
         face = np.full(len(o), -1, np.int64)
         face[ok] = eyebuf[1][pix[ok, 0], pix[ok, 1]]
-    P = o + t[:, None] * d
-    face = np.where(np.isfinite(t) & (face >= 0), face, -1)
-    return P, face
+    P = np.empty(o.shape)
+    face_out = np.empty(len(o), np.int64)
+    if len(o):  # P = o + t[:, None] * d; face where t is finite, else -1: on every thread
+        _hit_points_kernel(np.ascontiguousarray(o), np.ascontiguousarray(t, dtype=np.float64),
+                           np.ascontiguousarray(d), np.ascontiguousarray(face, dtype=np.int64), P, face_out)
+    return P, face_out
+
+
+@nb.njit(cache=True, parallel=True)
+def _hit_points_kernel(o, t, d, face, P, face_out):
+    for k0 in nb.prange(o.shape[0]):
+        k = np.int64(k0)
+        for c in range(3):
+            P[k, c] = o[k, c] + t[k] * d[k, c]
+        face_out[k] = face[k] if (math.isfinite(t[k]) and face[k] >= 0) else -1
 
 
 def splat_maps(rs, P, face, flux, size, groups=None):
@@ -131,16 +316,25 @@ def splat_maps(rs, P, face, flux, size, groups=None):
     flux = np.asarray(flux, dtype=np.float64)
     if flux.ndim == 1:
         flux = flux[:, None]
+    flux = np.ascontiguousarray(flux)
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    face = np.ascontiguousarray(face, dtype=np.int64)
+    normals = np.ascontiguousarray(rs.normals, dtype=np.float64)
+    on = np.full(len(face), -1, np.int64)  # the receiver each photon meets, -1 none
+    hit = face >= 0
+    on[hit] = rs.owner[face[hit]]
     for r, box in enumerate(rs.boxes):
-        sel = (face >= 0)
-        sel[sel] = rs.owner[face[sel]] == r
-        cosv = np.abs(dot(rs.normals[face[sel]], box.V))
-        col, row = map_position(rs, r, P[sel])
-        val = flux[sel] * (cosv / box.texel_area)[:, None]
-        maps.append(splat_bilinear(col, row, val, box.size))
+        idx = np.flatnonzero(on == r)
+        # map positions and values in one kernel; the whole map and each group's from one
+        # footprint and binning (splat.splat_bilinear_groups: the bits of separate splats)
+        col, row, val = receiver_photons(P, face, idx, normals, box, flux)
+        if ng == 0:
+            maps.append(splat_bilinear(col, row, val, box.size))
+            continue
+        allm = splat_bilinear_groups(col, row, val, box.size, np.asarray(groups)[idx], ng)
+        maps.append(allm[0])
         for h in range(ng):
-            m = groups[sel] == h
-            per_group[h].append(splat_bilinear(col[m], row[m], val[m], box.size))
+            per_group[h].append(allm[1 + h])
     return maps if groups is None else (maps, per_group)
 
 
@@ -153,18 +347,75 @@ def _photon_stats(flux0, status, trans_exit, landed):
     receiver; the caller adds ``flux_on_receivers`` (what was splatted).
     """
     f = flux0
-    ex = status == EXITED
-    t = trans_exit.mean(axis=1)
+    t = _row_means(trans_exit) if _f64_rows(trans_exit) else trans_exit.mean(axis=1)
+    if (isinstance(f, np.ndarray) and f.dtype == np.float64 and f.ndim == 1 and isinstance(status, np.ndarray)
+            and status.ndim == 1 and status.dtype.kind in "iu" and len(status) == len(f)):
+        # f[status != 0], f[status == EXITED], f[status >= 2] gathered on every thread (fixed
+        # chunks, order kept); their sums NumPy's
+        f_sil, f_ex, f_lost = _split_flux(f, status)
+    else:
+        f_sil, f_ex, f_lost = f[status != 0], f[status == EXITED], f[status >= 2]
+    fe_t = f_ex * t
     return {
-        "flux_silhouette": float(f[status != 0].sum()),
-        "flux_absorbed": float((f[ex] * (1.0 - t)).sum()),
-        "flux_lost_in_object": float(f[(status >= 2)].sum()),
-        "flux_exited": float((f[ex] * t).sum()),
-        "flux_missed_receivers": float((f[ex] * t)[~landed].sum()),
-        "photons_in_silhouette": int(np.count_nonzero(status != 0)),
-        "photons_lost_in_object": int(np.count_nonzero(status >= 2)),
+        "flux_silhouette": float(f_sil.sum()),
+        "flux_absorbed": float((f_ex * (1.0 - t)).sum()),
+        "flux_lost_in_object": float(f_lost.sum()),
+        "flux_exited": float(fe_t.sum()),
+        "flux_missed_receivers": float(fe_t[~landed].sum()),
+        "photons_in_silhouette": len(f_sil),
+        "photons_lost_in_object": len(f_lost),
         "photons_missed_receivers": int(np.count_nonzero(~landed)),
     }
+
+
+_SPLIT_CHUNK = 1 << 16
+
+
+@nb.njit(cache=True, parallel=True)
+def _split_count_kernel(status, exited, chunk, cnt):
+    n = status.shape[0]
+    for q0 in nb.prange(cnt.shape[0]):
+        q = np.int64(q0)
+        for i in range(q * chunk, min(n, (q + 1) * chunk)):
+            s = status[i]
+            if s != 0:
+                cnt[q, 0] += 1
+            if s == exited:
+                cnt[q, 1] += 1
+            if s >= 2:
+                cnt[q, 2] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _split_fill_kernel(status, f, exited, chunk, off, f_sil, f_ex, f_lost):
+    n = status.shape[0]
+    for q0 in nb.prange(off.shape[0]):
+        q = np.int64(q0)
+        a, b, c = off[q, 0], off[q, 1], off[q, 2]
+        for i in range(q * chunk, min(n, (q + 1) * chunk)):
+            s = status[i]
+            if s != 0:
+                f_sil[a] = f[i]
+                a += 1
+            if s == exited:
+                f_ex[b] = f[i]
+                b += 1
+            if s >= 2:
+                f_lost[c] = f[i]
+                c += 1
+
+
+def _split_flux(f, status):
+    """``f[status != 0], f[status == EXITED], f[status >= 2]``, on every thread."""
+    nch = max(1, -(-len(f) // _SPLIT_CHUNK))
+    cnt = np.zeros((nch, 3), np.int64)
+    _split_count_kernel(status, EXITED, _SPLIT_CHUNK, cnt)
+    off = np.zeros((nch, 3), np.int64)
+    np.cumsum(cnt[:-1], axis=0, out=off[1:])
+    tot = cnt.sum(axis=0)
+    f_sil, f_ex, f_lost = np.empty(tot[0]), np.empty(tot[1]), np.empty(tot[2])
+    _split_fill_kernel(status, f, EXITED, _SPLIT_CHUNK, off, f_sil, f_ex, f_lost)
+    return f_sil, f_ex, f_lost
 
 
 def _collect(lights, rs, per_light, arrays, gather):
@@ -321,7 +572,7 @@ def _st_splat(ctx, reference):
             stats.append({"photons": 0})
             continue
         P, face = hit
-        flux = L["flux0"][L["ex"], None] * L["trans"]
+        flux = _exit_flux(L["flux0"], L["ex"], L["trans"])
         if reference:  # the maps and those of the two interleaved halves, from one set of map positions
             m, hm = splat_maps(rs, P, face, flux, size, groups=L["half"])
             maps.append(m)
@@ -330,7 +581,8 @@ def _st_splat(ctx, reference):
         else:
             maps.append(splat_maps(rs, P, face, flux, size))
         s = _photon_stats(L["flux0"], L["status"], L["trans"], face >= 0)
-        s["flux_on_receivers"] = float(flux[face >= 0].mean(axis=1).sum())
+        s["flux_on_receivers"] = float((_row_means(flux)[face >= 0] if _f64_rows(flux)
+                                        else flux[face >= 0].mean(axis=1)).sum())
         if reference:
             s["photons"] = [int(d["exact"]["photons"])] * 2
         else:
@@ -471,10 +723,16 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
     obj &= ~rec
     base = np.zeros((H, W, 3))
-    # receivers seen directly: shaded with the object's rays below (one call)
-    dirs = rdir[rec]
+    # receivers seen directly: shaded with the object's rays below (one call); the rows of
+    # the boolean masks (row-major) gathered by kernels on every thread
+    ri = np.flatnonzero(rec)
+    rdir_f = np.ascontiguousarray(rdir.reshape(-1, 3))
+    dirs = _take_rows(rdir_f, ri)
     fwd = -cam.basis[2]
-    direct = (origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None], rtri[rec], dirs)
+    # origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None]
+    direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
+                            np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
+              rtri.reshape(-1)[ri], dirs)
     bg = ~rec & ~obj
     if bg.any():
         base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
@@ -485,39 +743,37 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
     st = tr["status"]
     ex = obj & (st == 1)
-    trans = beer_lambert(absorption, tr["path_length"][obj], ior)  # per pixel: only the object's
-    o_full = tr["exit_pos"][ex]  # world space (layered_trace)
-    d_full = tr["exit_dir"][ex]
+    oi = np.flatnonzero(obj)
+    xi = np.flatnonzero(ex)
+    trans = beer_lambert(absorption, tr["path_length"].reshape(-1)[oi], ior)  # per pixel: only the object's
+    o_full = _take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
+    d_full = _take_rows(tr["exit_dir"].reshape(-1, 3), xi)
     # the thesis's final pass: refraction at the front surface only
     nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
-    dv = cam.primary_rays_view()[obj]
-    t, _ = refract(dv, nrm[obj], outside / ior)
-    t = np.where(np.all(np.isfinite(t), axis=1)[:, None], t, dv)
-    ii, jj = np.nonzero(obj)  # row-major, the order of a boolean mask
-    xs = jj + 0.5
-    ys = ii + 0.5
-    x = (xs / W * 2.0 - 1.0) * cam.sx
-    y = (1.0 - ys / H * 2.0) * cam.sy
-    dfront = zfront[obj]
-    if cam.ortho:
-        pv = np.stack([x, y, -dfront], axis=1)
-    else:
-        pv = np.stack([x * dfront, y * dfront, -dfront], axis=1)
+    dv = _take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
+    t, _ = refract(dv, _take_rows(nrm.reshape(-1, 3), oi), outside / ior)
+    # np.where(all(isfinite(t), axis=1), t, dv), and the front points in view space (pixel
+    # centres (jj + .5, ii + .5) at depth zfront), on every thread
+    pv = np.empty((len(oi), 3))
+    _front_points_kernel(t, dv, oi, np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), W, H,
+                         float(cam.sx), float(cam.sy), bool(cam.ortho), pv)
     # both passes' rays in one march and one shading: each ray's colour is its own, and one call
     # instead of two halves the serial work around the kernels
     n_full = len(o_full)
-    c, base[rec] = _shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
-                               np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis,
-                               direct)
+    c, cd = _shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
+                        np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
+    base = base.reshape(-1, 3)
+    _put_rows(base, ri, cd)
     full = base.copy()
     single = base.copy()
     if n_full:
-        full[ex] = c[:n_full]
+        _put_rows(full, xi, c[:n_full])
     stuck = obj & (st != 1)
     if stuck.any():
-        full[stuck] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
-    full[obj] *= trans
-    single[obj] = c[n_full:]
+        full[stuck.reshape(-1)] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
+    _mul_rows(full, oi, trans)  # full[obj] *= trans
+    _put_rows(single, oi, c[n_full:])
+    full, single = full.reshape(H, W, 3), single.reshape(H, W, 3)
     return full.astype(np.float32), single.astype(np.float32)
 
 
@@ -545,11 +801,13 @@ def _st_photon_trace_exact(ctx):
                          outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
         st = tr["status"].astype(np.int8)
         ex = np.flatnonzero(st == EXITED)
-        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": tr["transmittance"][ex],
-                              "o": tr["exit_pos"][ex], "d": tr["exit_dir"][ex], "half": half[ex]})
+        # the exited photons' rows, gathered on every thread; the buffers are those arrays
+        eo, ed = _take_rows(tr["exit_pos"], ex), _take_rows(tr["exit_dir"], ex)
+        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex,
+                              "trans": _take_rows(tr["transmittance"], ex), "o": eo, "d": ed, "half": half[ex]})
         out[f"camera_{l}"] = camera_array(lcam)
-        out[f"exit_pos_{l}"] = tr["exit_pos"][ex]
-        out[f"exit_dir_{l}"] = tr["exit_dir"][ex]
+        out[f"exit_pos_{l}"] = eo
+        out[f"exit_dir_{l}"] = ed
     ctx.note(f"exact photon reference: {n}x{n} jittered photons per light through the triangles")
     return out
 
@@ -573,16 +831,15 @@ def _st_final_exact(ctx):
         return exact_visibility(obj_tris, lights[l], pts, nrm, scene=obj_scene, scale=scale)
 
     H, W = origin.shape[:2]
-    o = origin.reshape(-1, 3)
-    dd = rdir.reshape(-1, 3)
+    o = np.ascontiguousarray(origin.reshape(-1, 3), dtype=np.float64)
+    dd = np.ascontiguousarray(rdir.reshape(-1, 3), dtype=np.float64)
     t_rec, f_rec = hit_exact(rs.tris, o, dd)
     hp = eye_tr.get("hit_pos")
-    t_obj = np.full(len(o), np.inf) if hp is None else np.where(np.isfinite(hp[:, 0]),
-                                                              np.linalg.norm(hp - o, axis=1), np.inf)
+    t_obj = np.full(len(o), np.inf)
+    if hp is not None:  # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf), on every thread
+        _distance_kernel(np.ascontiguousarray(hp, dtype=np.float64), o, t_obj)
     rec = np.isfinite(t_rec) & (t_rec < t_obj)
     img = np.zeros((len(o), 3))
-    if rec.any():
-        img[rec] = shade_points(rs, lights, rgb_maps, o[rec] + t_rec[rec, None] * dd[rec], f_rec[rec], dd[rec], vis)
     obj = np.isfinite(t_obj) & ~rec
     bg = ~rec & ~obj
     env = d["environment"]
@@ -590,13 +847,19 @@ def _st_final_exact(ctx):
         img[bg] = environment_lookup(env, dd[bg], ctx.scene.base_dir)
     st = eye_tr["status"]
     ex = obj & (st == EXITED)
-    if ex.any():
-        img[ex] = _shade_rays(ctx.scene, rs, None, eye_tr["exit_pos"][ex], eye_tr["exit_dir"][ex], "exact", None,
-                              rgb_maps, vis)
+    # the receivers seen directly (o + t d) and the exit rays' receivers in one shading call
+    # (every point's colour is its own): one pass of shadow rays, one of map look-ups
+    ri, xi = np.flatnonzero(rec), np.flatnonzero(ex)
+    if len(ri) or len(xi):
+        direct = (_ray_points(o, t_rec, dd, ri), f_rec[ri], _take_rows(dd, ri))
+        c, cd = _shade_rays(ctx.scene, rs, None, _take_rows(eye_tr["exit_pos"], xi),
+                            _take_rows(eye_tr["exit_dir"], xi), "exact", None, rgb_maps, vis, direct)
+        _put_rows(img, ri, cd)
+        _put_rows(img, xi, c)
     stuck = obj & (st != EXITED)
     if stuck.any():
         img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], ctx.scene.base_dir)
-    img[obj] *= eye_tr["transmittance"][obj]
+    _scale_rows(img, np.flatnonzero(obj), np.ascontiguousarray(eye_tr["transmittance"], dtype=np.float64))
     ctx.note("receivers lit directly (exact shadow rays) and by the caustics; the object traced exactly")
     return {"image_caustics": img.reshape(H, W, 3).astype(np.float32)}
 

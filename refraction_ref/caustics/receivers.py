@@ -103,9 +103,38 @@ def receiver_set(scene, light, size):
 
 
 def map_position(rs, r, points):
-    """Continuous (col, row) of world points in receiver ``r``'s caustic map."""
-    q = to_map(rs.boxes[r], points)
-    return q[..., 0], q[..., 1]
+    """Continuous (col, row) of world points in receiver ``r``'s caustic map.
+
+    :func:`~refraction_ref.levelmap.planes.to_map`'s col and row, operation for operation
+    (``q = p - centre``, ``col = (q.U / w + 0.5) Wc``, ``row = (q.W / d + 0.5) Hc``, the dot
+    products in :func:`~refraction_ref.vec3.dot`'s order), in a kernel parallel over the points.
+    """
+    box = rs.boxes[r]
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim < 1 or p.shape[-1] != 3:
+        q = to_map(box, points)
+        return q[..., 0], q[..., 1]
+    flat = np.ascontiguousarray(p).reshape(-1, 3)
+    Hc, Wc = box.size
+    frame = np.array([box.center, box.U, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
+    col, row = np.empty(len(flat)), np.empty(len(flat))
+    _map_position_kernel(flat, frame, float(Hc), float(Wc), col, row)
+    return col.reshape(p.shape[:-1]), row.reshape(p.shape[:-1])
+
+
+@nb.njit(cache=True, parallel=True)
+def _map_position_kernel(p, frame, Hc, Wc, col, row):
+    cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
+    ux, uy, uz = frame[1, 0], frame[1, 1], frame[1, 2]
+    wx, wy, wz = frame[2, 0], frame[2, 1], frame[2, 2]
+    bw, bd = frame[3, 0], frame[3, 1]
+    for k0 in nb.prange(p.shape[0]):
+        k = np.int64(k0)
+        qx = p[k, 0] - cx
+        qy = p[k, 1] - cy
+        qz = p[k, 2] - cz
+        col[k] = ((qx * ux + qy * uy + qz * uz) / bw + 0.5) * Wc
+        row[k] = ((qx * wx + qy * wy + qz * wz) / bd + 0.5) * Hc
 
 
 def eye_buffers(rs, cam):
@@ -363,21 +392,50 @@ def hit_exact(tris, origins, dirs, scene=None):
     o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     n = len(o)
-    t = np.full(n, np.nan)
-    face = np.full(n, -1, np.int64)
     if n == 0 or len(tris) == 0:
-        return t, face
+        return np.full(n, np.nan), np.full(n, -1, np.int64)
+    t = np.empty(n)  # rows set to NaN / -1 by their chunk (_finite_rows32), then the hits
+    face = np.empty(n, np.int64)
     scene = commit(soup_scene(np.asarray(tris)) if scene is None else scene)  # built before the threads query it
 
     VF = _indexed(tris)
 
     def one(a, b):
-        # rays [a, b): the finite ones are traced (the test too runs in the chunk's thread)
-        ok = np.all(np.isfinite(o[a:b]), axis=1) & np.all(np.isfinite(d[a:b]), axis=1)
-        _hit_rows(VF, scene, o, d, a + np.flatnonzero(ok), t, face)
+        # rays [a, b): the finite ones are traced; their float32 copies for Embree are made
+        # by a nogil kernel (no NumPy under the GIL), in the chunk's thread
+        m = b - a
+        ii = np.empty(m, np.int64)
+        o32 = np.empty((m, 3), np.float32)
+        d32 = np.empty((m, 3), np.float32)
+        cnt = _finite_rows32(o, d, a, b, ii, o32, d32, t, face)
+        if cnt == 0:
+            return
+        res = scene.run(o32[:cnt], d32[:cnt], output=1)
+        _mt_kernel(VF[0], VF[1], o, d, ii[:cnt], np.asarray(res["primID"]), np.asarray(res["tfar"]), t, face)
 
     run_chunks(one, n, chunk_length(n, HIT_CHUNK))
     return t, face
+
+
+@nb.njit(cache=True, nogil=True)
+def _finite_rows32(o, d, a, b, ii, o32, d32, t, face):
+    # rays [a, b): t NaN and face -1 (no hit yet); those whose origin and direction are finite,
+    # in order: their indices and float32 copies (NumPy's casts: round to nearest); returns how many
+    cnt = 0
+    for i in range(a, b):
+        t[i] = np.nan
+        face[i] = -1
+        ok = True
+        for c in range(3):
+            if not (math.isfinite(o[i, c]) and math.isfinite(d[i, c])):
+                ok = False
+        if ok:
+            ii[cnt] = i
+            for c in range(3):
+                o32[cnt, c] = np.float32(o[i, c])
+                d32[cnt, c] = np.float32(d[i, c])
+            cnt += 1
+    return cnt
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -421,16 +479,6 @@ def _indexed(tris):
         return tris.vertices, tris.faces
     V = np.ascontiguousarray(tris, dtype=np.float64).reshape(-1, 3)
     return V, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
-
-
-def _hit_rows(VF, scene, o, d, ii, t, face):
-    """Rays ``ii``: Embree's nearest triangle, then t in float64 on it (rows ``ii`` of ``t``, ``face``)."""
-    if len(ii) == 0:
-        return
-    res = scene.run(np.ascontiguousarray(o[ii], dtype=np.float32),
-                    np.ascontiguousarray(d[ii], dtype=np.float32), output=1)
-    _mt_kernel(VF[0], VF[1], o, d, np.ascontiguousarray(ii, dtype=np.int64), np.asarray(res["primID"]),
-               np.asarray(res["tfar"]), t, face)
 
 
 def occluded(tris, origins, dirs, tmax=None, scene=None):

@@ -114,6 +114,23 @@ def _albedo_kernel(albedo, owner, light_sum, out):
             out[k, c] = albedo[owner[k], c] * light_sum[k, c]
 
 
+@nb.njit(cache=True, parallel=True)
+def _take_rows_kernel(a, idx, out):
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        for c in range(a.shape[1]):
+            out[k, c] = a[idx[k], c]
+
+
+def _take_rows(a, idx):
+    """``a[idx]`` of an (N, C) float64 array, on every thread."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    out = np.empty((len(idx), a.shape[1]))
+    if len(idx):
+        _take_rows_kernel(a, np.ascontiguousarray(idx, dtype=np.int64), out)
+    return out
+
+
 def sample_bilinear(E, col, row):
     """Bilinear look-up of a map (Hc, Wc, C) at continuous texel positions, clamped at the border."""
     Hc, Wc = E.shape[:2]
@@ -180,6 +197,22 @@ def shadow_map_visibility(lcam, zmin, points, bias):
     return out
 
 
+@nb.njit(cache=True, parallel=True)
+def _shadow_rays_kernel(p, n, tl, s, o, d):
+    # exact_visibility's rays towards a directional light: side = +-1 as n . to_light >= 0
+    # (einsum's order), o = p + s (to_light + side n), d = to_light
+    tx, ty, tz = tl[0], tl[1], tl[2]
+    for k0 in nb.prange(p.shape[0]):
+        k = np.int64(k0)
+        side = 1.0 if _einsum_dot(n[k, 0], n[k, 1], n[k, 2], tx, ty, tz) >= 0 else -1.0
+        o[k, 0] = p[k, 0] + s * (tx + side * n[k, 0])
+        o[k, 1] = p[k, 1] + s * (ty + side * n[k, 1])
+        o[k, 2] = p[k, 2] + s * (tz + side * n[k, 2])
+        d[k, 0] = tx
+        d[k, 1] = ty
+        d[k, 2] = tz
+
+
 def exact_visibility(obj_tris, light, points, normals, chunk=None, scene=None, scale=None):
     """Visibility of a light at world points past the refractive triangles (Embree shadow rays).
 
@@ -214,6 +247,15 @@ def exact_visibility(obj_tris, light, points, normals, chunk=None, scene=None, s
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     pos = np.asarray(light["position"], dtype=np.float64) if light["type"] == "point" else None
     scene = commit(soup_scene(np.asarray(obj_tris)) if scene is None else scene)  # built before the threads query it
+    if pos is None and chunk is None:
+        # a directional light: every ray's origin and direction by one parallel kernel (the
+        # NumPy expressions below, operation for operation), then the chunked Embree hits
+        L, _ = light_direction_at(light, p[:1])
+        tl = -np.asarray(L, dtype=np.float64)[0]
+        o = np.empty((len(p), 3))
+        d = np.empty((len(p), 3))
+        _shadow_rays_kernel(p, n, tl, 1e-6 * scale, o, d)
+        return (~occluded(obj_tris, o, d, None, scene)).astype(np.float64)
     hit = np.empty(len(p), dtype=bool)
 
     def one(a, b):
@@ -265,15 +307,16 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     for l, lt in enumerate(lights):
         L, fall = light_direction_at(lt, P)
         _cosine_kernel(n, L, cos)
-        lit = cos > 0
+        lit = np.flatnonzero(cos > 0)
         v = np.zeros(M)
-        if lit.any():
-            v[lit] = visibility(l, P[lit], n[lit])
+        if len(lit):  # v[lit] = visibility(l, P[lit], n[lit]), the rows gathered on every thread
+            v[lit] = visibility(l, P if len(lit) == M else _take_rows(P, lit),
+                                n if len(lit) == M else _take_rows(n, lit))
         _add_direct_kernel(np.asarray(lt["radiance"], dtype=np.float64), cos, fall, v, light_sum)
     for r in range(len(rs.boxes)):
         sel = np.flatnonzero(owner == r)
         if len(sel):
-            col, row = map_position(rs, r, P[sel])
+            col, row = map_position(rs, r, P if len(sel) == M else _take_rows(P, sel))
             # light_sum[sel] += sample_bilinear(maps_rgb[r], col, row), on every thread
             _add_bilinear_kernel(np.ascontiguousarray(maps_rgb[r], dtype=np.float64),
                                  np.ascontiguousarray(col, dtype=np.float64),

@@ -20,7 +20,11 @@ Determinism: photons are binned into bands of 8 map rows (in photon index
 order, as the rasterizer bins triangles) and each band is owned by one
 thread, which adds its photons in index order; the gather computes each
 texel independently (both passes of the separable filter own rows of their
-output). Results are bit-identical whatever the thread count.
+output). The exact reference's maps of its two interleaved halves come from
+the same footprint and binning as the whole map
+(:func:`splat_bilinear_groups`): each (band, map) pair is one thread's, which
+adds that map's photons in index order. Results are bit-identical whatever
+the thread count.
 
 References
 ----------
@@ -40,7 +44,7 @@ import numpy as np
 
 from ..raster import BAND, bin_bands
 
-__all__ = ["splat_bilinear", "gather_gaussian", "gaussian_weights", "accumulate_light", "channel_mean", "finite_maps"]
+__all__ = ["splat_bilinear", "splat_bilinear_groups", "receiver_photons", "gather_gaussian", "gaussian_weights", "accumulate_light", "channel_mean", "finite_maps"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -136,6 +140,151 @@ def splat_bilinear(col, row, values, shape, out=None):
     with nb.parallel_chunksize(1):
         _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, BAND, out)
     return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _group_counts_kernel(counts, items, grp, gc):
+    # gc[b, g]: how many of band b's items are of group g
+    ng = gc.shape[1]
+    for b0 in nb.prange(counts.shape[0] - 1):
+        b = np.int64(b0)
+        for p in range(counts[b], counts[b + 1]):
+            g = grp[items[p]]
+            if 0 <= g < ng:
+                gc[b, g] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _group_fill_kernel(counts, items, grp, goff, gitems):
+    # band b's items of group g, in their order, at gitems[goff[b ng + g]:goff[b ng + g + 1]]
+    ng = (goff.shape[0] - 1) // (counts.shape[0] - 1)
+    for b0 in nb.prange(counts.shape[0] - 1):
+        b = np.int64(b0)
+        pos = goff[b * ng:(b + 1) * ng].copy()
+        for p in range(counts[b], counts[b + 1]):
+            k = items[p]
+            g = grp[k]
+            if 0 <= g < ng:
+                gitems[pos[g]] = k
+                pos[g] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, band, out):
+    # out[0]: every photon; out[1 + g]: the photons of group g. Work item q is (band q // M,
+    # map q % M): each owned by one thread, which adds the band's photons (of its group) in
+    # index order, so every map is the one _splat_kernel makes of its photons alone, and a
+    # crowded band's maps go to different threads
+    C = val.shape[1]
+    M = out.shape[0]
+    ng = M - 1
+    nb_bands = counts.shape[0] - 1
+    for q0 in nb.prange(nb_bands * M):
+        q = np.int64(q0)
+        b = q // M
+        m = q % M
+        r0 = b * band
+        r1 = min(r0 + band, Hc) - 1
+        if m == 0:
+            p0, p1 = counts[b], counts[b + 1]
+        else:
+            p0, p1 = goff[b * ng + m - 1], goff[b * ng + m]
+        for p in range(p0, p1):
+            k = items[p] if m == 0 else gitems[p]
+            for di in range(2):
+                i = min(max(i0s[k] + di, 0), Hc - 1)
+                if i < r0 or i > r1:
+                    continue
+                wy = fy[k] if di == 1 else 1.0 - fy[k]
+                for dj in range(2):
+                    j = min(max(j0s[k] + dj, 0), Wc - 1)
+                    w = wy * (fx[k] if dj == 1 else 1.0 - fx[k])
+                    if w == 0.0:
+                        continue
+                    for c in range(C):
+                        out[m, i, j, c] += w * val[k, c]
+
+
+def splat_bilinear_groups(col, row, values, shape, groups, ng):
+    """:func:`splat_bilinear` of every point, and of the points of each group ``0 .. ng - 1`` alone,
+    from one footprint and one binning (the same bits as separate calls on each subset).
+
+    Returns
+    -------
+    (1 + ng, Hc, Wc, C) float64
+        Row 0 the map of every point, row ``1 + g`` that of group ``g`` (points of other
+        groups, e.g. negative, in none).
+    """
+    Hc, Wc = int(shape[0]), int(shape[1])
+    ng = int(ng)
+    val = np.ascontiguousarray(values, dtype=np.float64)
+    if val.ndim == 1:
+        val = val[:, None]
+    out = np.zeros((1 + ng, Hc, Wc, val.shape[1]))
+    n = val.shape[0]
+    if n == 0:
+        return out
+    col = np.ascontiguousarray(col, dtype=np.float64)
+    row = np.ascontiguousarray(row, dtype=np.float64)
+    grp = np.ascontiguousarray(groups, dtype=np.int64) if ng else np.zeros(n, np.int64)
+    rows = np.empty((n, 2), np.int64)
+    i0s = np.empty(n, np.int64)
+    j0s = np.empty(n, np.int64)
+    fx = np.empty(n)
+    fy = np.empty(n)
+    _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
+    counts, items = bin_bands(rows, Hc, BAND)
+    # each band's items split by group (their order kept), so a group's map reads only its photons
+    nbands = len(counts) - 1
+    gc = np.zeros((nbands, max(ng, 1)), np.int64)
+    if ng:
+        _group_counts_kernel(counts, items, grp, gc)
+    goff = np.zeros(nbands * ng + 1, np.int64)
+    np.cumsum(gc[:, :ng].ravel(), out=goff[1:])
+    gitems = np.empty(max(int(goff[-1]), 1), np.int64)
+    if ng:
+        _group_fill_kernel(counts, items, grp, goff, gitems)
+    with nb.parallel_chunksize(1):
+        _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, BAND, out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _receiver_photons_kernel(P, face, idx, normals, frame, texel_area, Hc, Wc, flux, col, row, val):
+    # per photon idx[k] on the receiver: its map position (levelmap.planes.to_map: q = p - centre,
+    # col = (q.U / w + 0.5) Wc, row = (q.W / d + 0.5) Hc, vec3.dot's order) and its irradiance
+    # flux |n.V| / A_texel (splat_maps's NumPy expressions, operation for operation)
+    cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
+    ux, uy, uz = frame[1, 0], frame[1, 1], frame[1, 2]
+    vx, vy, vz = frame[2, 0], frame[2, 1], frame[2, 2]
+    wx, wy, wz = frame[3, 0], frame[3, 1], frame[3, 2]
+    bw, bd = frame[4, 0], frame[4, 1]
+    C = flux.shape[1]
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        f = face[i]
+        cosv = abs(normals[f, 0] * vx + normals[f, 1] * vy + normals[f, 2] * vz)
+        qx = P[i, 0] - cx
+        qy = P[i, 1] - cy
+        qz = P[i, 2] - cz
+        col[k] = ((qx * ux + qy * uy + qz * uz) / bw + 0.5) * Wc
+        row[k] = ((qx * wx + qy * wy + qz * wz) / bd + 0.5) * Hc
+        s = cosv / texel_area
+        for c in range(C):
+            val[k, c] = flux[i, c] * s
+
+
+def receiver_photons(P, face, idx, normals, box, flux):
+    """Map positions (col, row) and splat values (N, C) of the photons ``idx`` on receiver ``box``."""
+    Hc, Wc = box.size
+    frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
+    n = len(idx)
+    col, row, val = np.empty(n), np.empty(n), np.empty((n, flux.shape[1]))
+    if n:
+        _receiver_photons_kernel(P, face, idx, normals, frame, float(box.texel_area), float(Hc), float(Wc), flux,
+                                 col, row, val)
+    return col, row, val
 
 
 def gaussian_weights(window):
