@@ -94,3 +94,35 @@ def test_parallel_slab_entry_matches_box_entry(on_one_and_two_threads):
     a, b = on_one_and_two_threads(run)
     assert np.array_equal(a, t_ref) and np.array_equal(b, t_ref)
     assert np.array_equal(np.signbit(a), np.signbit(t_ref))
+
+
+def test_parallel_slab_exit_and_entry_points_match_numpy(on_one_and_two_threads):
+    """The photon kernels' exit parameter and texel entry points equal box_entry's NumPy, bit for bit."""
+    from refraction_ref.volumetric.photons import _slab_both, box_entry, entry_points
+
+    rng = np.random.default_rng(5)
+    o = rng.uniform(-3, 3, (4000, 3))
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[::7, 0] = 0.0
+    d[::11, 1] = -0.0
+    o[::13, 0] = 1.0
+    o[::19, 1] = -1.0
+    o[::23, 2] = -0.0
+    o[::17] = 0.0
+    t_in_ref, t_out_ref = box_entry(o, d, BOUNDS)
+    _, back = box_entry(o, -d, BOUNDS)
+    e_ref = o - np.where(np.isfinite(back), np.maximum(back, 0.0), 0.0)[:, None] * d
+
+    def run():
+        t_in = np.empty(len(o))
+        t_out = np.empty(len(o))
+        _slab_both(o, d, BOUNDS, t_in, t_out, True)
+        e = np.empty_like(o)
+        entry_points(o, d, BOUNDS, e)
+        return t_in, t_out, e
+
+    for got in on_one_and_two_threads(run):
+        for x, y in zip(got, (t_in_ref, t_out_ref, e_ref)):
+            ok = ~np.isnan(y)  # (a NaN's sign bit may differ: t_out is only ever compared)
+            assert np.array_equal(x, y, equal_nan=True) and np.array_equal(np.signbit(x[ok]), np.signbit(y[ok]))

@@ -1063,39 +1063,69 @@ def smooth_radiance(sums):
     direction : (nx, ny, nz, 3) float32
         Unit mean photon direction (zero where no photon passed).
     """
-    from .voxelize import separable_correlate
-
-    s = separable_correlate(sums, np.array([0.25, 0.5, 0.25]))  # parallel over slabs, bit-identical to scipy
-    s = np.ascontiguousarray(s)
-    rad = np.empty(s.shape[:3] + (3,), np.float32)
-    direction = np.empty(s.shape[:3] + (3,), np.float32)
-    _split_directions(s, rad, direction)
+    # voxelize.separable_correlate (x, then y, then z passes; bit-identical to scipy) and the split, fused one
+    # x slab at a time: every value is formed by the same operations, but no intermediate volume is written
+    w = np.array([0.25, 0.5, 0.25])
+    src = np.ascontiguousarray(sums, dtype=np.float64)
+    rad = np.empty(src.shape[:3] + (3,), np.float32)
+    direction = np.empty(src.shape[:3] + (3,), np.float32)
+    nx = src.shape[0]
+    chunks = max(1, min(nx, 4 * nb.get_num_threads()))  # slabs per chunk: any split gives the same values
+    _smooth_split(src, w, np.linspace(0, nx, chunks + 1).astype(np.int64), rad, direction)
     return rad, direction
 
 
 @nb.njit(cache=True, parallel=True)
-def _split_directions(s, rad, direction):
-    """Radiance as float32 and the unit mean direction; parallel over x slabs.
-
-    The same operations as ``np.linalg.norm(d, axis=-1)`` (sqrt of the
-    squares summed in order) and ``d / norm`` where the norm is > 0, then
-    rounded to float32.
-    """
-    nx, ny, nz = s.shape[0], s.shape[1], s.shape[2]
-    for i in nb.prange(nx):
-        for j in range(ny):
-            for k in range(nz):
-                for c in range(3):
-                    rad[i, j, k, c] = np.float32(s[i, j, k, c])
-                d0 = s[i, j, k, 3]
-                d1 = s[i, j, k, 4]
-                d2 = s[i, j, k, 5]
-                nrm = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                if nrm > 0:
-                    direction[i, j, k, 0] = np.float32(d0 / nrm)
-                    direction[i, j, k, 1] = np.float32(d1 / nrm)
-                    direction[i, j, k, 2] = np.float32(d2 / nrm)
-                else:
-                    direction[i, j, k, 0] = np.float32(0.0)
-                    direction[i, j, k, 1] = np.float32(0.0)
-                    direction[i, j, k, 2] = np.float32(0.0)
+def _smooth_split(a, w, bounds, rad, direction):
+    """``voxelize._sym_correlate_axis`` along x, y, then z (the same operations per value), then the split:
+    radiance rounded to float32, and the unit direction by the operations of ``np.linalg.norm(d, axis=-1)``
+    (sqrt of the squares summed in order) and ``d / norm`` where the norm is > 0, rounded to float32;
+    slab by slab, parallel over chunks of x slabs (``bounds``), each with its own scratch."""
+    nx, ny, nz, nc = a.shape
+    r = w.shape[0] // 2
+    for ch in nb.prange(bounds.shape[0] - 1):
+        xb = np.empty((ny, nz, nc))
+        zb = np.empty((nz, nc))
+        yrow = np.empty((nz, nc))
+        for i in range(bounds[ch], bounds[ch + 1]):
+            for j in range(ny):
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = a[i, j, k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(i + jj, 0)
+                            hi = min(i - jj, nx - 1)
+                            acc += (a[lo, j, k, c] + a[hi, j, k, c]) * w[r + jj]
+                        xb[j, k, c] = acc
+            for j in range(ny):
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = xb[j, k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(j + jj, 0)
+                            hi = min(j - jj, ny - 1)
+                            acc += (xb[lo, k, c] + xb[hi, k, c]) * w[r + jj]
+                        yrow[k, c] = acc
+                for k in range(nz):
+                    for c in range(nc):
+                        acc = yrow[k, c] * w[r]
+                        for jj in range(-r, 0):
+                            lo = max(k + jj, 0)
+                            hi = min(k - jj, nz - 1)
+                            acc += (yrow[lo, c] + yrow[hi, c]) * w[r + jj]
+                        zb[k, c] = acc
+                for k in range(nz):
+                    for c in range(3):
+                        rad[i, j, k, c] = np.float32(zb[k, c])
+                    d0 = zb[k, 3]
+                    d1 = zb[k, 4]
+                    d2 = zb[k, 5]
+                    nrm = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                    if nrm > 0:
+                        direction[i, j, k, 0] = np.float32(d0 / nrm)
+                        direction[i, j, k, 1] = np.float32(d1 / nrm)
+                        direction[i, j, k, 2] = np.float32(d2 / nrm)
+                    else:
+                        direction[i, j, k, 0] = np.float32(0.0)
+                        direction[i, j, k, 1] = np.float32(0.0)
+                        direction[i, j, k, 2] = np.float32(0.0)

@@ -92,9 +92,15 @@ def _np_max(a, b):
     return a if (a > b or a != a) else b
 
 
-@nb.njit(cache=True, parallel=True)
 def _slab_entry(org, dirs, b, t_in):
     """:func:`box_entry`'s ``t_in`` per ray, the same operations in the same order; parallel over rays."""
+    _slab_both(org, dirs, b, t_in, t_in, False)
+
+
+@nb.njit(cache=True, parallel=True)
+def _slab_both(org, dirs, b, t_in, t_out, want_out):
+    """:func:`box_entry`'s ``t_in`` and (``want_out``) ``t_out`` per ray, the same operations in the same
+    order (``np.min`` over the axes is a left fold of ``np.minimum``); parallel over rays."""
     for p in nb.prange(org.shape[0]):
         lo = 0.0
         hi = 0.0
@@ -116,6 +122,26 @@ def _slab_entry(org, dirs, b, t_in):
                 hi = _np_min(hi, hc)
         t = _np_max(lo, 0.0)
         t_in[p] = t if hi > t else np.inf
+        if want_out:
+            t_out[p] = hi
+
+
+@nb.njit(cache=True, parallel=True)
+def entry_points(pos, dirs, b, entry):
+    """Where each photon's texel ray entered the box: ``pos - max(t, 0) dirs`` with ``t`` the exit
+    parameter of the reversed ray (:func:`box_entry` of ``(pos, -dirs)``; 0 where not finite), the same
+    operations in the same order as that NumPy expression; parallel over photons."""
+    for p in nb.prange(pos.shape[0]):
+        hi = 0.0
+        for c in range(3):
+            inv = 1.0 / (-dirs[p, c])
+            t0 = (b[0, c] - pos[p, c]) * inv
+            t1 = (b[1, c] - pos[p, c]) * inv
+            hc = np.inf if t0 != t0 else _np_max(t0, t1)
+            hi = hc if c == 0 else _np_min(hi, hc)
+        s = _np_max(hi, 0.0) if (hi == hi and abs(hi) < np.inf) else 0.0
+        for c in range(3):
+            entry[p, c] = pos[p, c] - s * dirs[p, c]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -143,7 +169,76 @@ def _gather_hits(org, dirs, t_in, idx, b, pos, dout):
             dout[m, c] = dirs[p, c]
 
 
-def inflate_mesh(vertices, faces, distance):
+@nb.njit(cache=True, parallel=True)
+def _face_cross(v, f, out):
+    """``np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])``, the same operations; parallel over faces."""
+    for i in nb.prange(f.shape[0]):
+        a = f[i, 0]
+        b = f[i, 1]
+        c = f[i, 2]
+        e1x = v[b, 0] - v[a, 0]
+        e1y = v[b, 1] - v[a, 1]
+        e1z = v[b, 2] - v[a, 2]
+        e2x = v[c, 0] - v[a, 0]
+        e2y = v[c, 1] - v[a, 1]
+        e2z = v[c, 2] - v[a, 2]
+        out[i, 0] = e1y * e2z - e1z * e2y
+        out[i, 1] = e1z * e2x - e1x * e2z
+        out[i, 2] = e1x * e2y - e1y * e2x
+
+
+@nb.njit(cache=True, parallel=True)
+def _gather_corners(v, f, out):
+    """``v[f]`` for (F, 3) faces: (F, 3, 3); parallel over faces."""
+    for i in nb.prange(f.shape[0]):
+        for k in range(3):
+            q = f[i, k]
+            for c in range(3):
+                out[i, k, c] = v[q, c]
+
+
+@nb.njit(cache=True)
+def _scatter_add_rows(n, f, fn):
+    """``for k in range(3): np.add.at(n, f[:, k], fn)``: the same additions in the same order (serial)."""
+    for k in range(3):
+        for i in range(f.shape[0]):
+            r = f[i, k]
+            for c in range(n.shape[1]):
+                n[r, c] += fn[i, c]
+
+
+@nb.njit(cache=True)
+def _scatter_min(a, idx, x):
+    """``np.minimum.at(a, idx, x)`` (NaN-propagating, ``x`` on a tie), serial."""
+    for i in range(idx.shape[0]):
+        a[idx[i]] = _np_min(a[idx[i]], x[i])
+
+
+def _weld(v):
+    """``np.unique(v, axis=0, return_inverse=True)`` (rows sorted lexicographically, inverse flattened).
+
+    By a stable ``np.lexsort`` of the columns, in half its time: the same order, the same groups (rows
+    equal as floats). Where a group holds rows that differ in their bits (0.0 and -0.0), which of them
+    np.unique keeps is up to its unstable sort, so that case is left to np.unique itself.
+    """
+    if len(v) == 0:
+        uv, inv = np.unique(v, axis=0, return_inverse=True)
+        return uv, inv.reshape(-1)
+    perm = np.lexsort((v[:, 2], v[:, 1], v[:, 0]))
+    s = v[perm]
+    new = np.empty(len(v), bool)
+    new[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    bits = s.view(np.uint64)
+    if np.any(bits[1:][~new[1:]] != bits[:-1][~new[1:]]):
+        uv, inv = np.unique(v, axis=0, return_inverse=True)
+        return uv, inv.reshape(-1)
+    inv = np.empty(len(v), np.int64)
+    inv[perm] = np.cumsum(new) - 1
+    return s[new], inv
+
+
+def inflate_mesh(vertices, faces, distance, indexed=False):
     """An inflated copy of a closed triangle mesh: every face plane moved out by at least ``distance``.
 
     Vertices are welded by position (so seams do not open), each is moved
@@ -159,38 +254,48 @@ def inflate_mesh(vertices, faces, distance):
     faces : (F, 3) int
     distance : float
         World units (>= 0).
+    indexed : bool
+        Also return the welded mesh the triangles index.
 
     Returns
     -------
     tris : (F, 3, 3) float64
         The inflated triangles, wound outwards.
+    points, welded : (W, 3) float64, (F, 3) int64
+        Only with ``indexed``: ``tris == points[welded]``.
 
     References
     ----------
     Sun et al. (2008), §4.3: "for a complex object, we typically use a
     mesh that has been inflated to encompass the entire object".
     """
-    from ..meshes import vertex_normals
-
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if len(f) == 0:
-        return np.zeros((0, 3, 3))
-    uv, inv = np.unique(v, axis=0, return_inverse=True)
-    fw = inv.reshape(-1)[f]
+        return (np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3), np.int64)) if indexed else np.zeros((0, 3, 3))
+    uv, inv = _weld(v)
+    fw = inv[f]
     vol = float(np.einsum("ij,ij->i", uv[fw[:, 0]], np.cross(uv[fw[:, 1]], uv[fw[:, 2]])).sum())
     if vol < 0:
         fw = fw[:, ::-1]
-    vn = vertex_normals(uv, fw)
-    fn = np.cross(uv[fw[:, 1]] - uv[fw[:, 0]], uv[fw[:, 2]] - uv[fw[:, 0]])
+    fw = np.ascontiguousarray(fw)
+    # meshes.vertex_normals(uv, fw), its np.add.at as a Numba loop (the same additions in the same order)
+    fn = np.empty((len(fw), 3))
+    _face_cross(uv, fw, fn)  # = np.cross(uv[fw[:, 1]] - uv[fw[:, 0]], uv[fw[:, 2]] - uv[fw[:, 0]]), in parallel
+    vn = np.zeros_like(uv)
+    _scatter_add_rows(vn, fw, fn)
+    ln = np.linalg.norm(vn, axis=1, keepdims=True)
+    vn = np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
     ln = np.linalg.norm(fn, axis=1, keepdims=True)
     fn = np.divide(fn, ln, out=np.zeros_like(fn), where=ln > 0)
     cmin = np.ones(len(uv))
-    for k in range(3):
-        np.minimum.at(cmin, fw[:, k], np.where(ln[:, 0] > 0, np.einsum("ij,ij->i", vn[fw[:, k]], fn), 1.0))
+    for k in range(3):  # np.minimum.at, as a Numba loop
+        _scatter_min(cmin, fw[:, k].copy(), np.where(ln[:, 0] > 0, np.einsum("ij,ij->i", vn[fw[:, k]], fn), 1.0))
     scale = float(distance) / np.maximum(cmin, 0.5)
     out = uv + vn * scale[:, None]
-    return np.ascontiguousarray(out[fw])
+    tris = np.empty((len(fw), 3, 3))
+    _gather_corners(out, fw, tris)  # = out[fw], in parallel
+    return (tris, out, fw) if indexed else tris
 
 
 def occupied_box(ior, bounds, outside_ior, eps, grow):
@@ -262,6 +367,23 @@ def _proxy_entry(org, dirs, tris, prim, t_box, t_out):
             t_box[p] = t
 
 
+@nb.njit(cache=True, parallel=True)
+def _copy_rows(src, out):
+    """``out[...] = src`` for (P, 3) arrays (any strides; the cast of ``out``'s dtype); parallel over rows."""
+    for p in nb.prange(src.shape[0]):
+        for c in range(3):
+            out[p, c] = src[p, c]
+
+
+def _contiguous(a, dtype):
+    """``np.ascontiguousarray(a, dtype)`` of a (P, 3) float64 array, copied (or rounded) in parallel."""
+    if a.dtype == dtype and a.flags.c_contiguous:
+        return a
+    out = np.empty(a.shape, dtype)
+    _copy_rows(a, out)
+    return out
+
+
 def _proxy_t(org, dirs, b, proxy):
     """Start parameters of the texel rays with the proxy (inf: no photon)."""
     t_in = np.empty(len(org))
@@ -272,15 +394,24 @@ def _proxy_t(org, dirs, b, proxy):
     if kind == "box":
         _slab_entry(org, dirs, np.asarray(data, dtype=np.float64), t_in)
         return t_in
-    from ..embree import nearest_hits, soup_scene
+    from ..embree import mesh_scene, nearest_hits, soup_scene
 
-    _slab_entry(org, dirs, b, t_in)
-    _, t_out = box_entry(org, dirs, b)
-    tris = np.ascontiguousarray(data, dtype=np.float64)
+    t_out = np.empty(len(org))
+    _slab_both(org, dirs, b, t_in, t_out, True)  # = box_entry's (t_in, t_out), in parallel
+    if isinstance(data, tuple):  # (tris, points, welded): the same triangles, indexed
+        tris, pts, welded = data
+    else:
+        tris, pts, welded = data, None, None
+    tris = np.ascontiguousarray(tris, dtype=np.float64)
     if len(tris) == 0:
         t_in[:] = np.inf
         return t_in
-    prim = nearest_hits(soup_scene(tris, cache=False), org, dirs)[0].astype(np.int64)
+    # Embree's nearest face: the indexed mesh (primitive k = tris[k], the same float32 corners, so the same
+    # BVH and hits as the soup) is copied into Embree in a third of the soup's time, and mesh_scene keeps it
+    # while the proxy comes again (a light change re-runs this stage on the same geometry)
+    scene = soup_scene(tris, cache=False) if pts is None else mesh_scene(pts, welded)
+    # Embree's float32 rays, rounded in parallel (nearest_hits would round them in one thread)
+    prim = nearest_hits(scene, _contiguous(org, np.float32), _contiguous(dirs, np.float32))[0]
     _proxy_entry(org, dirs, tris, prim, t_in, t_out)
     return t_in
 
@@ -313,7 +444,8 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
     proxy : None or (kind, data), optional
         None: photons start on the volume's box. ``("mesh", tris)`` with
         ``tris`` (T, 3, 3) the proxy's triangles wound outwards
-        (:func:`inflate_mesh`), or ``("box", bounds)`` a box inside the
+        (:func:`inflate_mesh`; or ``("mesh", (tris, points, welded))``, its
+        ``indexed`` output, traced as the same triangles), or ``("box", bounds)`` a box inside the
         volume (:func:`occupied_box`): only texels whose ray meets the proxy
         make photons, starting where they meet it (module docstring).
 
@@ -393,8 +525,8 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
         else:
             raise SceneError(f"lights[{li}].type is {L['type']!r}; the volumetric method knows 'directional' "
                              "and 'point'")
-        org = np.ascontiguousarray(org, dtype=np.float64)
-        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+        org = _contiguous(org, np.float64)  # (the directional light's broadcast direction, copied in parallel)
+        dirs = _contiguous(dirs, np.float64)
         t_in = _proxy_t(org, dirs, b, proxy)
         idx = np.flatnonzero(np.isfinite(t_in)) if np.any(rad > 0) else np.zeros(0, np.int64)
         pos = np.empty((len(idx), 3))
@@ -413,5 +545,7 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
     if not out_p:
         z = np.zeros((0, 3))
         return z, z.copy(), z.copy(), np.zeros(0, np.int32), notes
+    if len(out_p) == 1:  # one light: its arrays as they are (contiguous, fresh), not a copy
+        return out_p[0], out_d[0], np.ascontiguousarray(out_r[0]), out_l[0], notes
     return (np.ascontiguousarray(np.concatenate(out_p)), np.ascontiguousarray(np.concatenate(out_d)),
             np.ascontiguousarray(np.concatenate(out_r)), np.concatenate(out_l), notes)

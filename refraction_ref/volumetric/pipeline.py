@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import os
 
+import numba as nb
 import numpy as np
 
 from ..camera import Camera
@@ -146,11 +147,27 @@ def _media(vox, v):
     if vox["extinction"] is not None:
         kappa = vox["extinction"].astype(np.float32)
     else:
+        # = (sigma + abs_k).astype(float32), then += absorption.astype(float32), in parallel
         kappa = np.empty(shape + (3,), np.float32)
-        kappa[...] = (sigma + abs_k).astype(np.float32)
-        if vox["absorption"] is not None:
-            kappa += vox["absorption"].astype(np.float32)
+        absn = vox["absorption"]
+        _kappa(np.broadcast_to(sigma, shape + (3,)), abs_k.copy(),
+               np.zeros((1, 1, 1, 3)) if absn is None else np.ascontiguousarray(absn, dtype=np.float64),
+               absn is not None, kappa)
     return sigma, kappa
+
+
+@nb.njit(cache=True, parallel=True)
+def _kappa(sigma, abs_k, absn, has_absn, kappa):
+    """``float32(float64(sigma) + abs_k)`` (+ ``float32(absn)`` in float32), parallel over x slabs."""
+    nx, ny, nz = kappa.shape[0], kappa.shape[1], kappa.shape[2]
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                for c in range(3):
+                    x = np.float32(np.float64(sigma[i, j, k, c]) + abs_k[c])
+                    if has_absn:
+                        x = x + np.float32(absn[i, j, k, c])
+                    kappa[i, j, k, c] = x
 
 
 # --------------------------------------------------------------------- stages
@@ -255,8 +272,8 @@ def _proxy(ctx):
     hmin = float(np.min((b[1] - b[0]) / np.asarray(shape, dtype=np.float64)))
     grow = float(v["proxy_inflate"])
     if vox["mesh"] is not None:
-        tris = inflate_mesh(vox["mesh"][0], vox["mesh"][1], grow * hmin)
-        return ("mesh", tris), (f"proxy 'inflated': the objects' meshes inflated by {grow:g} voxels "
+        tris, pts, welded = inflate_mesh(vox["mesh"][0], vox["mesh"][1], grow * hmin, indexed=True)
+        return ("mesh", (tris, pts, welded)), (f"proxy 'inflated': the objects' meshes inflated by {grow:g} voxels "
                                 f"({len(tris)} triangles), nearest front face per texel (§4.3)")
     box = occupied_box(vox["ior"], b, float(d["outside_ior"]), 1e-6, grow)
     if box is None:
@@ -284,10 +301,12 @@ def _st_photons(ctx):
     entry = None
     if d["volumetric"]["proxy"] != "box" and len(ph[0]):
         # where each texel ray entered the volume: the march attenuates the photon over the skipped segment
-        from .photons import box_entry
+        # (= ph[0] - where(isfinite(t), max(t, 0), 0) ph[1], t = box_entry(ph[0], -ph[1])'s exit, in parallel)
+        from .photons import entry_points
 
-        _, back = box_entry(ph[0], -ph[1], np.asarray(vox["bounds"], dtype=np.float64))
-        entry = ph[0] - np.where(np.isfinite(back), np.maximum(back, 0.0), 0.0)[:, None] * ph[1]
+        entry = np.empty_like(ph[0])
+        entry_points(np.ascontiguousarray(ph[0]), np.ascontiguousarray(ph[1]),
+                     np.ascontiguousarray(vox["bounds"], dtype=np.float64), entry)
     return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2], "entry": entry}
 
 

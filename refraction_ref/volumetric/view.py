@@ -59,12 +59,29 @@ def hg_phase(cos_t, g):
 
 
 def source_volume(radiance, direction, scattering, extinction):
-    """Pack what a viewing ray reads per voxel: (sigma L, direction, kappa), (nx, ny, nz, 9) float32."""
+    """Pack what a viewing ray reads per voxel: (sigma L, direction, kappa), (nx, ny, nz, 9) float32.
+
+    The float32 product ``radiance * scattering`` as NumPy forms it, packed in parallel over x slabs
+    (``scattering`` and ``extinction`` may be broadcast views).
+    """
+    shape = radiance.shape[:3] + (3,)
     out = np.empty(radiance.shape[:3] + (9,), np.float32)
-    out[..., 0:3] = radiance * scattering
-    out[..., 3:6] = direction
-    out[..., 6:9] = extinction
+    _pack_source(np.ascontiguousarray(radiance, dtype=np.float32), np.ascontiguousarray(direction, dtype=np.float32),
+                 np.broadcast_to(np.asarray(scattering, dtype=np.float32), shape),
+                 np.broadcast_to(np.asarray(extinction, dtype=np.float32), shape), out)
     return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _pack_source(rad, dirn, sig, kap, out):
+    nx, ny, nz = rad.shape[0], rad.shape[1], rad.shape[2]
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                for c in range(3):
+                    out[i, j, k, c] = rad[i, j, k, c] * sig[i, j, k, c]
+                    out[i, j, k, 3 + c] = dirn[i, j, k, c]
+                    out[i, j, k, 6 + c] = kap[i, j, k, c]
 
 
 @nb.njit(cache=True, inline="always")

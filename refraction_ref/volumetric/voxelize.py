@@ -33,6 +33,9 @@ References
 
 from __future__ import annotations
 
+import hashlib
+import threading
+
 import numba as nb
 import numpy as np
 from scipy import ndimage
@@ -165,6 +168,45 @@ def _read_centres(off, depth, cum, ncol, nrow, z0, dz, nz, w_minus, w_total):
                 w_minus[j, i, k] = cum[m - 1] if m > a else 0
 
 
+@nb.njit(cache=True, parallel=True)
+def _vote_centres(off, depth, cum, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
+    """``votes += (w_minus != 0)`` (+ ``(w_plus != 0)`` with ``both``) at every voxel centre, in (x, y, z)
+    order: :func:`_read_centres` and :func:`winding_at_centres`' difference and transpose in one pass.
+    Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds)."""
+    for i0 in nb.prange(nrow):
+        i = np.int64(i0)
+        for j in range(ncol):
+            c = i * ncol + j
+            a = off[c]
+            e = off[c + 1]
+            m = a
+            wt = cum[e - 1] if e > a else 0
+            for k in range(nz):
+                z = z0 + (k + 0.5) * dz
+                while m < e and depth[m] < z:
+                    m += 1
+                wm = cum[m - 1] if m > a else 0
+                v = 1 if wm != 0 else 0
+                if both and wm - wt != 0:
+                    v += 1
+                x = j if p == 0 else (i if q == 0 else k)
+                y = j if p == 1 else (i if q == 1 else k)
+                zz = j if p == 2 else (i if q == 2 else k)
+                votes[x, y, zz] += v
+
+
+@nb.njit(cache=True, parallel=True)
+def _inside_coverage(votes, need, inside, cov):
+    """``inside = votes >= need`` and ``cov = inside.astype(float64)``; parallel over x."""
+    nx, ny, nz = votes.shape
+    for i in nb.prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                b = votes[i, j, k] >= need
+                inside[i, j, k] = b
+                cov[i, j, k] = 1.0 if b else 0.0
+
+
 def winding_at_centres(tri, axis, lo, h, n):
     """Winding numbers along +axis and -axis at every voxel centre.
 
@@ -217,22 +259,35 @@ def _read_subsamples(off, depth, cum, ncol, S, vox, p, q, r, z0, dz, both, votes
 
 @nb.njit(cache=True, parallel=True)
 def _any_all_axis(anyv, allv, axis, oany, oall):
-    """OR and AND of each voxel and its two neighbours along ``axis`` (edges clamped); parallel over x."""
+    """OR and AND of each voxel and its two neighbours along ``axis`` (edges clamped); parallel over x.
+
+    (Booleans: the order of the three terms does not matter; the clamping is hoisted out of the
+    innermost loop.)
+    """
     nx, ny, nz = anyv.shape
     for i0 in nb.prange(nx):
         i = np.int64(i0)
-        for j in range(ny):
-            for k in range(nz):
-                o = False
-                a = True
-                for d in range(-1, 2):
-                    ii = min(max(i + d, 0), nx - 1) if axis == 0 else i
-                    jj = min(max(j + d, 0), ny - 1) if axis == 1 else j
-                    kk = min(max(k + d, 0), nz - 1) if axis == 2 else k
-                    o = o or anyv[ii, jj, kk]
-                    a = a and allv[ii, jj, kk]
-                oany[i, j, k] = o
-                oall[i, j, k] = a
+        if axis == 0:
+            ia = max(i - 1, 0)
+            ib = min(i + 1, nx - 1)
+            for j in range(ny):
+                for k in range(nz):
+                    oany[i, j, k] = anyv[ia, j, k] or anyv[i, j, k] or anyv[ib, j, k]
+                    oall[i, j, k] = allv[ia, j, k] and allv[i, j, k] and allv[ib, j, k]
+        elif axis == 1:
+            for j in range(ny):
+                j0 = max(j - 1, 0)
+                j1 = min(j + 1, ny - 1)
+                for k in range(nz):
+                    oany[i, j, k] = anyv[i, j0, k] or anyv[i, j, k] or anyv[i, j1, k]
+                    oall[i, j, k] = allv[i, j0, k] and allv[i, j, k] and allv[i, j1, k]
+        else:
+            for j in range(ny):
+                for k in range(nz):
+                    k0 = max(k - 1, 0)
+                    k1 = min(k + 1, nz - 1)
+                    oany[i, j, k] = anyv[i, j, k0] or anyv[i, j, k] or anyv[i, j, k1]
+                    oall[i, j, k] = allv[i, j, k0] and allv[i, j, k] and allv[i, j, k1]
 
 
 def _mixed_voxels(inside):
@@ -296,15 +351,15 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     h = np.asarray(h, dtype=np.float64)
     axes = (2,) if closed else (0, 1, 2)
     votes_c = np.zeros(n, np.int32)
-    for ax in axes:
-        wm, wp = winding_at_centres(tri, ax, lo, h, n)
-        votes_c += wm != 0
-        if not closed:
-            votes_c += wp != 0
+    for ax in axes:  # winding_at_centres' w_minus (and w_plus) != 0, added up in parallel
+        p, q = (ax + 1) % 3, (ax + 2) % 3
+        off, depth, cum = column_crossings(tri, ax, lo, h, (n[p], n[q]))
+        _vote_centres(off, depth, cum, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
     need = 1 if closed else 4
-    inside = votes_c >= need
-    mixed = _mixed_voxels(np.ascontiguousarray(inside))
-    cov = inside.astype(np.float64)
+    inside = np.empty(n, np.bool_)
+    cov = np.empty(n)
+    _inside_coverage(votes_c, need, inside, cov)
+    mixed = _mixed_voxels(inside)
     S = int(supersample)
     vox = np.argwhere(mixed).astype(np.int64)
     if S > 1 and len(vox):
@@ -318,7 +373,7 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
 
 
-def repair_mesh(vertices, faces):
+def _repair_mesh_trimesh(vertices, faces):
     """Try to close an open mesh with trimesh (merge vertices, fill holes).
 
     Returns
@@ -335,6 +390,54 @@ def repair_mesh(vertices, faces):
     if m.is_watertight:
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64), True
     return vertices, faces, False
+
+
+_REPAIRED = {}  # BLAKE2 digest of the mesh -> (vertices, faces) repaired, or None: trimesh could not close it
+_REPAIRED_LOCK = threading.Lock()
+
+
+def repair_mesh(vertices, faces):
+    """Try to close an open mesh with trimesh (merge vertices, fill holes).
+
+    The answer for the last four meshes is kept, keyed by a digest of the
+    float64 vertices and int64 faces (trimesh's repair is serial Python,
+    about 40 ms for the bunny, and deterministic): voxelizing the same
+    objects again (a resolution, padding or blur change, a sweep, the next
+    render) skips it.
+
+    Returns
+    -------
+    vertices, faces, ok
+        The repaired mesh and True when it is now watertight; the input and
+        False otherwise.
+    """
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    h = hashlib.blake2b(digest_size=20)
+    h.update(np.asarray(v.shape + f.shape, np.int64).tobytes())
+    h.update(v.tobytes())
+    h.update(f.tobytes())
+    key = h.digest()
+    with _REPAIRED_LOCK:
+        hit = _REPAIRED.pop(key, False)
+        if hit is not False:
+            _REPAIRED[key] = hit  # most recently used last
+    if hit is False:
+        rv, rf, ok = _repair_mesh_trimesh(vertices, faces)
+        hit = None
+        if ok:
+            rv = np.array(rv, dtype=np.float64)
+            rf = np.array(rf, dtype=np.int64)
+            rv.flags.writeable = False
+            rf.flags.writeable = False
+            hit = (rv, rf)
+        with _REPAIRED_LOCK:
+            while len(_REPAIRED) >= 4:
+                _REPAIRED.pop(next(iter(_REPAIRED)))
+            _REPAIRED[key] = hit
+    if hit is None:
+        return vertices, faces, False
+    return hit[0], hit[1], True
 
 
 @nb.njit(cache=True, parallel=True)
