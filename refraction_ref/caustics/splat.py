@@ -73,27 +73,46 @@ def _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy):
         rows[k, 1] = min(max(i0 + 1, 0), Hc - 1)
 
 
+@nb.njit(cache=True, inline="always")
+def _deposit(k, i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, out):
+    # photon k's bilinear weights added into out (Hc, Wc, C), rows r0..r1 only (its band)
+    for di in range(2):
+        i = min(max(i0s[k] + di, 0), Hc - 1)
+        if i < r0 or i > r1:
+            continue
+        wy = fy[k] if di == 1 else 1.0 - fy[k]
+        for dj in range(2):
+            j = min(max(j0s[k] + dj, 0), Wc - 1)
+            w = wy * (fx[k] if dj == 1 else 1.0 - fx[k])
+            if w == 0.0:
+                continue
+            for c in range(val.shape[1]):
+                out[i, j, c] += w * val[k, c]
+
+
 @nb.njit(cache=True, parallel=True)
 def _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, band, out):
-    C = val.shape[1]
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         r0 = b * band
         r1 = min(r0 + band, Hc) - 1
         for q in range(counts[b], counts[b + 1]):
-            k = items[q]
-            for di in range(2):
-                i = min(max(i0s[k] + di, 0), Hc - 1)
-                if i < r0 or i > r1:
-                    continue
-                wy = fy[k] if di == 1 else 1.0 - fy[k]
-                for dj in range(2):
-                    j = min(max(j0s[k] + dj, 0), Wc - 1)
-                    w = wy * (fx[k] if dj == 1 else 1.0 - fx[k])
-                    if w == 0.0:
-                        continue
-                    for c in range(C):
-                        out[i, j, c] += w * val[k, c]
+            _deposit(items[q], i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, out)
+
+
+def _footprint_bands(col, row, Hc, Wc):
+    """Each point's bilinear footprint (corner texel, fractions) and the points binned by map-row band."""
+    col = np.ascontiguousarray(col, dtype=np.float64)
+    row = np.ascontiguousarray(row, dtype=np.float64)
+    n = len(col)
+    rows = np.empty((n, 2), np.int64)
+    i0s = np.empty(n, np.int64)
+    j0s = np.empty(n, np.int64)
+    fx = np.empty(n)
+    fy = np.empty(n)
+    _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
+    counts, items = bin_bands(rows, Hc, BAND)
+    return i0s, j0s, fx, fy, counts, items
 
 
 def splat_bilinear(col, row, values, shape, out=None):
@@ -126,15 +145,7 @@ def splat_bilinear(col, row, values, shape, out=None):
     n = val.shape[0]
     if n == 0:
         return out
-    col = np.ascontiguousarray(col, dtype=np.float64)
-    row = np.ascontiguousarray(row, dtype=np.float64)
-    rows = np.empty((n, 2), np.int64)
-    i0s = np.empty(n, np.int64)
-    j0s = np.empty(n, np.int64)
-    fx = np.empty(n)
-    fy = np.empty(n)
-    _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
-    counts, items = bin_bands(rows, Hc, BAND)
+    i0s, j0s, fx, fy, counts, items = _footprint_bands(col, row, Hc, Wc)
     # caustics crowd photons into a few bands: the threads take bands one at a time (dynamic
     # scheduling), not equal runs of bands; which thread adds a band does not change its sums
     with nb.parallel_chunksize(1):
@@ -175,7 +186,6 @@ def _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc,
     # map q % M): each owned by one thread, which adds the band's photons (of its group) in
     # index order, so every map is the one _splat_kernel makes of its photons alone, and a
     # crowded band's maps go to different threads
-    C = val.shape[1]
     M = out.shape[0]
     ng = M - 1
     nb_bands = counts.shape[0] - 1
@@ -189,20 +199,9 @@ def _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc,
             p0, p1 = counts[b], counts[b + 1]
         else:
             p0, p1 = goff[b * ng + m - 1], goff[b * ng + m]
+        om = out[m]
         for p in range(p0, p1):
-            k = items[p] if m == 0 else gitems[p]
-            for di in range(2):
-                i = min(max(i0s[k] + di, 0), Hc - 1)
-                if i < r0 or i > r1:
-                    continue
-                wy = fy[k] if di == 1 else 1.0 - fy[k]
-                for dj in range(2):
-                    j = min(max(j0s[k] + dj, 0), Wc - 1)
-                    w = wy * (fx[k] if dj == 1 else 1.0 - fx[k])
-                    if w == 0.0:
-                        continue
-                    for c in range(C):
-                        out[m, i, j, c] += w * val[k, c]
+            _deposit(items[p] if m == 0 else gitems[p], i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, om)
 
 
 def splat_bilinear_groups(col, row, values, shape, groups, ng):
@@ -224,16 +223,8 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     n = val.shape[0]
     if n == 0:
         return out
-    col = np.ascontiguousarray(col, dtype=np.float64)
-    row = np.ascontiguousarray(row, dtype=np.float64)
     grp = np.ascontiguousarray(groups, dtype=np.int64) if ng else np.zeros(n, np.int64)
-    rows = np.empty((n, 2), np.int64)
-    i0s = np.empty(n, np.int64)
-    j0s = np.empty(n, np.int64)
-    fx = np.empty(n)
-    fy = np.empty(n)
-    _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy)
-    counts, items = bin_bands(rows, Hc, BAND)
+    i0s, j0s, fx, fy, counts, items = _footprint_bands(col, row, Hc, Wc)
     # each band's items split by group (their order kept), so a group's map reads only its photons
     nbands = len(counts) - 1
     gc = np.zeros((nbands, max(ng, 1)), np.int64)
