@@ -77,6 +77,7 @@ import numba as nb
 import numpy as np
 
 from ..status import EXITED, LIMIT, LOST
+from .voxelize import sym_tap
 
 __all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS",
            "PHOTON_ACTIVE", "PHOTON_ABSORBED", "PHOTON_RECEIVED", "receiver_tuple"]
@@ -1077,7 +1078,7 @@ def smooth_radiance(sums):
 
 @nb.njit(cache=True, parallel=True)
 def _smooth_split(a, w, bounds, rad, direction):
-    """``voxelize._sym_correlate_axis`` along x, y, then z (the same operations per value), then the split:
+    """``voxelize.sym_tap`` along x, y, then z (the passes of ``voxelize.separable_correlate``), then the split:
     radiance rounded to float32, and the unit direction by the operations of ``np.linalg.norm(d, axis=-1)``
     (sqrt of the squares summed in order) and ``d / norm`` where the norm is > 0, rounded to float32;
     slab by slab, parallel over chunks of x slabs (``bounds``), each with its own scratch."""
@@ -1090,30 +1091,17 @@ def _smooth_split(a, w, bounds, rad, direction):
         for i in range(bounds[ch], bounds[ch + 1]):
             for j in range(ny):
                 for k in range(nz):
+                    line = a[:, j, k, :]
                     for c in range(nc):
-                        acc = a[i, j, k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(i + jj, 0)
-                            hi = min(i - jj, nx - 1)
-                            acc += (a[lo, j, k, c] + a[hi, j, k, c]) * w[r + jj]
-                        xb[j, k, c] = acc
+                        xb[j, k, c] = sym_tap(line, i, c, w, r)
             for j in range(ny):
                 for k in range(nz):
+                    line = xb[:, k, :]
                     for c in range(nc):
-                        acc = xb[j, k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(j + jj, 0)
-                            hi = min(j - jj, ny - 1)
-                            acc += (xb[lo, k, c] + xb[hi, k, c]) * w[r + jj]
-                        yrow[k, c] = acc
+                        yrow[k, c] = sym_tap(line, j, c, w, r)
                 for k in range(nz):
                     for c in range(nc):
-                        acc = yrow[k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(k + jj, 0)
-                            hi = min(k - jj, nz - 1)
-                            acc += (yrow[lo, c] + yrow[hi, c]) * w[r + jj]
-                        zb[k, c] = acc
+                        zb[k, c] = sym_tap(yrow, k, c, w, r)
                 for k in range(nz):
                     for c in range(3):
                         rad[i, j, k, c] = np.float32(zb[k, c])

@@ -440,15 +440,28 @@ def repair_mesh(vertices, faces):
     return hit[0], hit[1], True
 
 
+@nb.njit(cache=True, inline="always")
+def sym_tap(line, x, c, w, r):
+    """``line[x] w[r] + sum_{j=-r..-1} (line[x + j] + line[x - j]) w[r + j]``, indices clamped.
+
+    ``line`` is (n, C): one line of a volume along the filtered axis. The
+    terms are added in scipy's symmetric-filter order, so a whole pass is
+    ``scipy.ndimage.correlate1d(..., mode="nearest")`` bit for bit.
+    """
+    n = line.shape[0]
+    acc = line[x, c] * w[r]
+    for jj in range(-r, 0):
+        acc += (line[max(x + jj, 0), c] + line[min(x - jj, n - 1), c]) * w[r + jj]
+    return acc
+
+
 @nb.njit(cache=True, parallel=True)
 def _sym_correlate_axis(a, w, axis, out):
     """``scipy.ndimage.correlate1d(a, w, axis, mode="nearest")`` for a symmetric ``w``, bit for bit.
 
-    ``a`` and ``out`` are (nx, ny, nz, C) float64. Every output value is
-    ``a[x] w[r] + sum_{j=-r..-1} (a[x + j] + a[x - j]) w[r + j]`` in that order
-    (scipy's symmetric-filter loop), indices clamped to the grid; each
-    parallel slab writes only its own outputs, so the result does not depend
-    on the thread count.
+    ``a`` and ``out`` are (nx, ny, nz, C) float64 (every value by :func:`sym_tap`);
+    each parallel slab writes only its own outputs, so the result does not
+    depend on the thread count.
     """
     nx, ny, nz, nc = a.shape
     r = w.shape[0] // 2
@@ -456,35 +469,23 @@ def _sym_correlate_axis(a, w, axis, out):
         for j in nb.prange(ny):
             for i in range(nx):
                 for k in range(nz):
+                    line = a[:, j, k, :]
                     for c in range(nc):
-                        acc = a[i, j, k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(i + jj, 0)
-                            hi = min(i - jj, nx - 1)
-                            acc += (a[lo, j, k, c] + a[hi, j, k, c]) * w[r + jj]
-                        out[i, j, k, c] = acc
+                        out[i, j, k, c] = sym_tap(line, i, c, w, r)
     elif axis == 1:
         for i in nb.prange(nx):
             for j in range(ny):
                 for k in range(nz):
+                    line = a[i, :, k, :]
                     for c in range(nc):
-                        acc = a[i, j, k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(j + jj, 0)
-                            hi = min(j - jj, ny - 1)
-                            acc += (a[i, lo, k, c] + a[i, hi, k, c]) * w[r + jj]
-                        out[i, j, k, c] = acc
+                        out[i, j, k, c] = sym_tap(line, j, c, w, r)
     else:
         for i in nb.prange(nx):
             for j in range(ny):
+                line = a[i, j]
                 for k in range(nz):
                     for c in range(nc):
-                        acc = a[i, j, k, c] * w[r]
-                        for jj in range(-r, 0):
-                            lo = max(k + jj, 0)
-                            hi = min(k - jj, nz - 1)
-                            acc += (a[i, j, lo, c] + a[i, j, hi, c]) * w[r + jj]
-                        out[i, j, k, c] = acc
+                        out[i, j, k, c] = sym_tap(line, k, c, w, r)
 
 
 def separable_correlate(a, w):
