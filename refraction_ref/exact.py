@@ -34,6 +34,7 @@ import numpy as np
 
 from . import optics
 from .embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
+from .meshes import face_corner_normals
 from .status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
@@ -213,36 +214,14 @@ def _vertex_normals_kernel(adj, fnt, out):
 
 @nb.njit(cache=True, parallel=True)
 def _corner_normals_kernel(adj, fnt, cos_t, out):
-    # meshes._corner_normals_kernel with the faces shared among threads: each writes only its faces
+    # meshes.face_corner_normals with the faces shared among threads: each writes only its faces
     f = adj.faces
     start = adj.start
     incident = adj.incident
     fn = fnt.fn
     un = fnt.un
     for f0 in nb.prange(f.shape[0]):
-        fi = np.int64(f0)
-        if un[fi, 0] == 0.0 and un[fi, 1] == 0.0 and un[fi, 2] == 0.0:
-            continue  # a zero-area face has no normal: zero corners (the tracer uses the face normal)
-        for k in range(3):
-            vtx = f[fi, k]
-            sx = 0.0
-            sy = 0.0
-            sz = 0.0
-            last = -1
-            for p in range(start[vtx], start[vtx + 1]):
-                g = incident[p]
-                if g == last:  # a face that uses this vertex twice counts once
-                    continue
-                last = g
-                if g == fi or un[fi, 0] * un[g, 0] + un[fi, 1] * un[g, 1] + un[fi, 2] * un[g, 2] > cos_t:
-                    sx += fn[g, 0]
-                    sy += fn[g, 1]
-                    sz += fn[g, 2]
-            ln = np.sqrt(sx * sx + sy * sy + sz * sz)
-            if ln > 0.0:
-                out[fi, k, 0] = sx / ln
-                out[fi, k, 1] = sy / ln
-                out[fi, k, 2] = sz / ln
+        face_corner_normals(np.int64(f0), f, fn, un, start, incident, cos_t, out)
 
 
 @nb.njit(cache=True, parallel=True)

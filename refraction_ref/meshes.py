@@ -137,31 +137,42 @@ def vertex_normals(v, f):
 _CREASE_MARGIN = 1e-12  # in cosine: an edge at the crease angle is sharp, whatever the rounding
 
 
+@nb.njit(cache=True, inline="always")
+def face_corner_normals(fi, f, fn, un, start, incident, cos_t, out):
+    """The three corner normals of face ``fi`` (:func:`corner_normals`' rule) into ``out[fi]``.
+
+    ``start``/``incident``: the faces around each vertex in face order (a
+    face that uses a vertex twice listed twice, counted once). Shared by the
+    serial kernel here and the exact reference's parallel one.
+    """
+    if un[fi, 0] == 0.0 and un[fi, 1] == 0.0 and un[fi, 2] == 0.0:
+        return  # a zero-area face has no normal: zero corners (the tracer uses the face normal)
+    for k in range(3):
+        vtx = f[fi, k]
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        last = -1
+        for p in range(start[vtx], start[vtx + 1]):
+            g = incident[p]
+            if g == last:  # a face that uses this vertex twice counts once
+                continue
+            last = g
+            if g == fi or un[fi, 0] * un[g, 0] + un[fi, 1] * un[g, 1] + un[fi, 2] * un[g, 2] > cos_t:
+                sx += fn[g, 0]
+                sy += fn[g, 1]
+                sz += fn[g, 2]
+        ln = np.sqrt(sx * sx + sy * sy + sz * sz)
+        if ln > 0.0:
+            out[fi, k, 0] = sx / ln
+            out[fi, k, 1] = sy / ln
+            out[fi, k, 2] = sz / ln
+
+
 @nb.njit(cache=True)
 def _corner_normals_kernel(f, fn, un, start, incident, cos_t, out):
     for fi in range(f.shape[0]):
-        if un[fi, 0] == 0.0 and un[fi, 1] == 0.0 and un[fi, 2] == 0.0:
-            continue  # a zero-area face has no normal: zero corners (the tracer uses the face normal)
-        for k in range(3):
-            vtx = f[fi, k]
-            sx = 0.0
-            sy = 0.0
-            sz = 0.0
-            last = -1
-            for p in range(start[vtx], start[vtx + 1]):
-                g = incident[p]
-                if g == last:  # a face that uses this vertex twice counts once
-                    continue
-                last = g
-                if g == fi or un[fi, 0] * un[g, 0] + un[fi, 1] * un[g, 1] + un[fi, 2] * un[g, 2] > cos_t:
-                    sx += fn[g, 0]
-                    sy += fn[g, 1]
-                    sz += fn[g, 2]
-            ln = np.sqrt(sx * sx + sy * sy + sz * sz)
-            if ln > 0.0:
-                out[fi, k, 0] = sx / ln
-                out[fi, k, 1] = sy / ln
-                out[fi, k, 2] = sz / ln
+        face_corner_normals(fi, f, fn, un, start, incident, cos_t, out)
 
 
 def corner_normals(vertices, faces, crease_deg):
