@@ -225,15 +225,20 @@ def _load_task(task):
 _WARM = set()  # task functions already called in this process
 
 
-def run_function(task, fn, base, threads):
-    """A grid point of a ``task`` spec: ``fn(**{**base, **overrides})``'s dict is the row."""
-    row = {**({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
+def _worker_address():
+    """The dask worker running this task, or ``"local"`` outside a worker."""
     try:
         import distributed
 
-        row["worker"] = distributed.get_worker().address
+        return distributed.get_worker().address
     except (ImportError, ValueError):
-        row["worker"] = "local"
+        return "local"
+
+
+def run_function(task, fn, base, threads):
+    """A grid point of a ``task`` spec: ``fn(**{**base, **overrides})``'s dict is the row."""
+    row = {**({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
+    row["worker"] = _worker_address()
     try:
         row["threads"] = _pin_threads(threads)
         f = _load_task(fn)
@@ -279,12 +284,7 @@ def run_task(task, base, repeats, threads, reference=None):
 
     row = {"scene": task["scene_name"], "method": task["method"],
            **({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
-    try:
-        import distributed
-
-        row["worker"] = distributed.get_worker().address
-    except (ImportError, ValueError):
-        row["worker"] = "local"
+    row["worker"] = _worker_address()
     try:
         row["threads"] = _pin_threads(threads)
         sc = rr.load_scene(task["scene"], {**base, **task["overrides"]})
