@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numba
+import numpy as np
 import pytest
 
 
@@ -23,3 +24,21 @@ def _on_one_and_two_threads(fn):
 def on_one_and_two_threads():
     """Run a callable with 1 and with 2 Numba threads: determinism tests compare the two results."""
     return _on_one_and_two_threads
+
+
+def _same_arrays(a, b, keys=None):
+    """Arrays of ``a`` and ``b`` equal bit for bit (dtype, shape, NaN where NaN): the keys ``keys``, or
+    every key, when the two hold the same keys."""
+    if keys is None:
+        assert sorted(a) == sorted(b)
+        keys = a
+    for k in keys:
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        assert x.dtype == y.dtype and x.shape == y.shape, k
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+
+
+@pytest.fixture
+def same_arrays():
+    """Assert two dicts of arrays equal bit for bit (determinism and before/after tests)."""
+    return _same_arrays

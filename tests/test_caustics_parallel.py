@@ -31,15 +31,6 @@ SMALL = {"camera.width": 96, "camera.height": 96, "imagespace.photons": 64, "ima
          "exact.photons": 96}
 
 
-def _same(a, b):
-    """Every array of ``a`` equals ``b``'s bit for bit (NaN where NaN)."""
-    assert a.keys() == b.keys()
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert x.dtype == y.dtype and x.shape == y.shape, k
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-
-
 def _arrays(res):
     return {k: v for k, v in res.arrays.items() if isinstance(v, np.ndarray)}
 
@@ -49,7 +40,7 @@ def _arrays(res):
     ("imagespace", {"imagespace.receiver_hit": "exact", "imagespace.gather": 5}),
     ("exact", {}),
 ])
-def test_every_caustic_stage_buffer_is_the_same_on_one_and_two_threads(on_one_and_two_threads, method, over):
+def test_every_caustic_stage_buffer_is_the_same_on_one_and_two_threads(on_one_and_two_threads, method, over, same_arrays):
     sc = rr.load_scene(SCENE, {**SMALL, **over})
     a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method=method, keep="stages")))
     stages = {k.split(".")[1] for k in a if k.startswith("stage.")}
@@ -58,7 +49,7 @@ def test_every_caustic_stage_buffer_is_the_same_on_one_and_two_threads(on_one_an
         want.add("receiver_depth")
     assert want <= stages
     assert a["caustic_map_0"].sum() > 0  # photons reached the floor
-    _same(a, b)
+    same_arrays(a, b)
 
 
 def _odd_mesh():
@@ -87,11 +78,11 @@ def test_parallel_mesh_normals_equal_the_serial_functions_on_any_thread_count(on
     assert mesh_normals(v, f).corner is None
 
 
-def test_the_exact_reference_is_the_same_on_one_and_two_threads_for_every_normals_rule(on_one_and_two_threads):
+def test_the_exact_reference_is_the_same_on_one_and_two_threads_for_every_normals_rule(on_one_and_two_threads, same_arrays):
     for normals in ("crease", "smooth", "file"):
         sc = rr.load_scene(None, {"camera.width": 48, "camera.height": 48, "exact.normals": normals})
         a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method="exact", keep="stages")))
-        _same(a, b)
+        same_arrays(a, b)
 
 
 def _gather_transposed(E, window):

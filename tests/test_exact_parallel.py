@@ -33,15 +33,6 @@ DATA = os.path.join(os.path.dirname(rr.__file__), "data")
 TOL = 1e-12
 
 
-def _same(a, b):
-    """Every array of ``a`` equals ``b``'s bit for bit (NaN where NaN)."""
-    assert a.keys() == b.keys()
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert x.dtype == y.dtype and x.shape == y.shape, k
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-
-
 def _rays(n, seed, r=0.6, dist=3.0):
     rng = np.random.default_rng(seed)
     target = rng.uniform(-r, r, (n, 3))
@@ -224,23 +215,23 @@ def _close(ref, new):
 
 @pytest.mark.parametrize("extra", [{}, {"smooth": False}, {"record": 4, "outside_ior": 1.1}, {"max_bounces": 3},
                                    {"corner": True}])
-def test_trace_identical_on_one_and_two_threads_and_to_numpy(extra, on_one_and_two_threads):
+def test_trace_identical_on_one_and_two_threads_and_to_numpy(extra, on_one_and_two_threads, same_arrays):
     kw = _two_objects()
     o, d = _rays(6000, 1)
     extra = dict(extra)
     if extra.pop("corner", False):
         extra["normals"] = corner_normals(kw["vertices"], kw["faces"], 30.0)
     a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=512, **extra))
-    _same(a, b)
+    same_arrays(a, b)
     st = np.bincount(a["status"], minlength=5)
     assert st[MISSED] > 0 and st[EXITED] > 0
     assert np.any(a["transmittance"] < 1.0)
     _close(_trace_numpy(**kw, origins=o, dirs=d, **extra), a)
     # the chunk size does not matter either
-    _same(a, trace_exact(**kw, origins=o, dirs=d, chunk_size=100_000, **extra))
+    same_arrays(a, trace_exact(**kw, origins=o, dirs=d, chunk_size=100_000, **extra))
 
 
-def test_tir_heavy_sphere_identical_on_one_and_two_threads(on_one_and_two_threads):
+def test_tir_heavy_sphere_identical_on_one_and_two_threads(on_one_and_two_threads, same_arrays):
     """IOR 2.4 (a diamond): rays trapped by TIR bounce until the limit (status 3); few rays per late bounce."""
     v, f = icosphere_mesh(4, 0.5)
     kw = dict(vertices=v, faces=f, face_object=np.zeros(len(f), np.int64), object_ior=[2.4],
@@ -248,12 +239,12 @@ def test_tir_heavy_sphere_identical_on_one_and_two_threads(on_one_and_two_thread
     o, d = _rays(8000, 2, r=0.5)
     a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=256, max_bounces=40,
                                                       record=3))
-    _same(a, b)
+    same_arrays(a, b)
     assert np.sum(a["status"] == TIR) > 0 and a["bounces"].max() == 40
     _close(_trace_numpy(**kw, origins=o, dirs=d, max_bounces=40, record=3), a)
 
 
-def test_grazing_rays_take_embrees_distance_identically(on_one_and_two_threads):
+def test_grazing_rays_take_embrees_distance_identically(on_one_and_two_threads, same_arrays):
     """Rays in the plane of a cube's faces and along its edges (Möller-Trumbore's degenerate cases)."""
     import trimesh
 
@@ -268,15 +259,15 @@ def test_grazing_rays_take_embrees_distance_identically(on_one_and_two_threads):
     d = np.c_[np.ones(n), rng.normal(0.0, 1e-9, n), np.zeros(n)]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=300, record=2))
-    _same(a, b)
+    same_arrays(a, b)
     _close(_trace_numpy(**kw, origins=o, dirs=d, record=2), a)
 
 
-def test_mesh_scene_render_identical_on_one_and_two_threads(on_one_and_two_threads):
+def test_mesh_scene_render_identical_on_one_and_two_threads(on_one_and_two_threads, same_arrays):
     scene = rr.load_scene({"objects": [{"mesh": "bunny", "material": {"ior": 1.6, "absorption": [0.5, 0.1, 1.0]}}],
                            "camera": {"width": 96, "height": 96}, "exact": {"record": 3}})
     a, b = on_one_and_two_threads(lambda: rr.render(scene, method="exact").arrays)
-    _same(a, b)
+    same_arrays(a, b)
     assert np.any(a["status"] == EXITED)
 
 
@@ -284,7 +275,7 @@ def test_mesh_scene_render_identical_on_one_and_two_threads(on_one_and_two_threa
 # caustics photons and the water reference
 # ---------------------------------------------------------------------------
 
-def test_caustics_exact_photons_identical_on_one_and_two_threads(on_one_and_two_threads):
+def test_caustics_exact_photons_identical_on_one_and_two_threads(on_one_and_two_threads, same_arrays):
     scene = rr.load_scene(os.path.join(DATA, "caustics_default.json"))
 
     def run():
@@ -294,7 +285,7 @@ def test_caustics_exact_photons_identical_on_one_and_two_threads(on_one_and_two_
         return r.arrays
 
     a, b = on_one_and_two_threads(run)
-    _same(a, b)
+    same_arrays(a, b)
     assert len(a["stage.photon_trace.exit_pos_0"]) > 0
 
 
@@ -313,11 +304,11 @@ def _water_maps(scene):
     return {k: v for k, v in r.arrays.items()}, r.meta["stats"]
 
 
-def test_exact_water_identical_on_one_and_two_threads(on_one_and_two_threads, monkeypatch):
+def test_exact_water_identical_on_one_and_two_threads(on_one_and_two_threads, monkeypatch, same_arrays):
     monkeypatch.setattr(exact_water, "_CHUNK", 160 * 12)  # 12 rows a chunk: 14 chunks per light
     scene = _water_scene()
     (a, sa), (b, sb) = on_one_and_two_threads(lambda: _water_maps(scene))
-    _same(a, b)
+    same_arrays(a, b)
     assert sa == sb and sum(st["hit"] for st in sa) > 0  # photons per light: traced, landed, deposited
     assert a["caustic_map_0"].max() > 0
 

@@ -48,13 +48,6 @@ def test_the_seed_defaults():
     assert (d["iterations"], d["layers"], d["slices"], d["normals"], d["delta"]) == (5, 32, 256, "central", 2)
 
 
-def _same(a, b, keys=KEYS):
-    for k in keys:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert x.shape == y.shape and x.dtype == y.dtype, k
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-
-
 # --------------------------------------------------------------------------
 # blend = add (§3.3)
 # --------------------------------------------------------------------------
@@ -118,7 +111,7 @@ def test_additive_blend_is_the_sum_of_the_slice_bits(slicing, S):
     assert np.all(ta[shared] <= to_[shared] + 1)  # a carry can only merge bits (or set a new one above)
 
 
-def test_additive_blend_changes_nothing_without_shared_slices():
+def test_additive_blend_changes_nothing_without_shared_slices(same_arrays):
     """The default sphere (local slicing, 256 slices): no pixel has two fragments in one slice
     away from the rim, and the whole pipeline gives the same result with 'add' and 'or'
     wherever the bitmasks agree."""
@@ -129,7 +122,7 @@ def test_additive_blend_changes_nothing_without_shared_slices():
     same = np.all(a["stage.voxelize.bits"] == o["stage.voxelize.bits"], axis=-1)
     assert np.mean(same[a["hit"]]) > 0.97
     if same.all():
-        _same(a, o)
+        same_arrays(a, o, KEYS)
     else:  # a pixel whose mask differs can move its neighbours' normals: compare away from them
         from scipy.ndimage import binary_dilation
 
@@ -332,7 +325,7 @@ def test_bilinear_beats_nearest_against_the_closed_form_sphere():
 # --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("extra", [{}, {"depth": "float"}, {"peeling": "lut"}, {"tir": True, "filter": "nearest"}])
-def test_peel_all_peels_every_layer_and_changes_no_output(extra):
+def test_peel_all_peels_every_layer_and_changes_no_output(extra, same_arrays):
     sc = {"camera": {"width": 48, "height": 48, "eye": [0.3, 0.4, 3.0]},
           "objects": [{"mesh": "sphere", "fit": 1.0, "material": {"ior": 1.4}},
                       {"mesh": "sphere", "fit": 0.6, "material": {"ior": 1.4},
@@ -340,7 +333,7 @@ def test_peel_all_peels_every_layer_and_changes_no_output(extra):
           "imagespace": dict(layers=8, **extra)}
     a = rr.render(sc, keep="peel,reduce")
     b = rr.render(sc, overrides={"imagespace.peel_all": True}, keep="peel,reduce")
-    _same(a, b)
+    same_arrays(a, b, KEYS)
     dc = int(a["depth_complexity"].max())
     assert dc == 4
     if extra.get("peeling") == "lut":

@@ -7,7 +7,6 @@ the thread count changes no bit.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import refraction_ref as rr
@@ -27,26 +26,18 @@ SCENE = {
 }
 
 
-def _same(a, b):
-    assert sorted(a) == sorted(b)
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert x.dtype == y.dtype and x.shape == y.shape, k
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-
-
 @pytest.mark.parametrize("knobs", [{}, {"levelmap.smart_spacing": "respace"}, {"levelmap.culling": "bounds"},
                                    {"levelmap.placement": "tight", "levelmap.smart_slicing": False},
                                    {"levelmap.variant": "volumetric"}, {"levelmap.variant": "per_ray"}],
                          ids=["default", "respace", "bounds", "tight", "volumetric", "per_ray"])
-def test_levelmap_outputs_and_stage_buffers_bit_identical(knobs, on_one_and_two_threads):
+def test_levelmap_outputs_and_stage_buffers_bit_identical(knobs, on_one_and_two_threads, same_arrays):
     sc = load_scene(SCENE, knobs)
     a, b = on_one_and_two_threads(lambda: rr.render(sc, method="levelmap", keep="stages").arrays)
     assert "stage.image.view_status" in a and "image_direct" in a
-    _same(a, b)
+    same_arrays(a, b)
 
 
-def test_exact_water_view_bit_identical(on_one_and_two_threads):
+def test_exact_water_view_bit_identical(on_one_and_two_threads, same_arrays):
     sc = load_scene(SCENE)
     a, b = on_one_and_two_threads(lambda: rr.render(sc, method="exact", keep="stages").arrays)
-    _same(a, b)
+    same_arrays(a, b)
