@@ -42,27 +42,13 @@ from refraction_ref.tables import chaudhari as T  # noqa: E402
 
 
 def models(quick=False):
-    """Row name -> chaudhari.Model, for the rows we have meshes for (a missing mesh: skipped)."""
-    out, skipped = {}, {}
-    tries = {
-        "Bunny-lowpoly": lambda: T.Model([C._obj(C.lowpoly_bunny_path())], 2.6, "bunny decimated to 15,000"),
-        "Bunny and Bunny": lambda: T.Model([C._obj(C.lowpoly_bunny_path(), (-0.55, 0, 0)),
-                                            C._obj(C.lowpoly_bunny_path(), (0.55, 0, 0))], C.TWO_BUNNY_EYE_Z,
-                                           "two decimated bunnies, 2 x 15,000"),
-        "Bunny I": lambda: T.Model([C._obj("bunny")], 2.6, "the bunny, 69,451"),
-        "Igea": lambda: T.Model([C._obj(C.model_path("igea.ply"))], 2.6, "Igea, 268,686"),
-        "I-A": lambda: T.Model([C._obj("bunny", (-0.55, 0, 0)), C._obj("bunny", (0.55, 0, 0))], C.TWO_BUNNY_EYE_Z,
-                               "two full bunnies, 2 x 69,451"),
-    }
+    """Row name -> chaudhari.Model: the package's rows (``tables.chaudhari_report.models``), two in quick mode."""
+    from refraction_ref.tables.chaudhari_report import models as report_models
+
+    out, _ = report_models(C.results_dir())
     if quick:
-        tries = {k: tries[k] for k in ("Bunny-lowpoly", "Bunny I")}
-    for name, make in tries.items():
-        try:
-            out[name] = make()
-        except C.Skip as e:
-            skipped[name] = str(e)
-            print(f"  skip {name}: {e}")
-    return out, skipped
+        out = {k: out[k] for k in ("Bunny-lowpoly", "Bunny I")}
+    return out, {}
 
 
 def time_many(scenes, repeats, warmup=C.WARMUP, retries=2):
