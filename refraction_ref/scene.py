@@ -270,25 +270,24 @@ def apply_overrides(data, overrides):
         parts = key.split(".")
         if len(parts) == 2:
             parts[1] = _alias(parts[0], parts[1])
-        node = data
+        node, where = data, ""
         for p in parts[:-1]:
             if isinstance(node, list):
-                try:
-                    node = node[int(p)]
-                except (ValueError, IndexError):
-                    raise SceneError(f"override '{key}': '{p}' is not a valid index") from None
+                node = node[_list_index(node, p, key, where)]
             elif isinstance(node, dict) and p in node:
                 if node[p] is None:
                     node[p] = {}
                 node = node[p]
+            elif isinstance(node, dict):
+                raise SceneError(f"override '{key}': unknown key '{p}'; known keys "
+                                 f"{'in ' + repr(where) if where else 'at the top level'}: {', '.join(sorted(node))}")
             else:
-                raise SceneError(f"override '{key}': unknown key '{p}'")
+                raise SceneError(f"override '{key}': '{where}' is a {type(node).__name__}, not an object; "
+                                 f"set '{where}' itself")
+            where = f"{where}.{p}" if where else p
         last = parts[-1]
         if isinstance(node, list):
-            try:
-                node[int(last)] = _coerce_cli_value(value)
-            except (ValueError, IndexError):
-                raise SceneError(f"override '{key}': '{last}' is not a valid index") from None
+            node[_list_index(node, last, key, where)] = _coerce_cli_value(value)
         elif isinstance(node, dict):
             if last not in node:
                 raise SceneError(f"override '{key}': unknown key '{last}'; known keys here: "
@@ -297,6 +296,20 @@ def apply_overrides(data, overrides):
         else:
             raise SceneError(f"override '{key}': cannot set a key inside a {type(node).__name__}")
     return data
+
+
+def _list_index(items, p, key, where):
+    """``int(p)`` as an index of ``items`` (the list at ``where``), or a SceneError saying how many there are."""
+    n = len(items)
+    have = f"'{where}' has {n} item{'s' if n != 1 else ''}" + (f" (indices 0 to {n - 1})" if n else "")
+    try:
+        k = int(p)
+    except ValueError:
+        raise SceneError(f"override '{key}': '{p}' is not an index; {have}") from None
+    if not 0 <= k < n:
+        raise SceneError(f"override '{key}': index {k} is out of range; {have}; to add or remove items, "
+                         f"set the whole list, e.g. --set '{where}=[...]'") from None
+    return k
 
 
 def _alias(block, key):
@@ -388,7 +401,9 @@ def load_scene(src=None, overrides=None):
         base_dir = os.path.dirname(os.path.abspath(path))
     data = _resolve(raw, base_dir, callables)
     if overrides:
-        data = apply_overrides(data, overrides)
+        # a whole block set on the command line (--set 'camera={"width":64}', --set 'objects.0={...}')
+        # gets its defaults exactly as the same block in a file would: resolve again after the overrides
+        data = _resolve(apply_overrides(data, overrides), base_dir, callables)
     validate(data, base_dir)
     return Scene(data, base_dir, callables)
 

@@ -50,3 +50,34 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys):
     assert "missing.json" in capsys.readouterr().err
     assert main(["scene", "--set", "imagespace.iterations=7"]) == 0
     assert json.loads(capsys.readouterr().out)["imagespace"]["iterations"] == 7
+
+
+BLOCKS_FROM_SET = [("camera", '{"width":64}', {"camera": {"width": 64}}),
+                   ("objects.0", '{"mesh":"sphere"}', {"objects": [{"mesh": "sphere"}]}),
+                   ("lights.0", '{"type":"point","position":[0,0,0]}',
+                    {"lights": [{"type": "point", "position": [0, 0, 0]}]}),
+                   ("lights", '[{"type":"directional"}]', {"lights": [{"type": "directional"}]}),
+                   ("imagespace", '{"iterations":3}', {"imagespace": {"iterations": 3}})]
+
+
+def test_blocks_given_through_set_get_the_defaults_of_a_scene_file(tmp_path, capsys):
+    for key, value, as_file in BLOCKS_FROM_SET:
+        f = tmp_path / "s.json"
+        f.write_text(json.dumps(as_file))
+        assert main(["scene", "--set", f"{key}={value}"]) == 0, key
+        from_set = json.loads(capsys.readouterr().out)
+        assert main(["scene", str(f)]) == 0
+        assert from_set == json.loads(capsys.readouterr().out), key
+    assert main(["scene", "--set", 'objects.0={"mesh":"sphere","bogus":1}']) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'objects[0].bogus'" in err and "Traceback" not in err
+
+
+def test_bad_dotted_keys_say_what_is_there(capsys):
+    assert main(["scene", "--set", "camera..width=5"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("refraction-ref: error:") and "eye, far, fov_y, height, near, target, up, width" in err
+    assert main(["scene", "--set", "objects.5.fit=2"]) == 2
+    assert "'objects' has 1 item (indices 0 to 0)" in capsys.readouterr().err
+    assert main(["scene", "--set", "camra.width=3"]) == 2
+    assert "known keys at the top level: camera," in capsys.readouterr().err
