@@ -19,7 +19,9 @@ ds_min, ds_max : float
     Minimum photon step and the step limit of "almost constant" octree
     nodes (eps <= variation < eps2), in voxels (defaults 1 and 8, §4.4, §5.3).
 eps, eps2 : float
-    Octree tolerances epsilon and epsilon' (defaults 0.005 and 0.02, §5.3).
+    Octree tolerances epsilon and epsilon' (defaults 0.005 and 0.02, §5.3):
+    a voxel's leaf is the coarsest node whose index range is below eps2,
+    and its step limit is infinite when that range is also below eps.
 integrator : {'euler', 'rk4'}
     'euler' is the paper's forward difference (eqs. 4-5); 'rk4' the classic
     fourth-order Runge-Kutta on the same system (eqs. 2-3), for photons and
@@ -54,12 +56,14 @@ stiff : float
     by ``stepping = 'paper'``.
 stepping : {'paper', 'robust'}
     'paper' (default) is §4.4 and §5.3 as written: the step is the distance
-    to the octree node's boundary clamped to ``[ds_min, ds_max]``, every
-    step applies eqs. 4-5, and a voxel's level-0 octree range is its own
-    value. 'robust' adds this package's extensions: the ``stiff`` cap and
-    step halving at index jumps, and a 26-neighbour dilation of the level-0
-    ranges so that constant nodes have an exactly zero gradient and are
-    crossed in one straight step.
+    to the octree node's boundary clamped to ``[ds_min, step_max]``, the
+    voxel's step limit (infinite in nodes whose index range is below eps,
+    ``ds_max`` where it lies in [eps, eps2)), every step applies eqs. 4-5,
+    and a voxel's level-0 octree range is its own value. 'robust' adds this
+    package's extensions: the ``stiff`` cap and step halving at index jumps,
+    and a 26-neighbour dilation of the level-0 ranges so that constant nodes
+    (range below eps over each voxel's neighbourhood; their small gradient is
+    taken as zero) are crossed in one straight step.
 proxy : {'inflated', 'box'}
     Where photons start (§4.3). 'inflated' (default): the light's texture
     records the proxy geometry, an inflated copy of every mesh (for
