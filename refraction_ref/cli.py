@@ -82,8 +82,31 @@ def _cmd_compare(a):
 def _cmd_scene(a):
     from . import load_scene
 
-    print(load_scene(a.scene, _parse_sets(a.set)).to_json())
+    scene = load_scene(a.scene, _parse_sets(a.set))
+    if getattr(a, "to", None):
+        fmt, path = a.to
+        if fmt != "mitsuba":
+            from .scene import SceneError
+
+            raise SceneError(f"scene --to: unknown format {fmt!r}; the one known is 'mitsuba'")
+        from .interop.mitsuba import write_xml
+
+        spec = write_xml(scene, path, bsdf=a.bsdf)
+        files = sorted(v["file"] for v in spec.values() if isinstance(v, dict) and "file" in v)
+        print(f"wrote {path} and beside it {', '.join(files)} (load with mitsuba.load_file)")
+        return 0
+    print(scene.to_json())
     return 0
+
+
+def _cmd_crosscheck(a):
+    from .crosscheck import report_markdown, run
+
+    parts = tuple(x for x in a.parts.split(",") if x)
+    res = run(a.out, only=a.only, parts=parts, workers=a.workers, scheduler=a.scheduler,
+              log=(lambda m: None) if a.quiet else print)
+    print(f"{len(res['cases'])} cases; wrote {os.path.join(a.out, 'crosscheck.md')}")
+    return 0 if "**FAIL**" not in report_markdown(res).split("\n## ")[0] else 1
 
 
 def _cmd_golden_build(a):
@@ -175,7 +198,21 @@ def main(argv=None):
     s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
     s.add_argument("scene", nargs="?", default=None)
     s.add_argument("--set", action="append", metavar="KEY=VALUE")
+    s.add_argument("--to", nargs=2, metavar=("FORMAT", "OUT"),
+                   help="export instead of printing: 'mitsuba OUT.xml' writes a Mitsuba 3 scene (meshes and "
+                        "environment bitmap beside it; needs the crosscheck extra)")
+    s.add_argument("--bsdf", default="dielectric", choices=("dielectric", "refract"),
+                   help="with --to mitsuba: Mitsuba's dielectric (default) or the Fresnel-free refraction of "
+                        "the exact references (plugin refraction_ref_refract, registered from Python)")
     s.set_defaults(fn=_cmd_scene)
+    x = sub.add_parser("crosscheck", help="the exact references against Mitsuba 3, per golden case (Markdown report)")
+    x.add_argument("--out", default="out/crosscheck", help="folder for crosscheck.md, crosscheck.json, figures")
+    x.add_argument("--only", metavar="NAME,...", help="only these golden cases")
+    x.add_argument("--parts", default="paths,images", help="paths, images (default both)")
+    x.add_argument("--workers", type=int, metavar="N", help="run the cases on a LocalCluster of N worker processes")
+    x.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the cases on this Dask cluster")
+    x.add_argument("--quiet", action="store_true")
+    x.set_defaults(fn=_cmd_crosscheck)
     g = sub.add_parser("golden", help="the conformance kit's golden suite")
     gsub = g.add_subparsers(dest="golden_cmd", required=True)
     gb = gsub.add_parser("build", help="render the catalogue with the oracle into DIR (arrays, manifest)")

@@ -1,0 +1,493 @@
+"""Any scene of ours as a Mitsuba 3 scene: a dictionary for ``mi.load_dict`` or an XML file for ``mi.load_file``.
+
+=========================  =====================================================================
+ours                       Mitsuba 3
+=========================  =====================================================================
+``camera`` (perspective)   ``perspective``, ``fov_axis="y"``, ``to_world = look_at(eye, target,
+                           up)``, a ``box`` pixel filter; pixel (row i, col j) is Mitsuba's film
+                           position ``((j + 0.5) / W, (i + 0.5) / H)`` (row 0 at the top in both;
+                           checked to float32 precision by :func:`refraction_ref.crosscheck`)
+object                     ``ply`` mesh with the exact reference's shading normals written into
+                           it (``exact.normals``: crease and file normals split the vertices per
+                           corner, smooth normals per vertex, face normals as ``face_normals``)
+material ``ior``           ``dielectric`` (``int_ior = ior``, ``ext_ior = outside_ior``), or the
+                           Fresnel-free ``refraction_ref_refract`` plugin of this module
+material ``absorption``    an ``interior`` ``homogeneous`` medium, ``albedo = 0``, ``sigma_t =
+                           absorption * ior`` (our Beer-Lambert factor ``exp(-a l ior)``, Chaudhari
+                           2008 §3.8); media need the ``volpath`` integrator
+``environment``            ``envmap`` of a bitmap sampled at Mitsuba's own texel directions
+                           (rows at ``v = i / (H - 1)``, columns at ``u = (j + 1/2) / W`` with
+                           Mitsuba's ``u`` half a turn from ours), or ``constant``
+directional / point light  ``directional`` (``irradiance``) / ``point`` (``intensity``)
+receiver                   ``ply`` with face normals and a ``diffuse`` BSDF of its ``albedo``
+``water``                  a dense height-field ``ply`` of the analytic surface (its analytic
+                           normals as vertex normals), ``dielectric`` of ``water.ior``, an
+                           ``interior`` medium of ``sigma_t = water.absorption`` (eq. 4-17:
+                           ``exp(-K d)``)
+=========================  =====================================================================
+
+The export is a plain *spec* (nested dicts, numbers, file names, 4x4
+matrices) written once (:func:`export`); :func:`to_dict` turns it into
+Mitsuba objects and :func:`to_xml` into Mitsuba's XML, so the dictionary and
+the file describe one scene.
+
+References
+----------
+.. [1] W. Jakob, S. Speierer, N. Roussel, M. Nimier-David, D. Vicini,
+   T. Zeltner, B. Nicolet, M. Crespo, V. Leroy, Z. Zhang, "Mitsuba 3
+   renderer", 2022, https://mitsuba-renderer.org (plugin reference:
+   ``perspective``, ``ply``, ``dielectric``, ``envmap``, ``homogeneous``).
+.. [2] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+   Objects", M.S. thesis, UMBC, 2008, §3.8 (absorption).
+.. [3] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+   with Caustics Using Level Map Method", M.Eng. thesis, 2006, eq. 4-17.
+"""
+
+from __future__ import annotations
+
+import os
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+__all__ = ["require", "export", "to_dict", "to_xml", "write_xml", "load", "object_meshes",
+           "envmap_bitmap", "register_refract_bsdf", "REFRACT_PLUGIN", "write_ply", "ENV_WIDTH"]
+
+#: name under which :func:`register_refract_bsdf` registers the Fresnel-free BSDF
+REFRACT_PLUGIN = "refraction_ref_refract"
+#: default envmap width: 64 texels per checker square of the default 48-square checker
+ENV_WIDTH = 3072
+_INSTALL = 'pip install -e ".[crosscheck]"  (or: pip install "mitsuba>=3.5")'
+
+
+def require(variant="scalar_rgb"):
+    """Import Mitsuba 3 and set ``variant``; a clear ImportError when it is absent."""
+    try:
+        import mitsuba as mi
+    except ImportError as e:
+        raise ImportError(f"Mitsuba 3 is not installed; install the crosscheck extra: {_INSTALL}") from e
+    if mi.variant() != variant:
+        if variant not in mi.variants():
+            raise ImportError(f"Mitsuba variant {variant!r} is not available here (have: {', '.join(mi.variants())})")
+        mi.set_variant(variant)
+    return mi
+
+
+# --------------------------------------------------------------------------- files
+def write_ply(path, vertices, faces, normals=None):
+    """A binary little-endian PLY: float32 ``x y z`` (and ``nx ny nz``), ``uchar``/``int`` face lists."""
+    v = np.asarray(vertices, dtype=np.float32)
+    f = np.asarray(faces, dtype=np.int32)
+    cols = [v] if normals is None else [v, np.asarray(normals, dtype=np.float32)]
+    vert = np.ascontiguousarray(np.concatenate(cols, axis=1))
+    head = ["ply", "format binary_little_endian 1.0", f"element vertex {len(v)}",
+            "property float x", "property float y", "property float z"]
+    if normals is not None:
+        head += ["property float nx", "property float ny", "property float nz"]
+    head += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
+    fr = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    fr["n"] = 3
+    fr["i"] = f
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(head) + "\n").encode("ascii"))
+        fh.write(vert.astype("<f4").tobytes())
+        fh.write(fr.tobytes())
+
+
+def _split_corners(faces, corner_normals):
+    """Vertices per (vertex, normal) pair: a crease vertex carries one normal per side (Mitsuba's PLY
+    holds one normal per vertex). Returns (source vertex of each new vertex, its normal, new faces)."""
+    vid = faces.ravel().astype(np.float64)
+    n = corner_normals.reshape(-1, 3)
+    key = np.column_stack([vid, n])
+    uniq, inv = np.unique(key, axis=0, return_inverse=True)
+    return uniq[:, 0].astype(np.int64), uniq[:, 1:], inv.reshape(-1, 3)
+
+
+def object_meshes(scene):
+    """Each refractive object's world triangles with the exact reference's shading normals.
+
+    Returns
+    -------
+    list of dict
+        ``vertices`` (V, 3), ``faces`` (F, 3), ``normals`` (V, 3) or None (face
+        normals), ``ior``, ``absorption`` (3,), ``rule`` (the normals rule).
+    """
+    from ..exact_render import shading_normals
+    from ..meshes import scene_geometry
+
+    geom = scene_geometry(scene)
+    if not len(geom.faces):
+        return []
+    p = scene.data["exact"]
+    nrm, smooth, rule = shading_normals(scene, geom, p["normals"], float(p["crease_deg"]))
+    out = []
+    for k in range(len(geom.ior)):
+        sel = np.flatnonzero(geom.face_object == k)
+        f = geom.faces[sel]
+        used = np.unique(f)
+        remap = np.full(len(geom.vertices), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        if not smooth or nrm is None:
+            v, fk, nk = geom.vertices[used], remap[f], None
+        elif nrm.ndim == 2:
+            v, fk, nk = geom.vertices[used], remap[f], nrm[used]
+        else:
+            src, nk, fk = _split_corners(f, nrm[sel])
+            v = geom.vertices[src]
+        out.append({"vertices": v, "faces": fk, "normals": nk, "ior": float(geom.ior[k]),
+                    "absorption": np.asarray(geom.absorption[k], dtype=np.float64), "rule": rule})
+    return out
+
+
+def envmap_bitmap(env, width=ENV_WIDTH, base_dir="."):
+    """Our environment sampled at the texel directions of Mitsuba's ``envmap``: (H, W, 3) float32.
+
+    Mitsuba's ``envmap`` reads texel column ``j`` at ``u_mi = (j + 1/2) / W``
+    and row ``i`` at ``v = i / (H - 1)`` (first and last rows on the poles),
+    bilinearly, with ``u_mi = u - 1/2`` for our ``u`` (its seam looks down -z,
+    ours down +z; measured with ``emitter.eval``). Point samples of ours at
+    those directions, so every texel is exact and only Mitsuba's bilinear
+    blend between texels differs from ours: within one texel of a sharp
+    edge (a checker's), i.e. ``width`` sets the error.
+    """
+    from ..environment import environment_lookup
+
+    W = int(width)
+    H = W // 2 + 1
+    u = (np.arange(W) + 0.5) / W + 0.5
+    v = np.arange(H) / (H - 1)
+    phi = (u - 0.5) * 2 * np.pi  # ours: u = atan2(x, -z) / (2 pi) + 1/2
+    theta = v * np.pi
+    P, T = np.meshgrid(phi, theta)
+    d = np.stack([np.sin(T) * np.sin(P), np.cos(T), -np.sin(T) * np.cos(P)], axis=-1)
+    return environment_lookup(env, d, base_dir).astype(np.float32)
+
+
+def _lookat(eye, target, up):
+    return {"lookat": {"origin": [float(x) for x in eye], "target": [float(x) for x in target],
+                       "up": [float(x) for x in up]}}
+
+
+def _bsdf(kind, ior, outside_ior):
+    if kind == "refract":
+        return {"type": REFRACT_PLUGIN, "int_ior": float(ior), "ext_ior": float(outside_ior)}
+    if kind == "dielectric":
+        return {"type": "dielectric", "int_ior": float(ior), "ext_ior": float(outside_ior)}
+    raise ValueError(f"mitsuba export: bsdf must be 'dielectric' or 'refract', got {kind!r}")
+
+
+def _medium(sigma_t):
+    return {"type": "homogeneous", "albedo": {"type": "rgb", "value": [0.0, 0.0, 0.0]},
+            "sigma_t": {"type": "rgb", "value": [float(s) for s in sigma_t]}, "scale": 1.0}
+
+
+def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resolution=None,
+           integrator=None, max_depth=None, near_clip=1e-4):
+    """Write a scene's meshes and environment into ``folder``; the scene spec (plain data).
+
+    Parameters
+    ----------
+    scene : Scene
+    folder : str
+        Mesh files (``object_k.ply``, ``receiver_k.ply``, ``water.ply``) and
+        the environment bitmap (``environment.exr``) go here.
+    bsdf : {'dielectric', 'refract'}
+        Mitsuba's own Fresnel dielectric (default), or the Fresnel-free
+        refraction of the exact references (:func:`register_refract_bsdf`).
+    env_width : int
+        Width of the environment bitmap (height ``width / 2 + 1``).
+    water_resolution : int, optional
+        Quads per side of the water's height-field mesh (default
+        ``max(512, 4 * water.resolution)``).
+    integrator : str, optional
+        ``path`` (default) or ``volpath`` (default when an object absorbs);
+        ``ptracer`` for caustics.
+    max_depth : int, optional
+        Default ``exact.max_bounces + 2`` (camera segment, every event, the
+        segment to the environment), Russian roulette off (``rr_depth`` the same).
+    near_clip : float
+        The sensor's near clip (our primary rays start at the eye).
+
+    Returns
+    -------
+    dict
+        The spec: ``{name: {"type": ..., ...}}`` with ``"file"`` entries
+        relative to ``folder``.
+    """
+    from ..camera import Camera
+    from ..meshes import object_mesh
+
+    os.makedirs(folder, exist_ok=True)
+    d = scene.data
+    out_ior = float(d["outside_ior"])
+    cam = Camera.from_dict(d["camera"])
+    if cam.ortho:
+        raise ValueError("mitsuba export: an orthographic scene camera is not exported (perspective only)")
+    absorbing = False
+    spec = {"type": "scene"}
+    depth = int(max_depth) if max_depth is not None else int(d["exact"]["max_bounces"]) + 2
+    spec["sensor"] = {
+        "type": "perspective", "fov": float(cam.fov_y), "fov_axis": "y", "near_clip": float(near_clip),
+        "far_clip": max(1e4, float(cam.far)), "to_world": _lookat(cam.eye, cam.target, cam.up),
+        "film": {"type": "hdrfilm", "width": int(cam.width), "height": int(cam.height), "pixel_format": "rgb",
+                 "rfilter": {"type": "box"}, "sample_border": False},
+        "sampler": {"type": "independent", "sample_count": 64}}
+    for k, m in enumerate(object_meshes(scene)):
+        fn = f"object_{k}.ply"
+        write_ply(os.path.join(folder, fn), m["vertices"], m["faces"], m["normals"])
+        e = {"type": "ply", "file": fn, "face_normals": m["normals"] is None,
+             "bsdf": _bsdf(bsdf, m["ior"], out_ior)}
+        if np.any(m["absorption"] > 0):
+            absorbing = True
+            e["interior"] = _medium(m["absorption"] * m["ior"])
+        spec[f"object_{k}"] = e
+    for k, rc in enumerate(d.get("receivers") or []):
+        v, f = object_mesh(rc, scene.base_dir)
+        fn = f"receiver_{k}.ply"
+        write_ply(os.path.join(folder, fn), v, f)
+        spec[f"receiver_{k}"] = {"type": "ply", "file": fn, "face_normals": True,
+                                 "bsdf": {"type": "diffuse",
+                                          "reflectance": {"type": "rgb", "value": [float(a) for a in rc["albedo"]]}}}
+    w = d.get("water")
+    if w is not None:
+        from ..levelmap.water import water_mesh
+
+        res = int(water_resolution) if water_resolution else max(512, 4 * int(w["resolution"]))
+        wm = water_mesh({**w, "resolution": res})
+        write_ply(os.path.join(folder, "water.ply"), wm.vertices, wm.faces, wm.normals)
+        e = {"type": "ply", "file": "water.ply", "face_normals": False,
+             "bsdf": _bsdf(bsdf, float(w["ior"]), out_ior), "resolution": res}
+        if float(w["absorption"]) > 0:
+            absorbing = True
+            e["interior"] = _medium([float(w["absorption"])] * 3)
+        spec["water"] = e
+    for k, lt in enumerate(d.get("lights") or []):
+        rad = [float(x) for x in lt["radiance"]]
+        if lt["type"] == "directional":
+            spec[f"light_{k}"] = {"type": "directional", "direction": [float(x) for x in lt["direction"]],
+                                  "irradiance": {"type": "rgb", "value": rad}}
+        else:
+            spec[f"light_{k}"] = {"type": "point", "position": [float(x) for x in lt["position"]],
+                                  "intensity": {"type": "rgb", "value": rad}}
+    env = d["environment"]
+    if env.get("type", "checker") == "constant":
+        c = np.asarray(env.get("colors", [[0.9, 0.9, 0.9]])[0], dtype=np.float64) * float(env.get("intensity", 1.0))
+        spec["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": [float(x) for x in c]}}
+    else:
+        img = envmap_bitmap(env, env_width, scene.base_dir)
+        _write_exr(os.path.join(folder, "environment.exr"), img)
+        spec["environment"] = {"type": "envmap", "file": "environment.exr", "scale": 1.0}
+    kind = integrator or ("volpath" if absorbing else "path")
+    spec["integrator"] = {"type": kind, "max_depth": depth}
+    if kind in ("path", "volpath"):
+        spec["integrator"]["rr_depth"] = depth
+    return spec
+
+
+def _write_exr(path, img):
+    mi = require(_variant_or_scalar())
+    mi.Bitmap(np.ascontiguousarray(img, dtype=np.float32)).write(path)
+
+
+def _variant_or_scalar():
+    try:
+        import mitsuba as mi
+
+        return mi.variant() or "scalar_rgb"
+    except ImportError:
+        return "scalar_rgb"
+
+
+# --------------------------------------------------------------------------- spec -> Mitsuba
+def to_dict(spec, folder):
+    """The spec as a ``mi.load_dict`` dictionary (Mitsuba imported, its variant set by the caller).
+
+    File entries become absolute ``filename`` s in ``folder``; look-at entries
+    ``mi.ScalarTransform4f`` s. A ``refraction_ref_refract`` BSDF needs
+    :func:`register_refract_bsdf` first.
+    """
+    import mitsuba as mi
+
+    def conv(x, key=None):
+        if isinstance(x, dict):
+            if key == "to_world" and "lookat" in x:
+                la = x["lookat"]
+                return mi.ScalarTransform4f().look_at(origin=la["origin"], target=la["target"], up=la["up"])
+            out = {}
+            for k, v in x.items():
+                if k == "file":
+                    out["filename"] = os.path.abspath(os.path.join(folder, v))
+                elif k == "resolution":
+                    continue
+                else:
+                    out[k] = conv(v, k)
+            return out
+        return x
+
+    return conv(spec)
+
+
+def _xml_value(name, v):
+    if isinstance(v, bool):
+        return f'<boolean name="{name}" value="{str(v).lower()}"/>'
+    if isinstance(v, int):
+        return f'<integer name="{name}" value="{v}"/>'
+    if isinstance(v, float):
+        return f'<float name="{name}" value="{v!r}"/>'
+    if isinstance(v, str):
+        return f"<string name={quoteattr(name)} value={quoteattr(v)}/>"
+    if isinstance(v, (list, tuple)) and len(v) == 3:
+        return f'<vector name="{name}" value="{", ".join(repr(float(x)) for x in v)}"/>'
+    raise ValueError(f"mitsuba xml: cannot write {name}={v!r}")
+
+
+_TAGS = {"perspective": "sensor", "hdrfilm": "film", "box": "rfilter", "independent": "sampler", "ply": "shape",
+         "dielectric": "bsdf", "diffuse": "bsdf", REFRACT_PLUGIN: "bsdf", "homogeneous": "medium",
+         "directional": "emitter", "point": "emitter", "envmap": "emitter", "constant": "emitter",
+         "path": "integrator", "volpath": "integrator", "ptracer": "integrator"}
+
+
+def _xml_node(d, name=None, indent="    "):
+    t = d["type"]
+    if t == "rgb":
+        return f'{indent}<rgb name="{name}" value="{", ".join(repr(float(x)) for x in d["value"])}"/>'
+    tag = _TAGS[t]
+    attrs = f' type="{t}"' + (f' name="{name}"' if name and tag in ("medium", "rfilter") and name != tag else "")
+    if tag == "medium":
+        attrs = f' type="{t}" name="{name}"'
+    lines = [f"{indent}<{tag}{attrs}>"]
+    for k, v in d.items():
+        if k in ("type", "resolution"):
+            continue
+        if k == "file":
+            lines.append(f"{indent}    " + _xml_value("filename", v))
+        elif k == "to_world":
+            la = v["lookat"]
+            lines.append(f'{indent}    <transform name="to_world">')
+            lines.append(f'{indent}        <lookat origin="{", ".join(map(repr, la["origin"]))}" '
+                         f'target="{", ".join(map(repr, la["target"]))}" up="{", ".join(map(repr, la["up"]))}"/>')
+            lines.append(f"{indent}    </transform>")
+        elif isinstance(v, dict):
+            lines.append(_xml_node(v, k, indent + "    "))
+        elif k == "direction" or k == "position":
+            tagv = "vector" if k == "direction" else "point"
+            lines.append(f'{indent}    <{tagv} name="{k}" value="{", ".join(repr(float(x)) for x in v)}"/>')
+        else:
+            lines.append(f"{indent}    " + _xml_value(k, v))
+    lines.append(f"{indent}</{tag}>")
+    return "\n".join(lines)
+
+
+def to_xml(spec):
+    """The spec as Mitsuba 3 XML (``<scene version="3.0.0">``; file names relative to the XML file)."""
+    body = [_xml_node(v, k) for k, v in spec.items() if k != "type"]
+    return '<?xml version="1.0" encoding="utf-8"?>\n<!-- written by refraction-ref (refraction_ref.interop.mitsuba) -->\n' \
+           '<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
+
+
+def write_xml(scene, path, **kw):
+    """Export ``scene`` as ``path`` (Mitsuba XML) with its mesh and bitmap files beside it; the spec.
+
+    Keyword arguments are those of :func:`export`.
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    spec = export(scene, folder, **kw)
+    with open(path, "w") as f:
+        f.write(to_xml(spec))
+    return spec
+
+
+def load(scene, folder, variant="scalar_rgb", **kw):
+    """The scene as a loaded ``mi.Scene`` (files written into ``folder``); (mi.Scene, spec)."""
+    mi = require(variant)
+    spec = export(scene, folder, **kw)
+    if kw.get("bsdf") == "refract":
+        register_refract_bsdf()
+    return mi.load_dict(to_dict(spec, folder)), spec
+
+
+# --------------------------------------------------------------------------- the Fresnel-free BSDF
+_REGISTERED = set()
+
+
+def register_refract_bsdf():
+    """Register the Fresnel-free refractive BSDF ``refraction_ref_refract`` with the current variant.
+
+    Refraction only, as the exact references trace it: Snell's law with the
+    shading normal flipped to the geometric normal's side, the geometric
+    normal instead when the shading normal would send the ray to the wrong
+    side of the triangle, the mirror direction under total internal
+    reflection, and a weight of one (no Fresnel split, no ``1 / eta^2``
+    radiance scaling: the exact image is the environment along the exit
+    direction). The medium is decided by the geometric normal
+    (``dot(wi, n_g) > 0``: outside, ``ext_ior``), as the exact tracer does.
+    Parameters: ``int_ior``, ``ext_ior`` (floats).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    if mi.variant() in _REGISTERED:
+        return REFRACT_PLUGIN
+
+    class RefractBSDF(mi.BSDF):
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.int_ior = float(props.get("int_ior", 1.5)) if hasattr(props, "get") else float(props["int_ior"])
+            self.ext_ior = float(props.get("ext_ior", 1.0)) if hasattr(props, "get") else float(props["ext_ior"])
+            flags = (mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide)
+            tflags = (mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+                      | mi.BSDFFlags.NonSymmetric)
+            self.m_components = [flags, tflags]
+            self.m_flags = flags | tflags
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            fr = si.sh_frame
+            wi = fr.to_world(si.wi)  # towards where the ray came from
+            d = -wi
+            ng = si.n
+            cos_g = dr.dot(d, ng)
+            entering = cos_g < 0
+            ns = fr.n
+            ns = dr.select(dr.dot(ns, ng) < 0, -ns, ns)
+            eta = dr.select(entering, self.ext_ior / self.int_ior, self.int_ior / self.ext_ior)
+
+            def refract(n):
+                nf = dr.select(dr.dot(d, n) < 0, n, -n)  # facing the incoming ray
+                ci = -dr.dot(d, nf)
+                k = 1 - eta * eta * (1 - ci * ci)
+                tir = k < 0
+                t = eta * d + (eta * ci - dr.safe_sqrt(k)) * nf
+                r = d + 2 * ci * nf
+                return dr.select(tir, r, dr.normalize(t)), tir
+
+            out, tir = refract(ns)
+            sn = dr.dot(out, ng)
+            wrong = dr.select(tir, (sn < 0) == (cos_g < 0), (sn < 0) != (cos_g < 0))
+            out2, tir2 = refract(ng)
+            out = dr.select(wrong, out2, out)
+            tir = dr.select(wrong, tir2, tir)
+            bs = dr.zeros(mi.BSDFSample3f)
+            bs.wo = fr.to_local(out)
+            bs.pdf = 1.0
+            bs.eta = dr.select(tir, 1.0, 1.0 / eta)
+            bs.sampled_type = dr.select(tir, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                        mi.UInt32(+mi.BSDFFlags.DeltaTransmission))
+            bs.sampled_component = dr.select(tir, mi.UInt32(0), mi.UInt32(1))
+            return bs, mi.Color3f(1.0)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0), mi.Float(0.0)
+
+        def to_string(self):
+            return f"RefractBSDF[int_ior={self.int_ior}, ext_ior={self.ext_ior}]"
+
+    mi.register_bsdf(REFRACT_PLUGIN, lambda props: RefractBSDF(props))
+    _REGISTERED.add(mi.variant())
+    return REFRACT_PLUGIN
