@@ -46,7 +46,15 @@ def _read_mesh_file(path, mtime):
     import trimesh
 
     try:
+        # the file's own data first: processing drops NaN vertices and their faces in silence
+        raw = trimesh.load(path, force="mesh", process=False)
+        _check_raw_mesh(path, np.asarray(raw.vertices), np.asarray(raw.faces))
         m = trimesh.load(path, force="mesh", process=True)
+    except SceneError:
+        raise
+    except IndexError as e:  # trimesh's OBJ reader indexes its vertices with the faces while parsing
+        raise SceneError(f"mesh file '{path}' has a face that names a vertex the file does not have ({e}); "
+                         "fix the face indices or add the missing vertices") from None
     except Exception as e:  # trimesh raises many types
         raise SceneError(f"mesh file '{path}' could not be read ({type(e).__name__}: {e}); "
                          "give a mesh format trimesh reads (PLY, OBJ, STL, OFF, GLB)") from None
@@ -55,6 +63,28 @@ def _read_mesh_file(path, mtime):
     v.setflags(write=False)
     f.setflags(write=False)
     return v, f
+
+
+def _count(n, one, many):
+    return f"{n} {one if n == 1 else many}"
+
+
+def _check_raw_mesh(path, v, f):
+    """Refuse non-finite vertices and out-of-range face indices as the file holds them (before trimesh's
+    processing, which drops the first without a word and indexes with the second)."""
+    if v.size:
+        bad = np.flatnonzero(~np.all(np.isfinite(v), axis=1))
+        if len(bad):
+            raise SceneError(f"mesh file '{path}' has {_count(len(bad), 'vertex', 'vertices')} with NaN or "
+                             f"infinite coordinates (the first: vertex {bad[0]} counting from 0, "
+                             f"{v[bad[0]].tolist()}); repair the mesh: give every vertex finite coordinates or "
+                             "remove it and its faces")
+    if f.size:
+        out = np.flatnonzero(np.any((f < 0) | (f >= len(v)), axis=1))
+        if len(out):
+            raise SceneError(f"mesh file '{path}' has {_count(len(out), 'face', 'faces')} with vertex indices "
+                             f"outside 0..{len(v) - 1} (the first: face {out[0]} counting from 0, indices "
+                             f"{f[out[0]].tolist()}); fix the face indices or add the missing vertices")
 
 
 @functools.lru_cache(maxsize=32)

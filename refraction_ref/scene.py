@@ -354,6 +354,22 @@ def _resolve(raw, base_dir, callables):
     return data
 
 
+class _DuplicateKey(ValueError):
+    def __init__(self, key):
+        super().__init__(key)
+        self.key = key
+
+
+def _no_duplicate_keys(pairs):
+    """``json`` object hook: a dict of ``pairs``, refusing a key given twice (plain JSON keeps the last)."""
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k)
+        out[k] = v
+    return out
+
+
 def load_scene(src=None, overrides=None):
     """Load, default-fill and validate a scene.
 
@@ -388,12 +404,20 @@ def load_scene(src=None, overrides=None):
         raw, base_dir = src, "."
     else:
         path = os.fspath(src)
+        if os.path.isdir(path):
+            raise SceneError(f"scene file '{path}' is a folder; give the path of a JSON scene file "
+                             "(see docs/oracle.md) or omit it to render the default scene")
         if not os.path.isfile(path):
             raise SceneError(f"scene file '{path}' does not exist; give the path of a JSON scene "
                              "(see docs/oracle.md) or omit it to render the default scene")
         try:
             with open(path) as f:
-                raw = json.load(f)
+                raw = json.load(f, object_pairs_hook=_no_duplicate_keys)
+        except _DuplicateKey as e:
+            raise SceneError(f"scene file '{path}' gives the key '{e.key}' twice in one object (JSON keeps only "
+                             "the last, silently); give each key once") from None
+        except UnicodeDecodeError as e:
+            raise SceneError(f"scene file '{path}' is not a text (JSON) file ({e.reason}); give a JSON scene") from None
         except json.JSONDecodeError as e:
             raise SceneError(f"scene file '{path}' is not valid JSON: {e}") from None
         if not isinstance(raw, dict):

@@ -4,6 +4,7 @@ import json
 import os
 
 import numpy as np
+import pytest
 
 from refraction_ref.cli import main
 from refraction_ref.result import load_result
@@ -81,3 +82,42 @@ def test_bad_dotted_keys_say_what_is_there(capsys):
     assert "'objects' has 1 item (indices 0 to 0)" in capsys.readouterr().err
     assert main(["scene", "--set", "camra.width=3"]) == 2
     assert "known keys at the top level: camera," in capsys.readouterr().err
+
+
+PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 2\nproperty list uchar int vertex_indices\nend_header\n")
+
+
+def test_broken_meshes_are_refused_with_their_own_messages(tmp_path, capsys):
+    from refraction_ref.meshes import load_mesh
+    from refraction_ref.scene import SceneError
+
+    files = {"nan.obj": ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 nan 0\nf 1 2 3\nf 1 2 4\n",
+                         "1 vertex with NaN or infinite coordinates (the first: vertex 3"),
+             "inf.ply": (PLY_HEAD + "0 0 0\n1 0 0\n0 1 0\n0 inf 0\n3 0 1 2\n3 0 1 3\n",
+                         "1 vertex with NaN or infinite coordinates (the first: vertex 3"),
+             "range.ply": (PLY_HEAD + "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 7\n",
+                           "1 face with vertex indices outside 0..3 (the first: face 1"),
+             "range.obj": ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n",
+                           "has a face that names a vertex the file does not have")}
+    for name, (text, message) in files.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(SceneError) as e:
+            load_mesh(str(tmp_path / name))
+        assert message in str(e.value) and "format" not in str(e.value), name
+    out = tmp_path / "o"
+    assert main(["render", "--out", str(out), "--set", f"objects.0.mesh={tmp_path / 'nan.obj'}",
+                 "--set", "camera.width=16", "--set", "camera.height=16", "--quiet"]) == 2
+    assert "NaN or infinite" in capsys.readouterr().err
+    assert sorted(os.listdir(tmp_path)) == sorted(files)  # nothing written
+
+
+def test_scene_files_with_a_key_twice_or_a_folder_are_refused(tmp_path, capsys):
+    (tmp_path / "dup.json").write_text('{"camera": {"width": 16, "height": 16, "width": 32}}')
+    assert main(["scene", str(tmp_path / "dup.json")]) == 2
+    assert "gives the key 'width' twice" in capsys.readouterr().err
+    assert main(["scene", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    (tmp_path / "img.json").write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff")
+    assert main(["scene", str(tmp_path / "img.json")]) == 2
+    assert "not a text (JSON) file" in capsys.readouterr().err
