@@ -45,7 +45,7 @@ def models(quick=False):
     """Row name -> chaudhari.Model: the package's rows (``tables.chaudhari_report.models``), two in quick mode."""
     from refraction_ref.tables.chaudhari_report import models as report_models
 
-    out, _ = report_models(C.results_dir())
+    out, _ = report_models()
     if quick:
         out = {k: out[k] for k in ("Bunny-lowpoly", "Bunny I")}
     return out, {}

@@ -11,14 +11,25 @@ import time
 __all__ = ["main"]
 
 
+class UsageError(ValueError):
+    """A command line that cannot run as given (exit 2 with the error prefix, like argparse's own)."""
+
+
 def _parse_sets(items):
     out = {}
     for it in items or []:
-        if "=" not in it:
-            raise SystemExit(f"refraction-ref: --set expects key=value, got {it!r}")
+        if "=" not in it:  # a usage error: exit 2 with the error prefix, like argparse's own
+            raise UsageError(f"--set expects KEY=VALUE, got {it!r}; e.g. --set camera.width=64")
         k, v = it.split("=", 1)
         out[k.strip()] = v.strip()
     return out
+
+
+def _check_workers(n):
+    """A LocalCluster of ``n`` worker processes: refuse ``n < 1`` (Dask would wait for workers forever)."""
+    if n is not None and n < 1:
+        raise UsageError(f"--workers is {n}; give at least 1 worker process (or --scheduler for an existing "
+                         "cluster)")
 
 
 def _cmd_render(a):
@@ -28,12 +39,10 @@ def _cmd_render(a):
 
     scene = load_scene(a.scene, _parse_sets(a.set))
     check_writable(output_paths(a.out), overwrite=a.force)  # before any work, not after it
-    from .render import kernels_cached
+    from ._warmup import compile_report
 
-    if not kernels_cached(a.method):
-        print(f"refraction-ref: compiling the {a.method} kernels with Numba (first run only: they are cached, "
-              "and later runs start in seconds) ...", file=sys.stderr, flush=True)
-    res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
+    with compile_report(a.method):  # kernels done of total on a terminal, one line each way in logs
+        res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
     paths = res.save(a.out, overwrite=a.force)
     import numpy as np
 
@@ -110,8 +119,11 @@ def _cmd_crosscheck(a):
 
 
 def _cmd_golden_build(a):
+    from .files import check_out_folder
     from .golden.build import build
 
+    _check_workers(a.workers)
+    check_out_folder(a.dir, "the golden suite folder")  # before any work: an existing file, a read-only place
     print(f"building the golden suite in {a.dir}" + (f" (cases {a.only})" if a.only else ""))
     t0 = time.perf_counter()
     m = build(a.dir, only=a.only, progress=not a.quiet and sys.stderr.isatty(), scheduler=a.scheduler,
@@ -138,6 +150,7 @@ def _cmd_sweep(a):
     from .sweep import load_spec, sweep, tasks_of
 
     spec = load_spec(a.spec)
+    _check_workers(a.workers if not a.scheduler else None)
     n = len(tasks_of(spec))
     where = a.scheduler or f"a LocalCluster of {a.workers} worker process(es) x {a.threads_per_worker} thread(s)"
     print(f"sweep {spec['name']}: {n} tasks on {where}", flush=True)
@@ -151,8 +164,8 @@ def _cmd_sweep(a):
 
 
 def _cmd_tables(a):
-    from .tables.common import HELD, NOT_HELD
-    from .tables.report import run_tables
+    from .tables.common import HELD, NOT_COMPARABLE, NOT_HELD
+    from .tables.report import run_tables, unreliable
 
     log = (lambda m: print(m, file=sys.stderr, flush=True)) if not a.quiet else (lambda m: None)
     only = [k for k in a.only.split(",") if k] if a.only else None
@@ -160,8 +173,14 @@ def _cmd_tables(a):
     claims = [c for r in reports for c in r.claims]
     held = sum(c.verdict == HELD for c in claims)
     not_held = sum(c.verdict == NOT_HELD for c in claims)
-    print(f"{held} claims held, {not_held} not held, {len(claims) - held - not_held} not measured; "
-          f"wrote {os.path.join(a.out, 'tables.md')}")
+    nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
+    bad = sum(unreliable(r, c) for r in reports for c in r.claims)
+    if bad:  # shown under --quiet too: the verdicts below it are not to be trusted
+        print(f"refraction-ref: warning: the machine was busy (other processes used up to "
+              f"{100 * max(r.other_load for r in reports):.0f}% of the CPUs); {bad} timing verdicts are marked "
+              "unreliable in claims.csv and tables.md", file=sys.stderr, flush=True)
+    print(f"{held} claims held, {not_held} not held, {nc} not comparable, {len(claims) - held - not_held - nc} "
+          f"not measured; wrote {os.path.join(a.out, 'tables.md')}")
     return 0
 
 
@@ -234,7 +253,8 @@ def main(argv=None):
     k.set_defaults(fn=_cmd_check)
     w = sub.add_parser("sweep", help="run a grid of scenes x methods x knobs on dask.distributed (error vs time)")
     w.add_argument("spec", help="sweep spec (JSON; see refraction_ref/sweep.py)")
-    w.add_argument("--out", default="out/sweep", help="folder for NAME.csv, NAME.parquet, NAME.png")
+    w.add_argument("--out", default="out/sweep",
+                   help="folder for NAME.csv and NAME.png (and NAME.parquet where pyarrow is installed)")
     w.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing dask cluster (default: a LocalCluster)")
     w.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     w.add_argument("--threads-per-worker", type=int, default=1, help="threads per LocalCluster worker (default 1)")
@@ -248,6 +268,7 @@ def main(argv=None):
     t.set_defaults(fn=_cmd_tables)
     a = p.parse_args(argv)
     from .compare import CompareError
+    from .files import NotNpzError, OutputError
     from .golden.check import CheckError
     from .scene import SceneError
     from .sweep import SweepError
@@ -256,7 +277,7 @@ def main(argv=None):
     try:
         return a.fn(a)
     except (SceneError, CompareError, CheckError, SweepError, TablesError, FileExistsError,
-            FileNotFoundError) as e:
+            FileNotFoundError, OutputError, NotNpzError, UsageError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
 

@@ -5,7 +5,8 @@ import csv
 import numpy as np
 import pytest
 
-from refraction_ref.tables.common import HELD, NOT_HELD, Claim, Report, Table
+from refraction_ref.tables.common import (BUSY, HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, Claim, LoadProbe,
+                                          Report, Table, other_load)
 from refraction_ref.tables.report import TablesError, markdown, run_tables, write_report
 
 
@@ -21,7 +22,7 @@ def test_report_markdown_and_csv(tmp_path):
     reps = _fake()
     write_report(reps, tmp_path)
     md = (tmp_path / "tables.md").read_text()
-    assert "1 held, 1 not held, 0 not measured." in md
+    assert "1 held, 1 not held, 0 not comparable, 0 not measured." in md
     assert "“It is \\| small.”" in md            # a pipe in a quote does not break the table
     assert "| b | 12,345 | 2 |" in md and "| a | 1.5 | — |" in md
     assert "## Q 2001\n\nNot measured in this build." in md
@@ -31,6 +32,32 @@ def test_report_markdown_and_csv(tmp_path):
     claims = list(csv.DictReader(open(tmp_path / "claims.csv")))
     assert [c["verdict"] for c in claims] == [HELD, NOT_HELD]
     assert markdown(reps, quick=True).count("Quick run") == 1
+
+
+def test_busy_machine_marks_timing_verdicts_unreliable(tmp_path):
+    c = [Claim("P 2000", "§1", "It is fast.", HELD, "2.0x", "because", rule="held if > 1.5x", timing=True),
+         Claim("P 2000", "§2", "It is exact.", HELD, "0 ulp", "because", rule="held if equal")]
+    busy, idle = Report("P 2000", [], c, 1.0, other_load=BUSY + 0.3), Report("Q 2001", [], c[:1], 1.0, other_load=0.0)
+    write_report([busy, idle], tmp_path)
+    md = (tmp_path / "tables.md").read_text()
+    assert "Warning: the machine was busy" in md and "P 2000" in md.split("## Claims")[0]
+    assert "1 timing verdicts unreliable" in md and "held if > 1.5x" in md
+    rows = list(csv.DictReader(open(tmp_path / "claims.csv")))
+    # only the busy paper's timing claim is unreliable; its exactness claim and the idle paper's timing claim stand
+    assert [(r["section"], r["timing"], r["reliable"], r["other_load"]) for r in rows] == [
+        ("§1", "yes", "no", "0.45"), ("§2", "no", "yes", "0.45"), ("§1", "yes", "yes", "0.00")]
+    assert rows[0]["rule"] == "held if > 1.5x"
+    write_report([idle], tmp_path)
+    assert "busy" not in (tmp_path / "tables.md").read_text()
+
+
+def test_other_load_share():
+    hz = __import__("os").sysconf("SC_CLK_TCK")
+    # 2 s of wall on 2 CPUs = 4 CPU-seconds; the machine was busy 3 s of them, 1 s ours: others took 50 %
+    assert other_load((0, 0), (3 * hz, 1 * hz), 2.0, cpus=2) == 0.5
+    assert other_load((0, 0), (hz, hz), 2.0, cpus=2) == 0.0
+    assert other_load(None, (hz, 0), 1.0) == 0.0
+    assert 0.0 <= LoadProbe().stop() <= 1.0
 
 
 def test_unknown_paper_is_named(tmp_path):
@@ -63,5 +90,19 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     bunny = next(r for r in rows if r["model"] == "Bunny I")
     assert int(bunny["our triangles"]) == 69451
     claims = list(csv.DictReader(open(tmp_path / "claims.csv")))
-    assert len(claims) == 5 and all(c["verdict"] in (HELD, NOT_HELD) for c in claims)
+    assert len(claims) == 7 and all(c["verdict"] in (HELD, NOT_HELD, NOT_COMPARABLE, NOT_MEASURED) for c in claims)
+    assert all(c["rule"] for c in claims)                    # every verdict has its rule
+    # a GPU's frame rate is not judged on a CPU; the quick run has one grid, so the trend is not measured
+    assert [c["verdict"] for c in claims if c["section"] == "§4.1"] == [NOT_COMPARABLE, NOT_MEASURED]
+    # Table 4.2's one bunny and two are filmed with one camera: one bunny is traced on fewer interfaces
+    t42 = {r["stage"]: r for r in csv.DictReader(open(tmp_path / "chaudhari_4_2.csv"))}
+    assert int(t42["Interfaces (ours only)"]["ours II-A 256"]) < int(t42["Interfaces (ours only)"]["ours I-A 256"])
+    # the depth-complexity study: equal triangles, twice the layers
+    dc = list(csv.DictReader(open(tmp_path / "chaudhari_depth.csv")))
+    assert dc[0]["triangles"] == dc[1]["triangles"] == "4096"
+    assert (int(dc[0]["max fragments/pixel"]), int(dc[1]["max fragments/pixel"])) == (2, 4)
     assert (tmp_path / "chaudhari_tables.png").stat().st_size > 5000
+    # nothing but the report: the decimated bunny stays in memory
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv", "chaudhari_tables.png", "claims.csv",
+        "tables.md"]

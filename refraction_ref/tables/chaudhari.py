@@ -44,7 +44,7 @@ import numpy as np
 __all__ = ["THESIS_4_1", "THESIS_4_1_ALL", "COLS_4_1", "THESIS_4_2", "SCENES_4_2", "THESIS_SCENE_TEXT",
            "STAGE_OF", "View", "VIEWS", "RING", "Model", "ERROR_OPTIONS", "FORMER_DEFAULTS", "eye_of",
            "with_view", "view_complexities", "highest_complexity_view", "time_pipeline", "pipeline_ms",
-           "photon_generation_ms", "table_4_1", "table_4_2", "exit_error", "error_vs_view",
+           "photon_generation_ms", "photon_generation_pass", "cell_scene", "time_cells", "table_4_1", "table_4_2", "exit_error", "error_vs_view",
            "summarize_error", "defaults_before_after", "PIPELINE_STAGES"]
 
 # --------------------------------------------------------------------------- the thesis's numbers
@@ -213,14 +213,8 @@ def time_pipeline(scene, repeats=9, warmup=2):
             "other_load": 0.0}
 
 
-def photon_generation_ms(scene, repeats=9, warmup=2):
-    """The thesis's photon generation, "rasterizing the geometry one more time" (§4.2), timed apart.
-
-    The objects' world triangles (already placed: scene set-up, as the
-    thesis's vertex buffers) are transformed into the view, set up and
-    rasterized with the ``min`` blend (the nearest surface per pixel: where
-    each eye photon starts). Median ms over ``repeats`` after ``warmup``.
-    """
+def photon_generation_pass(scene):
+    """A callable running the thesis's photon-generation pass once (see :func:`photon_generation_ms`)."""
     from ..camera import Camera
     from ..meshes import scene_geometry
     from ..raster import raster_setup, rasterize
@@ -234,6 +228,23 @@ def photon_generation_ms(scene, repeats=9, warmup=2):
         rs = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
         return rasterize(rs, cam, "min", clip=True)
 
+    return once
+
+
+def cell_scene(model, view, res, layers, mode):
+    """The loaded scene of one table cell: ``model`` from ``view`` at ``res``^2, ``layers``, ``mode``."""
+    return _scene_for(model, view, res, layers, mode)
+
+
+def photon_generation_ms(scene, repeats=9, warmup=2):
+    """The thesis's photon generation, "rasterizing the geometry one more time" (§4.2), timed apart.
+
+    The objects' world triangles (already placed: scene set-up, as the
+    thesis's vertex buffers) are transformed into the view, set up and
+    rasterized with the ``min`` blend (the nearest surface per pixel: where
+    each eye photon starts). Median ms over ``repeats`` after ``warmup``.
+    """
+    once = photon_generation_pass(scene)
     for _ in range(max(1, int(warmup))):
         once()
     ts = []
@@ -260,7 +271,9 @@ def _cells(model, view, keys, time_fn, time_many, cache, log):
         ts = time_many(scenes) if time_many is not None else [time_fn(sc) for sc in scenes]
         for (res, L, mode), scene, t in zip(todo, scenes, ts):
             m = t["result"].meta
-            cell = {"pipeline_ms": float(t["pipeline_ms"]), "total_ms": float(t.get("total_ms", float("nan"))),
+            st = np.asarray(t["result"]["status"])
+            cell = {"traced_pixels": int(np.count_nonzero(st != 0)),
+                    "interfaces": int(np.asarray(t["result"]["interfaces"], np.int64).sum()),"pipeline_ms": float(t["pipeline_ms"]), "total_ms": float(t.get("total_ms", float("nan"))),
                     "stages_ms": dict(t.get("stages_ms", {})), "fps": 1000.0 / float(t["pipeline_ms"]),
                     "dc_max_bitmask": m.get("depth_complexity_max"), "layers_used": m.get("layers_used"),
                     "pixels_over_layer_limit": m.get("pixels_over_layer_limit"), "triangles": m.get("triangles"),
@@ -271,6 +284,19 @@ def _cells(model, view, keys, time_fn, time_many, cache, log):
                     f"({cell['fps']:5.1f} FPS), bitmask depth complexity {cell['dc_max_bitmask']}, "
                     f"{cell['layers_used']} layers peeled, other load {100 * cell['other_load']:.0f}%")
     return {k: cache[(id(model), view.name) + k] for k in keys}
+
+
+def time_cells(model, view, keys, time_many, cache=None, log=None):
+    """Time the cells ``keys`` ((res, layers, mode) tuples) of ``model`` seen from ``view``, interleaved.
+
+    Returns
+    -------
+    dict
+        ``(res, layers, mode)`` -> cell dict (``pipeline_ms``, ``stages_ms``, ``fps``, ``traced_pixels``
+        (pixels whose status is not ``MISSED``), ``interfaces`` (summed over the image), ``triangles``,
+        ``scene``, ...).
+    """
+    return _cells(model, view, list(keys), None, time_many, {} if cache is None else cache, log)
 
 
 def table_4_1(models, time_fn=None, cols=COLS_4_1, modes=("thesis", "ours"), views=VIEWS, cache=None, log=print,
@@ -328,7 +354,11 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
     models : dict
         Row name -> :class:`Model`; ``scenes`` maps each of
         :data:`SCENES_4_2` to one of them (default: I-A ``"I-A"``, I-B
-        ``"Bunny and Bunny"``, II-A ``"Bunny I"``, II-B ``"Bunny-lowpoly"``).
+        ``"Bunny and Bunny"``, II-A ``"II-A"``, II-B ``"II-B"``). All four
+        are filmed from one view: the I-A model's view of highest depth
+        complexity over ``views`` (or each scene's own where I-A is missing),
+        so that one bunny and two are compared in one framing, as the thesis's
+        Table 4.2 compares one scene with one and two bunnies.
     time_fn, time_many, cache :
         As for :func:`table_4_1` (cells it timed are reused).
     photon_fn : callable, optional
@@ -341,10 +371,13 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
         ``(scene, res)`` -> ``{"stages_ms", "pipeline_ms", "photon_generation_ms", "view", "model",
         "triangles"}``; ``None`` for a scene whose model is missing.
     """
-    scenes = scenes or {"I-A": "I-A", "I-B": "Bunny and Bunny", "II-A": "Bunny I", "II-B": "Bunny-lowpoly"}
+    scenes = scenes or {"I-A": "I-A", "I-B": "Bunny and Bunny", "II-A": "II-A", "II-B": "II-B"}
     cache = {} if cache is None else cache
     photon_fn = photon_fn or photon_generation_ms
     out = {}
+    ia = models.get(scenes.get("I-A"))
+    if ia is not None:
+        views = (highest_complexity_view(_model_scene(ia), views, ia.distance)[0],)
     for sc in SCENES_4_2:
         name = scenes.get(sc)
         model = models.get(name)
@@ -361,7 +394,9 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
                 log(f"  {sc} ({name}) {res}: photon generation (one more rasterization) {pg:.2f} ms")
             out[(sc, res)] = {"stages_ms": cell["stages_ms"], "pipeline_ms": cell["pipeline_ms"],
                               "photon_generation_ms": pg, "view": view.name, "model": name,
-                              "triangles": cell["triangles"], "other_load": cell["other_load"]}
+                              "triangles": cell["triangles"], "other_load": cell["other_load"],
+                              "traced_pixels": cell["traced_pixels"], "interfaces": cell["interfaces"],
+                              "distance": model.distance}
     return out
 
 

@@ -2,7 +2,13 @@
 
 Each paper module returns a :class:`.common.Report`; this module runs them,
 writes one CSV per table, ``claims.csv`` and ``tables.md`` (our numbers beside
-the papers', the plots, and the claims marked held / not held).
+the papers', the plots, and the claims marked held / not held / not comparable,
+each with its rule). Nothing is written outside the output folder.
+
+Other load: each paper is measured under a :class:`.common.LoadProbe`; when
+other processes took more than :data:`.common.BUSY` of the CPUs meanwhile, a
+warning is logged and that paper's timing verdicts are marked unreliable in
+``claims.csv`` (column ``reliable``) and ``tables.md``.
 
 References
 ----------
@@ -17,9 +23,9 @@ import importlib
 import os
 import time
 
-from .common import HELD, NOT_HELD, Report
+from .common import BUSY, HELD, NOT_COMPARABLE, NOT_HELD, LoadProbe, Report
 
-__all__ = ["TablesError", "PAPERS", "run_tables", "write_report", "markdown"]
+__all__ = ["TablesError", "PAPERS", "run_tables", "write_report", "markdown", "unreliable"]
 
 class TablesError(ValueError):
     """A request the tables command cannot serve (an unknown paper)."""
@@ -69,9 +75,16 @@ def run_tables(out, quick=False, only=None, log=print):
             log(f"{paper}: not available in this build")
             reports.append(Report(paper, seconds=0.0))
             continue
+        probe = LoadProbe()
         rep = mod.run(quick=quick, out=out, log=log)
+        rep.other_load = probe.stop()
         rep.seconds = time.perf_counter() - t0
         log(f"{paper}: {len(rep.tables)} tables, {len(rep.claims)} claims in {rep.seconds:.0f} s")
+        if rep.other_load > BUSY:
+            n = sum(c.timing for c in rep.claims)
+            log(f"warning: other processes used {100 * rep.other_load:.0f}% of the CPUs while {paper} was "
+                f"measured (more than {100 * BUSY:.0f}%); its {n} timing verdicts are marked unreliable. "
+                "Re-run on an idle machine to trust them.")
         reports.append(rep)
     write_report(reports, out, quick)
     return reports
@@ -93,6 +106,18 @@ def _md_table(columns, rows):
     return "\n".join(out)
 
 
+def unreliable(report, claim):
+    """Whether a claim's verdict rests on a timing taken while the machine was busy (:data:`.common.BUSY`)."""
+    return bool(claim.timing) and report.other_load > BUSY
+
+
+def _verdict(report, claim):
+    v = f"**{claim.verdict}**"
+    if unreliable(report, claim):
+        v += f" (timing unreliable: other load {100 * report.other_load:.0f}%)"
+    return v
+
+
 def markdown(reports, quick=False):
     """The report's Markdown text."""
     from ..contract import software_versions
@@ -103,21 +128,34 @@ def markdown(reports, quick=False):
              f"{v.get('cpu', '')} ({v.get('cpu_count', os.cpu_count())} CPUs), numba {v.get('numba', '')}. "
              "Our times are a CPU's and the papers' a GPU's of their day: compare ratios and trends, "
              "not absolute times.", ""]
-    claims = [c for r in reports for c in r.claims]
-    if claims:
+    busy = [r for r in reports if r.other_load > BUSY]
+    if busy:
+        lines += ["**Warning: the machine was busy.** Other processes used "
+                  + ", ".join(f"{100 * r.other_load:.0f}% of the CPUs while {r.paper} was measured" for r in busy)
+                  + f" (more than {100 * BUSY:.0f}%): the timing verdicts of "
+                  + ", ".join(r.paper for r in busy) + " are marked unreliable. Re-run on an idle machine.", ""]
+    pairs = [(r, c) for r in reports for c in r.claims]
+    if pairs:
+        claims = [c for _, c in pairs]
         n_held = sum(c.verdict == HELD for c in claims)
         n_not = sum(c.verdict == NOT_HELD for c in claims)
+        n_nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
+        n_bad = sum(unreliable(r, c) for r, c in pairs)
         lines += ["## Claims", "",
-                  f"{n_held} held, {n_not} not held, {len(claims) - n_held - n_not} not measured.", "",
-                  _md_table(["paper", "section", "claim", "verdict", "measured", "why"],
-                            [[c.paper, c.section, f"“{c.quote}”", f"**{c.verdict}**", c.measured, c.why]
-                             for c in claims]), ""]
+                  f"{n_held} held, {n_not} not held, {n_nc} not comparable, "
+                  f"{len(claims) - n_held - n_not - n_nc} not measured"
+                  + (f"; {n_bad} timing verdicts unreliable (busy machine)." if n_bad else "."), "",
+                  "Each claim's rule (the quantity, the threshold, the set-up) was fixed before measuring.", "",
+                  _md_table(["paper", "section", "claim", "rule", "verdict", "measured", "why"],
+                            [[c.paper, c.section, f"“{c.quote}”", c.rule or "—", _verdict(r, c), c.measured, c.why]
+                             for r, c in pairs]), ""]
     for r in reports:
         lines += [f"## {r.paper}", ""]
         if not r.tables and not r.claims:
             lines += ["Not measured in this build.", ""]
             continue
-        lines += [f"Measured in {r.seconds:.0f} s.", ""]
+        lines += [f"Measured in {r.seconds:.0f} s; other processes used {100 * r.other_load:.0f}% of the CPUs "
+                  "meanwhile.", ""]
         for t in r.tables:
             lines += [f"### {t.title}", "", _md_table(t.columns, t.rows), ""]
             if t.note:
@@ -140,9 +178,11 @@ def write_report(reports, out, quick=False):
                 w.writerows([["" if c is None else c for c in row] for row in t.rows])
     with atomic_open(os.path.join(out, "claims.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["paper", "section", "quote", "verdict", "measured", "why"])
+        w.writerow(["paper", "section", "quote", "rule", "verdict", "measured", "why", "timing", "other_load",
+                    "reliable"])
         for r in reports:
             for c in r.claims:
-                w.writerow([c.paper, c.section, c.quote, c.verdict, c.measured, c.why])
+                w.writerow([c.paper, c.section, c.quote, c.rule, c.verdict, c.measured, c.why,
+                            "yes" if c.timing else "no", f"{r.other_load:.2f}", "no" if unreliable(r, c) else "yes"])
     with atomic_open(os.path.join(out, "tables.md"), "w") as f:
         f.write(markdown(reports, quick))
