@@ -333,8 +333,14 @@ def _st_shade(ctx):
 
 
 def eye_stages():
-    """The eye's stages of chapter 3 (without caustics)."""
+    """The eye's stages of chapter 3 (without caustics).
+
+    ``rays`` comes first: the pass a port writes first, and the first that ``check`` judges (the
+    golden suite's stage order is this graph's: :func:`refraction_ref.golden.build.stage_order`).
+    """
     return (
+        Stage("rays", _st_rays, reads=("camera",), makes=("ray_origin", "ray_dir"),
+              doc="every pixel's primary ray, world space (the output keys ray_origin, ray_dir)"),
         Stage("geometry", _st_geometry, reads=("objects", "outside_ior"), makes=("geom", "ior", "absorption"),
               doc="the objects' triangles, one material (§3.2, §4.1)"),
         Stage("minmax", _st_minmax, reads=("camera",) + _k(*MINMAX_KNOBS), after=("geometry",),
@@ -354,8 +360,6 @@ def eye_stages():
                      "path_dir"), doc="binary search + Snell at every interface (§3.6-3.7)"),
         Stage("shade", _st_shade, reads=("environment",), after=("geometry", "trace"), makes=("image",),
               doc="environment look-up, Beer-Lambert absorption (§3.8)"),
-        Stage("rays", _st_rays, reads=("camera",), makes=("ray_origin", "ray_dir"),
-              doc="every pixel's primary ray, world space (the output keys ray_origin, ray_dir)"),
     )
 
 
@@ -397,10 +401,11 @@ def _assemble(scene, bufs, stats):
     return arrays, info
 
 
-def _warm():
+def _warm(scene=None):
+    """Compile (or load) the kernels this scene's plan needs, on a tiny copy of it (``_warmup.warm``)."""
     from .. import _warmup
 
-    _warmup.imagespace()
+    _warmup.warm("imagespace", scene)
 
 
 METHOD = register_method(Method(
