@@ -2,8 +2,10 @@
 
 Layout of a suite (``docs/oracle.md``, "Conformance")::
 
-    DIR/manifest.json            contract and software versions, CPU, per case and key:
-                                 sha256, shape, dtype, stage, tolerance
+    DIR/manifest.json            contract and software versions, CPU, per case its stage order and
+                                 per key: sha256, shape, dtype, stage, tolerance
+    DIR/complete.json            the completion marker, written last: the cases and the manifest's
+                                 sha256 (``check`` refuses a suite without it: a build that stopped)
     DIR/<case>/scene.json        the resolved scene (volume arrays beside it as .npy)
     DIR/<case>/golden.npz        the method under test: final keys and every stage buffer
     DIR/<case>/reference.npz     the exact reference's result, for information (not judged)
@@ -36,7 +38,11 @@ from ..contract import CONTRACT_VERSION, software_versions
 from ..files import atomic_open, atomic_path
 from .tolerances import tolerance_for
 
-__all__ = ["catalogue", "build", "case_scene", "array_sha256", "key_stage", "CATALOGUE_DIR"]
+__all__ = ["catalogue", "build", "case_scene", "array_sha256", "key_stage", "stage_order", "FINAL_KEY_STAGES",
+           "COMPLETE", "CATALOGUE_DIR"]
+
+#: the completion marker of a suite, written after everything else (``check`` refuses a suite without it)
+COMPLETE = "complete.json"
 
 CATALOGUE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "golden")
 
@@ -113,14 +119,81 @@ def array_sha256(a):
     return h.hexdigest()
 
 
+#: (key pattern, stage): owners that the stages' ``makes`` do not give; the first match whose stage is in
+#: the graph wins. Final keys assembled from a stage's buffers under another name, the final image of a
+#: scene with caustics (made by ``caustic_final``, although ``shade`` makes an ``image`` too), and stage
+#: buffers stored by one stage but computed by an earlier pass (docs/oracle.md, "Conformance").
+FINAL_KEY_STAGES = (
+    ("image", "caustic_final"),              # with receivers the final image is the caustic pass's
+    ("image_refraction", "shade"),           # ... and the refraction-only view the shading pass's
+    ("hit", "trace"),                        # imagespace: status != 0 of the trace
+    ("ior", "voxelize"),                     # volumetric: the index volume (stage.voxelize.ior_volume)
+    ("volume_bounds", "voxelize"),
+    ("photon_*", "march"),                   # volumetric: the march's photon results
+    ("caustic_map_*", "caustics"),           # volumetric caustics (made inside the stage's arrays)
+    ("caustic_frame_*", "caustics"),
+    ("caustic_rgb_*", "caustics"),
+    ("stage.caustics.planes_[0-9]*", "planes"),  # level map: the plane offsets follow from the box (eqs. 4-1..4-9)
+)
+#: owners in FINAL_KEY_STAGES that win over a stage making a buffer of the same name
+_OVERRIDES = ("image",)
+
+
+def stage_order(stages):
+    """The order stages are judged in: a topological order of the graph, the registered order among equals.
+
+    Every stage comes after the stages whose buffers it reads (``Stage.after``),
+    so the first failing stage in this order is one whose inputs all passed.
+    Inspection stages are included (their buffers can be supplied and judged).
+    """
+    names = [s.name for s in stages]
+    after = {s.name: [u for u in s.after if u in names] for s in stages}
+    order, done = [], set()
+    while len(order) < len(names):
+        nxt = next((n for n in names if n not in done and all(u in done for u in after[n])), None)
+        if nxt is None:  # a cycle cannot be registered (after names earlier stages); keep the rest as listed
+            order += [n for n in names if n not in done]
+            break
+        order.append(nxt)
+        done.add(nxt)
+    return order
+
+
 def key_stage(key, stages):
-    """The stage that makes an array key: ``stage.<s>.<b>`` -> s; a final key -> the last stage making it."""
+    """The stage that makes an array key (``docs/oracle.md``, "Conformance").
+
+    ``stage.<s>.<b>`` -> s (or the owner :data:`FINAL_KEY_STAGES` names); a
+    final key -> the last stage whose ``makes`` holds it (``exit_dir`` ->
+    ``trace``; in the volumetric method ``exit_pos`` -> ``view``, after the
+    march's photon ``exit_pos``), else its :data:`FINAL_KEY_STAGES` owner.
+
+    Raises
+    ------
+    KeyError
+        For a final key no stage owns (add it to :data:`FINAL_KEY_STAGES`).
+    """
+    import fnmatch
+
+    names = {s.name for s in stages}
+    table = [owner for pat, owner in FINAL_KEY_STAGES if owner in names and fnmatch.fnmatchcase(key, pat)]
+    if key.startswith("stage."):
+        return table[0] if table else key.split(".")[1]
+    makers = [st.name for st in stages if key in st.makes]
+    if table and (key in _OVERRIDES or not makers):
+        return table[0]
+    if makers:
+        return makers[-1]
+    raise KeyError(f"golden build: no stage owns the final key {key!r}; name its stage in "
+                   "refraction_ref.golden.build.FINAL_KEY_STAGES")
     if key.startswith("stage."):
         return key.split(".")[1]
-    owner = "output"
+    owner = None
     for st in stages:
         if key in st.makes:
             owner = st.name
+    if owner is None:
+        raise KeyError(f"golden build: no stage owns the final key {key!r}; name its stage in "
+                       "refraction_ref.golden.build.FINAL_KEY_STAGES")
     return owner
 
 
@@ -194,6 +267,9 @@ def build(folder, only=None, progress=False, log=print, scheduler=None, workers=
     cases = catalogue(only)
     os.makedirs(folder, exist_ok=True)
     mpath = os.path.join(folder, "manifest.json")
+    marker = os.path.join(folder, COMPLETE)
+    if os.path.exists(marker):  # from here until the last case is written the suite is not complete
+        os.remove(marker)
     manifest = {"contract_version": CONTRACT_VERSION, "versions": software_versions(), "cases": {}}
     if os.path.exists(mpath):  # a partial rebuild (--only) keeps the other cases
         with open(mpath) as f:
@@ -210,6 +286,7 @@ def build(folder, only=None, progress=False, log=print, scheduler=None, workers=
     if scheduler is None and workers is None and client is None:
         for case in cases:
             done(case["name"], _build_case(case, os.path.join(folder, case["name"]), progress))
+        _mark_complete(folder, manifest)
         return manifest
     from distributed import Client, LocalCluster, as_completed
 
@@ -238,7 +315,17 @@ def build(folder, only=None, progress=False, log=print, scheduler=None, workers=
             client.close()
             if cluster is not None:
                 cluster.close()
+    _mark_complete(folder, manifest)
     return manifest
+
+
+def _mark_complete(folder, manifest):
+    """Write the completion marker, last: the cases built and the sha256 of the manifest it completes."""
+    with open(os.path.join(folder, "manifest.json"), "rb") as f:
+        sha = hashlib.sha256(f.read()).hexdigest()
+    with atomic_open(os.path.join(folder, COMPLETE), "w") as f:
+        json.dump({"cases": sorted(manifest["cases"]), "manifest_sha256": sha,
+                   "contract_version": manifest["contract_version"]}, f, indent=1)
 
 
 def _case_task(case, threads=1):
@@ -277,7 +364,7 @@ def _build_case(case, d, progress=False):
         keys[k] = {"sha256": array_sha256(a), "shape": list(a.shape), "dtype": a.dtype.str,
                    "stage": key_stage(k, stages), "tolerance": tolerance_for(k, noisy=noisy)}
     _save_npz(os.path.join(d, "golden.npz"), res.arrays)
-    entry = {"method": method, "purpose": case["purpose"], "stages": [s.name for s in stages] + ["output"],
+    entry = {"method": method, "purpose": case["purpose"], "stages": stage_order(stages),
              "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
     if noisy:
         K = int(case["batches"])

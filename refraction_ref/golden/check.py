@@ -6,19 +6,35 @@ stage buffers such as ``stage.peel.ldi``), with the golden shapes and
 dtypes. Every key the candidate supplies is judged by its tolerance
 (:mod:`.tolerances`, recorded per key in the manifest); ``require`` makes a
 key mandatory. Per case the report names the **earliest failing stage**:
-walking the method's stages in order, the first whose buffers fail; that
-is the pass to fix.
+walking the method's stages in the graph's order (recorded in the
+manifest), the first whose buffers fail; that is the pass to fix.
+
+A verdict cannot pass by accident: the run fails when any case fails, when
+a requested case is missing, when a case has no key of the contract to
+judge, and when a key is not in the contract (``allow_extra`` accepts a
+backend's own keys, listed in the report). A suite without its completion
+marker (written last by ``golden build``) is refused.
+
+Failures are *located* (:mod:`.tolerances`): differences are allowed only
+inside an ambiguity mask computed from the golden (silhouettes, status
+boundaries, depth discontinuities of the maps); elsewhere the allowance is a
+fraction of the informative elements (non-empty words, covered pixels,
+present layers, lit texels). A downstream buffer whose upstream input
+differs within tolerance is judged against what that difference explains:
+for the image-space method the layer counts and the LDI against the
+candidate's own bitmask, the search bounds against the candidate's own LDI,
+each run through the oracle's pass.
 
 Writes ``report.md`` (per case and key: pass or fail, the measured error
-beside the tolerance, the earliest failing stage), ``summary.json`` and a
-PNG panel (candidate, golden, difference) per failing key into the report
-folder. Never a traceback for a bad candidate: a missing case, a file that
-cannot be read, a wrong shape or dtype, NaN where the contract forbids it,
-and a suite from another contract version each get a clear message.
+beside the allowance and the tolerance's rationale, the earliest failing
+stage), ``summary.json``, and per failing key the mask of located failing
+elements (``<case>__<key>.fail.npy``) and a PNG panel (candidate, golden,
+difference with the failures marked, naming the layer or component shown).
 """
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import time
@@ -26,52 +42,309 @@ import time
 import numpy as np
 
 from ..contract import CONTRACT_VERSION
-from ..files import atomic_open, savefig_atomic
+from ..files import NotNpzError, atomic_open, atomic_path, load_npz, savefig_atomic
 from .tolerances import judge
 
-__all__ = ["check", "CheckError"]
+__all__ = ["check", "CheckError", "CheckReport", "CaseReport", "format_report"]
 
 
 class CheckError(ValueError):
-    """The golden suite itself cannot be used (missing, unreadable, another contract version)."""
+    """The golden suite itself cannot be used (missing, incomplete, unreadable, another contract version)."""
 
 
+class CaseReport(dict):
+    """One case's verdict: a dict (``ok``, ``method``, ``problems``, ``keys``, ``extra``,
+    ``earliest_failing_stage``) with the same names as attributes, and ``rows``: one dict per key judged."""
+
+    ok = property(lambda self: bool(self["ok"]))
+    method = property(lambda self: self["method"])
+    problems = property(lambda self: self["problems"])
+    earliest_failing_stage = property(lambda self: self["earliest_failing_stage"])
+    extra = property(lambda self: self["extra"])
+
+    @property
+    def rows(self):
+        """Per key judged: ``{key, stage, ok, kind, failing, allowed, detail, why}``."""
+        return [dict(key=k, **{f: j.get(f) for f in ("stage", "ok", "kind", "failing", "allowed", "detail", "why")})
+                for k, j in self["keys"].items()]
+
+    @property
+    def failing_keys(self):
+        return [k for k, j in self["keys"].items() if not j["ok"]]
+
+
+class CheckReport(dict):
+    """What :func:`check` returns: a dict (``ok``, ``cases``, ``golden``, ``candidate``, ``seconds``,
+    ``report``) with attributes ``ok``, ``cases`` (name -> :class:`CaseReport`), ``rows`` (one per case
+    and key), ``earliest_failing_stage`` (name -> stage or None) and ``text`` (the Markdown report)."""
+
+    ok = property(lambda self: bool(self["ok"]))
+    cases = property(lambda self: self["cases"])
+
+    @property
+    def rows(self):
+        return [dict(case=name, **r) for name, c in self["cases"].items() for r in c.rows]
+
+    @property
+    def earliest_failing_stage(self):
+        return {name: c["earliest_failing_stage"] for name, c in self["cases"].items()}
+
+    @property
+    def text(self):
+        return format_report(self)
+
+    def __repr__(self):
+        n_ok = sum(c.ok for c in self.cases.values())
+        return f"<CheckReport {'PASS' if self.ok else 'FAIL'}: {n_ok} of {len(self.cases)} cases pass>"
+
+
+# --------------------------------------------------------------------- the suite
 def _load_manifest(golden):
     p = os.path.join(golden, "manifest.json")
     if not os.path.isfile(p):
         raise CheckError(f"check: '{golden}' is not a golden suite (no manifest.json); build one with "
                          f"'refraction-ref golden build {golden}'")
-    with open(p) as f:
-        m = json.load(f)
+    with open(p, "rb") as f:
+        raw = f.read()
+    m = json.loads(raw)
     if m.get("contract_version") != CONTRACT_VERSION:
         raise CheckError(f"check: the golden suite '{golden}' follows contract_version {m.get('contract_version')}, "
                          f"this refraction_ref follows {CONTRACT_VERSION} (docs/oracle.md, changelog); rebuild it "
                          "with 'refraction-ref golden build'")
+    from .build import COMPLETE
+
+    import hashlib
+
+    mk = os.path.join(golden, COMPLETE)
+    done = None
+    if os.path.isfile(mk):
+        with open(mk) as f:
+            done = json.load(f)
+    if done is None or done.get("manifest_sha256") != hashlib.sha256(raw).hexdigest():
+        raise CheckError(f"check: the golden suite '{golden}' is incomplete: "
+                         + ("it has no completion marker (" + COMPLETE + ", written last by 'golden build'), so its "
+                            "build stopped or is still running" if done is None else
+                            f"its manifest changed after the build completed ({COMPLETE} names another)")
+                         + f"; finish it with 'refraction-ref golden build {golden}'")
     return m
 
 
+def _read_result(path):
+    """The candidate's arrays, or a problem sentence (missing, not a zip, unreadable)."""
+    try:
+        with load_npz(path, "candidate result") as z:
+            return {k: z[k] for k in z.files if k != "meta"}, None
+    except FileNotFoundError:
+        return None, "missing"
+    except NotNpzError as e:
+        return None, str(e)
+    except Exception as e:  # noqa: BLE001 - a broken member of the zip: a problem of the candidate, reported
+        return None, f"{path} could not be read ({type(e).__name__}: {e})"
+
+
 def _dtype_problem(c, spec):
+    """Dtypes are judged as documented: the golden's dtype exactly (byte order aside)."""
     g = np.dtype(spec["dtype"])
-    if c.dtype.kind != g.kind and not (g.kind in "iu" and c.dtype.kind in "iu"):
-        return f"dtype {c.dtype} where the contract has {g}"
-    if g.kind == "f" and c.dtype.itemsize < min(g.itemsize, 4):
-        return f"dtype {c.dtype} (under 32 bits) where the contract has {g}"
+    if c.dtype.newbyteorder("=") != g.newbyteorder("="):
+        return (f"dtype {c.dtype} where the contract has {g.newbyteorder('=')} (docs/oracle.md); write it as "
+                f"{g.newbyteorder('=')}")
     return None
 
 
+# --------------------------------------------------------------------- ambiguity masks
+def _changes(a):
+    """(H, W) codes -> True where the 3x3 neighbourhood holds another value (edges replicate)."""
+    a = np.asarray(a)
+    H, W = a.shape
+    p = np.pad(a, 1, mode="edge")
+    out = np.zeros((H, W), bool)
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            out |= p[di:di + H, dj:dj + W] != a
+    return out
+
+
+def _codes(a):
+    """A float array as codes for :func:`_changes` (NaN, inf kept apart); other dtypes as they are."""
+    a = np.asarray(a)
+    if a.dtype.kind == "f":
+        return np.where(np.isnan(a), 0, np.where(np.isposinf(a), 1, np.where(np.isneginf(a), 2, 3)))
+    return a
+
+
+def _jumps(z):
+    """Texels beside a depth discontinuity of a position map: finiteness changes, or a step between
+    neighbours above ten times the map's median step (a wall, a step, another receiver)."""
+    z = np.asarray(z, np.float64)
+    fin = np.isfinite(z)
+    out = _changes(fin)
+    zz = np.where(fin, z, 0.0)
+    steps = []
+    for ax in (0, 1):
+        d = np.abs(np.diff(zz, axis=ax))
+        ok = fin & np.roll(fin, -1, axis=ax)
+        ok = ok.take(np.arange(z.shape[ax] - 1), axis=ax)
+        steps.append((d, ok))
+    allst = np.concatenate([d[ok] for d, ok in steps]) if any(ok.any() for _, ok in steps) else np.zeros(0)
+    if allst.size:
+        thr = 10.0 * max(float(np.median(allst)), 1e-12)
+        big = np.zeros(z.shape, bool)
+        for ax, (d, ok) in enumerate(steps):
+            b = ok & (d > thr)
+            sl0 = [slice(None)] * 2
+            sl1 = [slice(None)] * 2
+            sl0[ax], sl1[ax] = slice(0, -1), slice(1, None)
+            big[tuple(sl0)] |= b
+            big[tuple(sl1)] |= b
+        out |= _changes(big.astype(np.int8)) | big
+    return out
+
+
+#: golden keys whose changes mark the camera picture's silhouettes and decision boundaries
+_SILHOUETTE_KEYS = ("depth_complexity", "stage.peel.depth_complexity", "hit", "status", "view_status",
+                    "object_mask", "object_mask_direct")
+
+
+def _context(gold):
+    """Per picture shape (H, W): the golden's ambiguity mask over it (camera silhouettes, map discontinuities)."""
+    pics = {}
+    for k in _SILHOUETTE_KEYS:
+        a = gold.get(k)
+        if a is not None and a.ndim == 2:
+            pics[a.shape] = pics.get(a.shape, np.zeros(a.shape, bool)) | _changes(_codes(a))
+    for k, a in gold.items():
+        if k.startswith("stage.level_map.position_") and a.ndim == 2:
+            pics[a.shape] = pics.get(a.shape, np.zeros(a.shape, bool)) | _jumps(a)
+    return pics
+
+
+def _ambiguity(key, g, spec, pics, c=None):
+    """The ambiguity mask of a key (broadcastable to its failing mask), or None where none applies.
+
+    Bit words (``spec['silhouette'] == 'counts'``): a silhouette explains a fragment that appears or
+    vanishes (the pixel's set-bit count differs), not a bit that moved: a moved bit is a slice tie or a
+    wrong slice map, counted against ``fraction`` wherever it is.
+    """
+    if not spec.get("locate"):
+        return None
+    g = np.asarray(g)
+    for shp, mask in pics.items():
+        if g.ndim >= 2 and g.shape[:2] == shp:  # per pixel (H, W, ...)
+            m = mask.copy()
+            if spec.get("silhouette") == "counts" and c is not None and g.dtype.kind == "u" and g.ndim == 3:
+                m &= _popcount(np.asarray(c, g.dtype)) != _popcount(g)
+            if spec.get("own_edges") and g.ndim == 2:
+                m |= _changes(_codes(g))
+            if spec.get("over") == "nonzero" and g.ndim == 2:  # the lit region's edge
+                m |= _changes(g != 0)
+            return m.reshape(shp + (1,) * (g.ndim - 2))
+        if g.ndim >= 3 and g.shape[1:3] == shp:  # per layer or plane (L, H, W, ...)
+            m = np.zeros(g.shape[:3], bool) | mask[None]
+            for i in range(g.shape[0]):
+                gi = g[i] if g.ndim == 3 else np.all(np.isfinite(g[i]), axis=-1) if g.dtype.kind == "f" else g[i, ..., 0]
+                m[i] |= _changes(_codes(gi) if g.ndim == 3 else gi)
+                if spec.get("over") == "nonzero" and g.ndim == 3:
+                    m[i] |= _changes(g[i] != 0)
+            return m.reshape(m.shape + (1,) * (g.ndim - 3))
+    return None
+
+
+# --------------------------------------------------------------------- explained by the candidate's upstream
+def _imagespace_explanations(golden, name, gold, cand, passed):
+    """For the image-space method: {key: array the oracle's own pass gives on the candidate's upstream buffers}.
+
+    Only where the candidate supplied the upstream buffer and it passed (within tolerance): the layer
+    counts (popcount of the bitmask), the LDI (peeled from the bitmask, §3.4.2) and the search bounds
+    (reduced from the LDI, §3.7). Each is first run on the golden's own upstream buffers and used only
+    if it reproduces the golden there.
+    """
+    out = {}
+    bits_ok = "stage.voxelize.bits" in cand and passed.get("stage.voxelize.bits")
+    ldi_ok = "stage.peel.ldi" in cand and passed.get("stage.peel.ldi")
+    if not (bits_ok or ldi_ok):
+        return out
+    from .. import load_scene
+    from ..imagespace.depth_bounds import global_bounds
+    from ..imagespace.pipeline import pass_peel, pass_reduce
+
+    p = load_scene(os.path.join(golden, name, "scene.json")).data["imagespace"]
+    if p.get("peeling", "separate") != "separate":
+        return out
+
+    def pick(k):
+        return cand[k] if (k in cand and passed.get(k)) else gold[k]
+
+    def peel(bits):
+        vox = {"bits": bits, "zlo": pick("stage.voxelize.zlo"), "zhi": pick("stage.voxelize.zhi")}
+        return pass_peel(vox, bits.shape[:2], p)
+
+    def reduce(ldi):
+        gmin, gmax = global_bounds(pick("stage.minmax.zmin"), pick("stage.minmax.zmax"))
+        return pass_reduce({"gmin": gmin, "gmax": gmax}, {"ldi": ldi, "lut": None}, p)
+
+    try:
+        ldi = None
+        if bits_ok:
+            gp = peel(gold["stage.voxelize.bits"])
+            if np.array_equal(gp["ldi"], gold["stage.peel.ldi"]):
+                cp = peel(cand["stage.voxelize.bits"])
+                ldi = cp["ldi"]
+                if ldi.shape == gold["stage.peel.ldi"].shape:
+                    out["stage.peel.ldi"] = ldi
+                dc = cp["total"].astype(np.int16)
+                out["stage.peel.depth_complexity"] = out["depth_complexity"] = dc
+        if ldi_ok:
+            ldi = cand["stage.peel.ldi"]
+        if ldi is not None and ldi.shape == gold["stage.peel.ldi"].shape:
+            gr = reduce(gold["stage.peel.ldi"])
+            if all(np.array_equal(gr[b], gold[f"stage.reduce.{b}"]) for b in ("bounds_hi", "bounds_lo")):
+                cr = reduce(ldi)
+                out.update({f"stage.reduce.{b}": cr[b] for b in ("bounds_hi", "bounds_lo")})
+    except (KeyError, ValueError, TypeError):  # a golden without these buffers: judge against the golden alone
+        return out
+    return out
+
+
+#: which upstream keys each explanation reads (the explanation is computed once they are judged)
+_EXPLAINED_BY = {"stage.peel.ldi": ("stage.voxelize.bits",),
+                 "stage.peel.depth_complexity": ("stage.voxelize.bits",),
+                 "depth_complexity": ("stage.voxelize.bits",),
+                 "stage.reduce.bounds_hi": ("stage.voxelize.bits", "stage.peel.ldi"),
+                 "stage.reduce.bounds_lo": ("stage.voxelize.bits", "stage.peel.ldi")}
+
+
+# --------------------------------------------------------------------- panels
 def _popcount(words):
     """Set bits per pixel of (H, W, K) unsigned words."""
     w = np.ascontiguousarray(words)
     return np.unpackbits(w.view(np.uint8).reshape(w.shape[:-1] + (-1,)), axis=-1).sum(axis=-1)
 
 
-def _panel(path, key, c, g, bad, kind=None):
-    """Candidate, golden and their difference for a failing array (2D pictures of what can be shown).
+def _view(shape, bad, kind, pics):
+    """Which 2D picture of an array to show: (index into the array, label), the one with the most failures."""
+    bad = np.asarray(bad) if bad is not None else None
+    pic_shapes = list(pics)
+    if len(shape) >= 3 and tuple(shape[1:3]) in pic_shapes and tuple(shape[:2]) not in pic_shapes:
+        counts = bad.reshape(shape[0], -1).sum(axis=1) if bad is not None and bad.shape[:1] == shape[:1] else None
+        i = int(np.argmax(counts)) if counts is not None and counts.any() else 0
+        return (i,), f"layer {i} of {shape[0]} (the one with the most failures)"
+    if len(shape) == 4:  # (H, W, K, 3): interface k
+        counts = bad.reshape(shape[0] * shape[1], shape[2], -1).any(-1).sum(0) if bad is not None \
+            and bad.ndim >= 3 else None
+        i = int(np.argmax(counts)) if counts is not None and counts.any() else 0
+        return (slice(None), slice(None), i), f"interface {i} of {shape[2]}"
+    return (), ""
+
+
+def _panel(path, key, c, g, bad, kind=None, pics=None):
+    """Candidate, golden and their difference for a failing array, the failing elements marked in red.
 
     Bit words (H, W, K) show the set bits per pixel and the bits that differ
     (popcount of XOR); unit vectors (``kind == 'angle'``, (..., 3)) show the
-    directions as colours and the angle between them in degrees; anything
-    else its middle 2D slice (vectors by their norm) and ``|c - g|``.
+    directions as colours and the angle between them in degrees; layered
+    arrays (L, H, W, ...) and path records (H, W, K, 3) the layer or
+    interface with the most failures (named in the titles); 3-vectors
+    otherwise their length.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -79,6 +352,16 @@ def _panel(path, key, c, g, bad, kind=None):
     c, g = np.asarray(c), np.asarray(g)
     if c.shape != g.shape or c.ndim < 2:
         return None
+    idx, label = _view(c.shape, bad, kind, pics or {})
+    if idx:
+        c, g = c[idx], g[idx]
+        bad = np.asarray(bad)[idx] if bad is not None and np.ndim(bad) >= len(idx) else bad
+    bad2 = None
+    if bad is not None:
+        b = np.asarray(bad)
+        while b.ndim > 2:
+            b = b.any(axis=-1)
+        bad2 = b if b.shape == c.shape[:2] else None
 
     def img(a):
         a = np.asarray(a, np.float64)
@@ -89,6 +372,7 @@ def _panel(path, key, c, g, bad, kind=None):
         return np.atleast_2d(a)
 
     rgb = None
+    comp = ""
     if np.issubdtype(c.dtype, np.unsignedinteger) and c.ndim == 3:
         ci, gi, diff = _popcount(c), _popcount(g), _popcount(c ^ g)
         names = ("set bits per pixel", "bits that differ")
@@ -96,35 +380,45 @@ def _panel(path, key, c, g, bad, kind=None):
         cf, gf = np.asarray(c, np.float64), np.asarray(g, np.float64)
         if c.ndim == 2:  # (N, 3): a strip
             cf, gf = cf[None], gf[None]
+            bad2 = None
         unit = lambda a: a / np.maximum(np.linalg.norm(np.nan_to_num(a), axis=-1, keepdims=True), 1e-300)  # noqa: E731
         cos = np.clip(np.sum(unit(np.nan_to_num(cf)) * unit(np.nan_to_num(gf)), axis=-1), -1.0, 1.0)
         diff = np.degrees(np.arccos(cos))
         diff[~(np.all(np.isfinite(cf), -1) & np.all(np.isfinite(gf), -1))] = np.nan
         rgb = [np.clip(0.5 + 0.5 * np.nan_to_num(unit(a)), 0.0, 1.0) for a in (cf, gf)]
         ci = gi = None
-        names = ("direction as colour", "angle between them (deg)")
+        names = ("direction as colour (x, y, z -> r, g, b)", "angle between them (deg)")
     else:
+        if c.ndim == 3 and c.shape[-1] == 3:
+            comp = "length of the 3-vector"
         ci, gi = img(c), img(g)
         if ci.ndim != 2 or ci.shape != gi.shape:
             return None
-        diff = np.abs(ci - gi)
-        names = ("", "|candidate - golden|")
-    fig = Figure(figsize=(12, 4))
+        with np.errstate(invalid="ignore"):  # inf - inf where both are absent: shown blank
+            diff = np.abs(ci - gi)
+        names = (comp, "|candidate - golden|")
+    sub = "; ".join(x for x in (label, names[0]) if x)
+    fig = Figure(figsize=(12, 4.4))
     FigureCanvasAgg(fig)
     ax = fig.subplots(1, 3)
     if rgb is not None:
         for x, a, t in ((ax[0], rgb[0], "candidate"), (ax[1], rgb[1], "golden")):
             x.imshow(a, interpolation="nearest")
-            x.set_title(f"{t}: {key}\n{names[0]}", fontsize=9)
+            x.set_title(f"{t}: {key}\n{sub}", fontsize=9)
     else:
         fin = np.isfinite(gi)
         lo, hi = (float(np.min(gi[fin])), float(np.max(gi[fin]))) if fin.any() else (0.0, 1.0)
         for x, a, t in ((ax[0], ci, "candidate"), (ax[1], gi, "golden")):
             im = x.imshow(a, vmin=lo, vmax=hi if hi > lo else lo + 1, cmap="viridis", interpolation="nearest")
-            x.set_title(f"{t}: {key}" + (f"\n{names[0]}" if names[0] else ""), fontsize=9)
+            x.set_title(f"{t}: {key}" + (f"\n{sub}" if sub else ""), fontsize=9)
             fig.colorbar(im, ax=x, fraction=0.046)
     im = ax[2].imshow(diff, cmap="magma", interpolation="nearest")
-    ax[2].set_title(names[1], fontsize=9)
+    title = names[1]
+    if bad2 is not None and bad2.shape == np.shape(diff) and bad2.any():
+        ax[2].imshow(np.ma.masked_where(~bad2, np.ones(bad2.shape)), cmap="autumn", vmin=0, vmax=1,
+                     interpolation="nearest", alpha=0.8)
+        title += f"\nred: {int(bad2.sum())} failing outside the ambiguity mask"
+    ax[2].set_title(title, fontsize=9)
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     for x in ax:
         x.set_xticks([])
@@ -133,7 +427,12 @@ def _panel(path, key, c, g, bad, kind=None):
     return savefig_atomic(fig, path, dpi=70)
 
 
-def check(candidate, golden, require=(), report=None, panels=True, cases=None):
+def _safe(name):
+    return "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in name)
+
+
+# --------------------------------------------------------------------- the check
+def check(candidate, golden, require=(), report=None, panels=True, cases=None, allow_extra=False):
     """Judge a candidate folder against a golden suite.
 
     Parameters
@@ -143,96 +442,43 @@ def check(candidate, golden, require=(), report=None, panels=True, cases=None):
     require : sequence of str
         Keys every case must supply (a missing one fails the case).
     report : str, optional
-        Folder for ``report.md``, ``summary.json`` and panels (default:
-        ``candidate/report``).
+        Folder for ``report.md``, ``summary.json``, masks and panels (default: ``candidate/report``).
     panels : bool
-        Write a PNG panel per failing key.
+        Write a PNG panel per failing key (the ``.fail.npy`` masks are written regardless).
     cases : sequence of str, optional
-        Judge only these cases of the suite.
+        Judge only these cases of the suite (each must be in the candidate folder).
+    allow_extra : bool
+        Accept keys the contract does not have (listed per case in ``extra``); by default they fail
+        the case (a typo such as ``exit_dirr`` must not pass unjudged).
 
     Returns
     -------
-    dict
-        ``ok`` (bool), ``cases`` (per case: ``ok``, ``earliest_failing_stage``,
-        ``problems``, ``keys`` with the judgement of each), ``seconds``.
+    CheckReport
+        ``ok`` (every case requested passed, and at least one was judged), ``cases`` (per case a
+        :class:`CaseReport`: ``ok``, ``earliest_failing_stage``, ``problems``, ``extra``, ``keys`` with
+        each key's judgement), ``seconds``, ``report`` (the path of ``report.md``).
 
     Raises
     ------
     CheckError
-        When the golden suite cannot be used.
+        When the golden suite cannot be used (no manifest, incomplete, another contract version) or the
+        candidate folder does not exist.
     """
     t0 = time.perf_counter()
     man = _load_manifest(golden)
     report = report or os.path.join(candidate, "report")
     if not os.path.isdir(candidate):
         raise CheckError(f"check: the candidate folder '{candidate}' does not exist")
-    names = list(man["cases"]) if not cases else list(cases)
-    out = {"ok": True, "golden": os.path.abspath(golden), "candidate": os.path.abspath(candidate),
-           "contract_version": CONTRACT_VERSION, "cases": {}}
+    if isinstance(cases, str):
+        cases = [c for c in cases.split(",") if c.strip()]
+    names = list(man["cases"]) if not cases else [c.strip() for c in cases]
+    out = CheckReport(ok=False, golden=os.path.abspath(golden), candidate=os.path.abspath(candidate),
+                      contract_version=CONTRACT_VERSION, cases={})
     for name in names:
-        entry = man["cases"].get(name)
-        res = {"ok": True, "problems": [], "keys": {}, "earliest_failing_stage": None, "method": None}
+        res = CaseReport(ok=False, problems=[], keys={}, extra=[], earliest_failing_stage=None, method=None)
         out["cases"][name] = res
-        if entry is None:
-            res["ok"] = False
-            res["problems"].append(f"the suite has no case '{name}'")
-            continue
-        res["method"] = entry["method"]
-        cpath = os.path.join(candidate, name, "result.npz")
-        if not os.path.isfile(cpath):
-            res["ok"] = False
-            res["problems"].append(f"missing: {os.path.join(name, 'result.npz')} (the backend did not run this case)")
-            continue
-        try:
-            with np.load(cpath, allow_pickle=False) as z:
-                cand = {k: z[k] for k in z.files if k != "meta"}
-        except Exception as e:  # any unreadable file is a problem of the candidate, reported, not raised
-            res["ok"] = False
-            res["problems"].append(f"{cpath} could not be read ({type(e).__name__}: {e})")
-            continue
-        with np.load(os.path.join(golden, name, "golden.npz"), allow_pickle=False) as z:
-            gold = {k: z[k] for k in z.files}
-        batches = {}
-        if "batches" in entry:
-            with np.load(os.path.join(golden, name, "batches.npz"), allow_pickle=False) as z:
-                batches = {k: z[k] for k in z.files}
-        for k in require:
-            if k not in cand:
-                res["ok"] = False
-                res["problems"].append(f"required key '{k}' is missing")
-        unknown = sorted(k for k in cand if k not in entry["keys"])
-        if unknown:
-            res["problems"].append(f"keys the contract does not have (ignored): {', '.join(unknown[:8])}"
-                                   + (" ..." if len(unknown) > 8 else ""))
-        for k, spec in entry["keys"].items():
-            if k not in cand:
-                continue
-            c, g = cand[k], gold[k]
-            j = {"stage": spec["stage"], "kind": spec["tolerance"]["kind"], "tolerance": spec["tolerance"]}
-            res["keys"][k] = j
-            if tuple(c.shape) != tuple(spec["shape"]):
-                j.update(ok=False, detail=f"shape {tuple(c.shape)} where the golden has {tuple(spec['shape'])}")
-            elif _dtype_problem(c, spec):
-                j.update(ok=False, detail=_dtype_problem(c, spec))
-            else:
-                try:
-                    r = judge(c, g, spec["tolerance"], batches.get(k))
-                except ValueError as e:
-                    r = {"ok": False, "detail": str(e), "failing": 1.0, "allowed": 0.0, "error": {}, "bad": None}
-                bad = r.pop("bad")
-                j.update(r)
-                if not r["ok"] and panels and bad is not None:
-                    os.makedirs(report, exist_ok=True)
-                    pp = _panel(os.path.join(report, f"{name}__{k}.png"), k, c, g, bad, j["kind"])
-                    if pp:
-                        j["panel"] = os.path.basename(pp)
-            if not j["ok"]:
-                res["ok"] = False
-        order = entry["stages"]
-        failing = [j["stage"] for j in res["keys"].values() if not j["ok"]]
-        if failing:
-            res["earliest_failing_stage"] = min(failing, key=lambda s: order.index(s) if s in order else len(order))
-        out["ok"] &= res["ok"]
+        _judge_case(res, name, man["cases"].get(name), candidate, golden, require, report, panels, allow_extra)
+    out["ok"] = bool(out["cases"]) and all(c["ok"] for c in out["cases"].values())
     out["seconds"] = time.perf_counter() - t0
     os.makedirs(report, exist_ok=True)
     with atomic_open(os.path.join(report, "summary.json"), "w") as f:
@@ -241,6 +487,111 @@ def check(candidate, golden, require=(), report=None, panels=True, cases=None):
         f.write(format_report(out))
     out["report"] = os.path.join(report, "report.md")
     return out
+
+
+def _judge_case(res, name, entry, candidate, golden, require, report, panels, allow_extra):
+    """Fill one case's :class:`CaseReport` (``res``) in place."""
+    if entry is None:
+        res["problems"].append(f"the suite has no case '{name}'")
+        return
+    res["method"] = entry["method"]
+    cpath = os.path.join(candidate, name, "result.npz")
+    cand, why = _read_result(cpath)
+    if cand is None:
+        res["problems"].append(f"missing: {os.path.join(name, 'result.npz')} (the backend did not run this case)"
+                               if why == "missing" else why)
+        return
+    with np.load(os.path.join(golden, name, "golden.npz"), allow_pickle=False) as z:
+        gold = {k: z[k] for k in z.files}
+    batches = {}
+    if "batches" in entry:
+        with np.load(os.path.join(golden, name, "batches.npz"), allow_pickle=False) as z:
+            batches = {k: z[k] for k in z.files}
+    problems = res["problems"]
+    failed = False
+    for k in require:
+        if k not in cand:
+            failed = True
+            problems.append(f"required key '{k}' is missing")
+    unknown = sorted(k for k in cand if k not in entry["keys"])
+    if unknown:
+        if allow_extra:
+            res["extra"] = unknown
+            problems.append(f"keys the contract does not have, accepted (allow_extra) and not judged: "
+                            f"{', '.join(unknown)}")
+        else:
+            failed = True
+            hints = []
+            for u in unknown:
+                near = difflib.get_close_matches(u, list(entry["keys"]), n=1)
+                hints.append(f"'{u}'" + (f" (did you mean '{near[0]}'?)" if near else ""))
+            problems.append(f"keys the contract does not have: {', '.join(hints)}; rename them, or pass "
+                            "--allow-extra (allow_extra=True) for a backend's own keys")
+    order = list(entry["stages"])
+    rank = {s: i for i, s in enumerate(order)}
+    keys = sorted((k for k in entry["keys"] if k in cand), key=lambda k: (rank.get(entry["keys"][k]["stage"],
+                                                                                     len(order)), k))
+    pics = _context(gold)
+    passed = {}
+    explained = None
+    for k in keys:
+        spec = entry["keys"][k]
+        tol = dict(spec["tolerance"])
+        c, g = cand[k], gold[k]
+        j = {"stage": spec["stage"], "kind": tol["kind"], "tolerance": tol, "why": tol.get("why", "")}
+        res["keys"][k] = j
+        bad = None
+        if tuple(c.shape) != tuple(spec["shape"]):
+            j.update(ok=False, detail=f"shape {tuple(c.shape)} where the golden has {tuple(spec['shape'])}")
+        elif _dtype_problem(c, spec):
+            j.update(ok=False, detail=_dtype_problem(c, spec))
+        else:
+            amb = _ambiguity(k, g, tol, pics, c)
+            try:
+                r = judge(c, g, tol, batches.get(k), amb)
+            except ValueError as e:
+                r = {"ok": False, "detail": str(e), "failing": 1.0, "allowed": 0.0, "error": {}, "bad": None}
+            if not r["ok"] and k in _EXPLAINED_BY and entry["method"] == "imagespace":
+                if explained is None:
+                    explained = _imagespace_explanations(golden, name, gold, cand, passed)
+                e = explained.get(k)
+                if e is not None and e.shape == g.shape:
+                    r2 = judge(c, e.astype(g.dtype), tol, None, amb)
+                    if r2["ok"]:
+                        ups = " and ".join(u for u in _EXPLAINED_BY[k] if u in cand)
+                        r2["detail"] = (f"differs from the golden where the candidate's own {ups} (within its "
+                                        f"tolerance) does; against the oracle's pass run on it: " + r2["detail"])
+                        r2["explained_by"] = ups
+                        r = r2
+            bad = r.pop("bad")
+            j.update(r)
+        passed[k] = bool(j["ok"])
+        if not j["ok"]:
+            failed = True
+            if bad is not None and np.any(bad):
+                os.makedirs(report, exist_ok=True)
+                mpath = os.path.join(report, f"{_safe(name)}__{_safe(k)}.fail.npy")
+                with atomic_path(mpath) as tmp:
+                    with open(tmp, "wb") as f:
+                        np.save(f, np.asarray(bad))
+                j["mask"] = os.path.basename(mpath)
+            if panels and (bad is not None or j.get("detail", "").startswith("dtype")):
+                os.makedirs(report, exist_ok=True)
+                try:
+                    pp = _panel(os.path.join(report, f"{_safe(name)}__{_safe(k)}.png"), k, c, g, bad, j["kind"],
+                                pics)
+                except (ValueError, TypeError):  # a candidate array that cannot be pictured: the row says why
+                    pp = None
+                if pp:
+                    j["panel"] = os.path.basename(pp)
+    if not res["keys"]:
+        failed = True
+        problems.append("no key of the contract was judged: the result holds none of the golden's keys "
+                        f"({len(cand)} keys supplied; the contract's are listed in the manifest)")
+    failing = [j["stage"] for j in res["keys"].values() if not j["ok"]]
+    if failing:
+        res["earliest_failing_stage"] = min(failing, key=lambda s: rank.get(s, len(order)))
+    res["ok"] = not failed
 
 
 def format_report(out):
@@ -260,11 +611,14 @@ def format_report(out):
         for p in c["problems"]:
             lines.append(f"\n- {p}")
         if c["keys"]:
-            lines += ["", "| key | stage | tolerance | measured | failing / allowed | result |", "|---|---|---|---|---|---|"]
+            lines += ["", "| key | stage | tolerance | measured | failing / allowed | result | rationale |",
+                      "|---|---|---|---|---|---|---|"]
             for k, j in c["keys"].items():
                 frac = (f"{100 * j['failing']:.3g}% / {100 * j['allowed']:.3g}%" if "failing" in j else "")
-                panel = f" ([panel]({j['panel']}))" if j.get("panel") else ""
+                links = "".join(f" ([{w}]({j[w]}))" for w in ("panel", "mask") if j.get(w))
                 detail = j.get("detail", "").replace("|", "\\|")  # |c| in a detail must not split the row
+                why = j.get("why", "").replace("|", "\\|")
                 lines.append(f"| `{k}` | {j['stage']} | {j['kind']} | {detail} | {frac} | "
-                             f"{'pass' if j['ok'] else '**FAIL**'}{panel} |")
+                             f"{'pass' if j['ok'] else '**FAIL**'}{links} | {why} |")
     return "\n".join(lines) + "\n"
+

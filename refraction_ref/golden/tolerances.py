@@ -26,7 +26,29 @@ Kinds (``docs/oracle.md``, "Conformance"):
     in K batches although one photon may land there, and the floor
     ``p q^2`` keeps the Gaussian test honest there.
 
-Every kind allows a ``fraction`` of elements to fail (0 by default).
+Every kind first says which elements fail; the verdict then *locates* them
+(``docs/oracle.md``, "Conformance"):
+
+``over``
+    The elements a fraction is counted over, the ones that carry
+    information: ``all``; ``nonzero`` (either array non-zero: non-empty
+    bitmask words, covered pixels, lit texels); ``finite`` (either array
+    finite: present layers, recorded interfaces).
+``locate``
+    Differences are allowed only inside an **ambiguity mask** computed from
+    the golden (by :mod:`.check`, per case): for arrays over the camera's
+    pixels the silhouettes (within one pixel of a change of the depth
+    complexity, of ``hit`` or of the status), for arrays over a map's
+    texels the texels beside a depth discontinuity of the position map or
+    the edge of the lit region, and for ``own_edges`` keys (codes) also
+    where the golden key itself changes. A failing element outside the
+    mask is *located*; ``fraction`` is the share of the informative
+    elements that may be located failures (0 for codes: a wrong value in
+    the interior fails however few pixels carry it). Arrays with no pixel
+    or texel axes (photons, volumes, frames) count every failure.
+``why``
+    The tolerance's rationale, printed beside each verdict.
+
 """
 
 from __future__ import annotations
@@ -35,47 +57,93 @@ import fnmatch
 
 import numpy as np
 
-__all__ = ["TOLERANCES", "tolerance_for", "judge"]
+__all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch"]
+
+_TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
+        "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
+_CODE = ("a code is a decision: it may differ only where the golden's own decision changes nearby "
+         "(silhouettes, status boundaries); a wrong value in the interior fails")
+_DIR = ("unit vectors: float64 arithmetic in another order moves them by ~1e-12 rad; differences follow "
+        "slice ties and silhouettes (1 % of the covered pixels elsewhere: a tie moves an interface by a slice)")
+_POS = ("positions and lengths: another order of float64 arithmetic; differences follow slice ties and "
+        "silhouettes (0.5 % of the informative elements elsewhere)")
+_MAP = ("maps of deterministic photons: another summation order; photons landing on the lit region's edge or "
+        "beside a depth discontinuity of the receivers (1 % of the lit texels elsewhere)")
+_EXACT_F = "set-up arithmetic (frames, cameras, boxes): float64 rounding only"
 
 #: (pattern on the key, spec): the first match wins. Stage buffers are ``stage.<stage>.<buffer>``.
 TOLERANCES = [
-    ("stage.voxelize.bits", {"kind": "exact", "fraction": 0.002}),
-    ("stage.peel.depth_complexity", {"kind": "exact", "fraction": 0.002}),
-    ("depth_complexity", {"kind": "exact", "fraction": 0.002}),
-    ("stage.receiver_depth.triangle", {"kind": "exact", "fraction": 0.01}),
-    ("stage.receiver_hit.hit_face_*", {"kind": "exact", "fraction": 0.01}),
-    ("*status", {"kind": "exact", "fraction": 0.005}),
-    ("*interfaces", {"kind": "exact", "fraction": 0.005}),
-    ("*hit", {"kind": "exact", "fraction": 0.005}),
-    ("*object_mask*", {"kind": "exact", "fraction": 0.005}),
-    ("*.octree.level", {"kind": "exact", "fraction": 0.0}),
-    ("*plane_index*", {"kind": "exact"}),
-    ("*planes_used*", {"kind": "exact"}),
-    ("*_dir", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("*_dir_*", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("*path_dir", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("*normals", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("stage.normals.normals", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("*normal_*", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01}),
-    ("*direction", {"kind": "close", "atol": 1e-4, "rtol": 1e-3, "fraction": 0.01}),
-    ("*caustic_frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7}),
-    ("*frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7}),
-    ("*camera_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7}),
-    ("*box_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7}),
-    ("*caustic_map*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01}),
-    ("*caustic_rgb*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01}),
-    ("*splat_*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01}),
-    ("*plane_maps*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01}),
-    ("*radiance", {"kind": "close", "atol": 1e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01}),
-    ("*image*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "fraction": 0.01}),
-    ("*diffuse_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-6, "fraction": 0.005}),
-    ("*ldi*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "fraction": 0.002}),
-    ("*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005}),
+    ("stage.voxelize.bits", {"kind": "exact", "fraction": 0.002, "over": "nonzero", "locate": True,
+                             "silhouette": "counts", "why": _TIE}),
+    ("stage.peel.depth_complexity", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True,
+                                     "why": "layer counts change only where fragments appear or vanish "
+                                            "(silhouettes); judged against the candidate's own bitmask"}),
+    ("depth_complexity", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True,
+                          "why": "as stage.peel.depth_complexity"}),
+    ("stage.receiver_depth.triangle", {"kind": "exact", "fraction": 0.0, "over": "all", "locate": True,
+                                       "own_edges": True, "why": "triangle ids tie on shared edges"}),
+    ("stage.receiver_hit.hit_face_*", {"kind": "exact", "fraction": 0.01, "over": "all",
+                                       "why": "photons on a shared edge of two receiver triangles"}),
+    ("*photon_status", {"kind": "exact", "fraction": 0.005, "over": "all",
+                        "why": "photons grazing the volume's box or a receiver's edge"}),
+    ("*status", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
+                 "why": _CODE}),
+    ("*interfaces", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
+                     "why": _CODE}),
+    ("*hit", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
+              "why": _CODE}),
+    ("*object_mask*", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
+                       "why": _CODE}),
+    ("*.octree.level", {"kind": "exact", "fraction": 0.0, "over": "all",
+                        "why": "the leaf test on the golden's own index volume: no ambiguity"}),
+    ("*plane_index*", {"kind": "exact", "over": "all", "why": "the planes drawn: a decision of smart slicing"}),
+    ("*planes_used*", {"kind": "exact", "over": "all", "why": "the planes drawn: a decision of smart slicing"}),
+    ("*path_dir", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite",
+                   "locate": True, "split_first": True, "why": _DIR + "; interface 0 judged apart from the rest"}),
+    ("*path_pos", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite",
+                   "locate": True, "split_first": True, "why": _POS + "; interface 0 judged apart from the rest"}),
+    ("*_dir", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite", "locate": True,
+               "why": _DIR}),
+    ("*_dir_*", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite", "why": _DIR}),
+    ("*normals", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite", "locate": True,
+                  "why": "unit normals: differences follow slice ties and silhouettes (1 % elsewhere)"}),
+    ("*normal_*", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite", "locate": True,
+                   "why": "unit normals of the receivers: faces tie on shared edges"}),
+    ("*direction", {"kind": "close", "atol": 1e-4, "rtol": 1e-3, "fraction": 0.01, "over": "all",
+                    "why": "smoothed photon directions: deposition order"}),
+    ("*caustic_frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
+    ("*frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
+    ("*camera_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
+    ("*box_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
+    ("stage.caustics.planes_[0-9]*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all",
+                                      "why": "plane offsets from the box (eqs. 4-1..4-9): float64 rounding only"}),
+    ("*caustic_map*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+                       "over": "nonzero", "locate": True, "why": _MAP}),
+    ("*caustic_rgb*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+                       "over": "nonzero", "locate": True, "why": _MAP}),
+    ("*splat_*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01, "over": "nonzero",
+                  "locate": True, "why": _MAP}),
+    ("*plane_maps*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+                      "over": "nonzero", "locate": True,
+                      "why": _MAP + "; counted over each plane's lit texels, not diluted over the planes"}),
+    ("*radiance", {"kind": "close", "atol": 1e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01, "over": "nonzero",
+                   "why": "photon radiance in the volume: deposition order (1 % of the lit voxels)"}),
+    ("*image*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "fraction": 0.01, "over": "all", "locate": True,
+                 "why": "colours: 8-bit-level differences; silhouettes free, 1 % of the pixels elsewhere "
+                        "(slice ties move a path)"}),
+    ("*diffuse_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-6, "fraction": 0.0, "over": "nonzero",
+                    "locate": True, "why": "albedo per texel: differs only beside a depth discontinuity"}),
+    ("*ldi*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "fraction": 0.0, "over": "finite", "locate": True,
+               "why": "layer depths are slice centres: they differ only where the bitmask does (judged against "
+                      "the candidate's own bitmask) or at silhouettes"}),
+    ("*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
+           "why": _POS}),
 ]
 
 #: keys of maps from jittered photons, judged by the Z-test when the oracle stored batches
 NOISY = ("caustic_map_*",)
-ZTEST = {"kind": "ztest", "alpha": 1e-3, "atol": 1e-3}
+ZTEST = {"kind": "ztest", "alpha": 1e-3, "atol": 1e-3, "over": "all",
+         "why": "jittered photons: a Z-test against the oracle's K independent batches, Bonferroni-corrected"}
 
 
 def tolerance_for(key, noisy=False):
@@ -88,28 +156,41 @@ def tolerance_for(key, noisy=False):
     raise KeyError(key)
 
 
-def _nan_mismatch(c, g):
+def nonfinite_mismatch(c, g):
+    """Counts of NaN / inf / finite mismatches by category (``{"NaN where the golden has +inf": n, ...}``)."""
     if c.dtype.kind not in "fc" or g.dtype.kind not in "fc":
-        return np.zeros(g.shape, bool)
-    return np.isnan(c) != np.isnan(g)
+        return {}
+
+    def cat(a):
+        return np.where(np.isnan(a), 0, np.where(a == np.inf, 1, np.where(a == -np.inf, 2, 3)))
+
+    names = ("NaN", "+inf", "-inf", "finite")
+    cc, gc = cat(c), cat(g)
+    out = {}
+    for i in range(4):
+        for j in range(4):
+            if i != j:
+                n = int(np.count_nonzero((cc == i) & (gc == j)))
+                if n:
+                    out[f"{names[i]} where the golden has {names[j]}"] = n
+    return out
 
 
-def judge(cand, gold, spec, batches=None):
-    """Judge one array; returns a dict ``ok``, ``failing`` (fraction), ``allowed``, ``error`` (measured), ``detail``.
+def informative(c, g, over):
+    """The elements a fraction counts over (``over``: all, nonzero, finite), per element of the judged array."""
+    if over == "nonzero":
+        with np.errstate(invalid="ignore"):
+            m = (np.nan_to_num(c, nan=1.0) != 0) | (np.nan_to_num(g, nan=1.0) != 0)
+    elif over == "finite" and g.dtype.kind in "fc":
+        m = np.isfinite(c) | np.isfinite(g) if c.dtype.kind in "fc" else np.isfinite(g)
+    else:
+        m = np.ones(g.shape, bool)
+    return m
 
-    Parameters
-    ----------
-    cand, gold : ndarray
-        Same shape (checked by the caller).
-    spec : dict
-        A :data:`TOLERANCES` spec (or :data:`ZTEST`).
-    batches : (K, ...) ndarray, optional
-        The oracle's independent batches, for ``ztest``.
-    """
+
+def _elementwise(c, g, spec, batches):
+    """Per element: failing mask (over the array's elements, or its vectors for ``angle``), error, detail."""
     kind = spec["kind"]
-    allowed = float(spec.get("fraction", 0.0))
-    c = np.asarray(cand)
-    g = np.asarray(gold)
     if kind == "exact":
         bad = (c != g) if g.dtype.kind not in "fc" else ~((c == g) | (np.isnan(c) & np.isnan(g)))
         err = {"differing": int(np.count_nonzero(bad))}
@@ -121,10 +202,11 @@ def judge(cand, gold, spec, batches=None):
         tol = spec["atol"] * scale + spec["rtol"] * np.abs(np.where(fin, g64, 0.0))
         with np.errstate(invalid="ignore"):
             diff = np.abs(c64 - g64)
-            bad = _nan_mismatch(c64, g64) | (fin & ~(diff <= tol)) | (np.isinf(g64) & (c64 != g64))
+            bad = (np.isnan(c64) != np.isnan(g64)) | (fin & ~(diff <= tol)) | (np.isinf(g64) & (c64 != g64))
         d = diff[fin & np.isfinite(c64)]
         err = {"max_abs": float(d.max()) if d.size else 0.0, "scale": scale}
-        detail = f"max |c - g| {err['max_abs']:.3g} (tolerance {spec['atol']:g} x {scale:.3g} + {spec['rtol']:g} |g|)"
+        detail = (f"max |c - g| {err['max_abs']:.3g} over the finite pairs (tolerance {spec['atol']:g} x "
+                  f"{scale:.3g} + {spec['rtol']:g} |g|)")
     elif kind == "angle":
         c64, g64 = c.astype(np.float64), g.astype(np.float64)
         if c64.shape[-1] != 3:
@@ -133,13 +215,13 @@ def judge(cand, gold, spec, batches=None):
         cfin = np.all(np.isfinite(c64), axis=-1)
         both = fin & cfin
         ang = np.zeros(fin.shape)
-        nrm = np.linalg.norm(c64, axis=-1)
-        gn = np.linalg.norm(g64, axis=-1)
-        dots = np.sum(c64 * g64, axis=-1)
-        crs = np.linalg.norm(np.cross(c64, g64), axis=-1)
+        nrm = np.linalg.norm(np.where(np.isfinite(c64), c64, 0.0), axis=-1)
+        gn = np.linalg.norm(np.where(np.isfinite(g64), g64, 0.0), axis=-1)
+        dots = np.sum(np.where(both[..., None], c64 * g64, 0.0), axis=-1)
+        crs = np.linalg.norm(np.cross(np.where(both[..., None], c64, 0.0), np.where(both[..., None], g64, 0.0)),
+                             axis=-1)
         ang[both] = np.degrees(np.arctan2(crs[both], dots[both]))
-        # zero vectors (no photon passed, no surface) must stay zero
-        unit = both & (gn > 0.5)
+        unit = both & (gn > 0.5)  # zero vectors (no photon passed, no surface) must stay zero
         bad = (fin != cfin) | (unit & ((ang > spec["deg"]) | (np.abs(nrm - 1.0) > spec["norm"]))) \
             | (both & (gn <= 0.5) & (nrm > 1e-9))
         a = ang[unit]
@@ -161,8 +243,7 @@ def judge(cand, gold, spec, batches=None):
         var_t = var * (1.0 + 1.0 / K) + p * q * q
         has = var_t > 0
         n = max(int(np.count_nonzero(has)), 1)
-        # two-sided Bonferroni threshold: P(|Z| > t) = alpha / n
-        t = _z_threshold(spec["alpha"] / n)
+        t = _z_threshold(spec["alpha"] / n)  # two-sided Bonferroni threshold: P(|Z| > t) = alpha / n
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(has, (c64 - mean) / np.sqrt(np.where(has, var_t, 1.0)), 0.0)
         bad = (has & ~(np.abs(z) <= t)) | (~has & ~(np.abs(c64 - mean) <= spec["atol"] * scale))
@@ -170,9 +251,74 @@ def judge(cand, gold, spec, batches=None):
         detail = f"max |z| {err['max_abs_z']:.3g} (threshold {t:.3g}: alpha {spec['alpha']:g} over {n} texels, K = {K})"
     else:
         raise ValueError(f"unknown tolerance kind {kind!r}")
-    failing = float(np.count_nonzero(bad)) / max(bad.size, 1)
-    return {"ok": failing <= allowed, "failing": failing, "allowed": allowed, "error": err, "detail": detail,
-            "bad": bad}
+    return bad, err, detail
+
+
+def _fold(a, shape):
+    """Reduce a per-element mask to ``shape`` (the failing mask's: vectors fold their last axis) with any()."""
+    while a.ndim > len(shape):
+        a = a.any(axis=-1)
+    return np.broadcast_to(a, shape)
+
+
+def judge(cand, gold, spec, batches=None, ambiguous=None):
+    """Judge one array against the golden.
+
+    Parameters
+    ----------
+    cand, gold : ndarray
+        Same shape (checked by the caller).
+    spec : dict
+        A :data:`TOLERANCES` spec (or :data:`ZTEST`).
+    batches : (K, ...) ndarray, optional
+        The oracle's independent batches, for ``ztest``.
+    ambiguous : bool ndarray, optional
+        The ambiguity mask (broadcastable to the failing mask), for ``locate`` specs.
+
+    Returns
+    -------
+    dict
+        ``ok``, ``failing`` (located failures over informative elements), ``allowed``, ``counts``
+        (failing, inside the ambiguity mask, located, informative), ``nonfinite`` (mismatch counts by
+        category), ``error`` (measured), ``detail``, ``why``, ``parts`` (``split_first``: interface 0 and
+        the rest judged apart) and ``bad`` (the located failing elements, for the mask file).
+    """
+    allowed = float(spec.get("fraction", 0.0))
+    c = np.asarray(cand)
+    g = np.asarray(gold)
+    bad, err, detail = _elementwise(c, g, spec, batches)
+    info = _fold(informative(c, g, spec.get("over", "all")), bad.shape) | bad
+    amb = np.zeros(bad.shape, bool) if ambiguous is None else _fold(np.asarray(ambiguous, bool), bad.shape)
+    located = bad & ~amb
+    nonfinite = nonfinite_mismatch(c, g)
+
+    def verdict(loc, inf, b, a):
+        n_info = int(np.count_nonzero(inf))
+        n_loc = int(np.count_nonzero(loc))
+        frac = n_loc / max(n_info, 1)
+        return {"ok": frac <= allowed, "failing": frac, "counts": {
+            "failing": int(np.count_nonzero(b)), "inside_ambiguity": int(np.count_nonzero(b & a)),
+            "located": n_loc, "informative": n_info}}
+
+    parts = None
+    if spec.get("split_first") and bad.ndim >= 3 and bad.shape[2] > 1:  # (H, W, K): interface k on axis 2
+        parts = {name: verdict(located[:, :, sl], info[:, :, sl], bad[:, :, sl], amb[:, :, sl])
+                 for name, sl in (("interface 0", slice(0, 1)), ("interfaces 1+", slice(1, None)))}
+        v = verdict(located, info, bad, amb)
+        v["ok"] = all(p["ok"] for p in parts.values())
+        v["failing"] = max(p["failing"] for p in parts.values())
+    else:
+        v = verdict(located, info, bad, amb)
+    cn = v["counts"]
+    detail += (f"; {cn['located']} failing outside the ambiguity mask of {cn['informative']} informative "
+               f"({cn['inside_ambiguity']} more inside it, allowed)")
+    if parts:
+        detail += "; " + ", ".join(f"{n}: {p['counts']['located']} of {p['counts']['informative']}"
+                                   f"{'' if p['ok'] else ' FAIL'}" for n, p in parts.items())
+    if nonfinite:
+        detail += "; " + ", ".join(f"{n} {k}" for k, n in nonfinite.items())
+    return dict(v, allowed=allowed, error=err, detail=detail, why=spec.get("why", ""), nonfinite=nonfinite,
+                parts=parts, bad=located)
 
 
 def _z_threshold(p):
