@@ -11,10 +11,11 @@ rendering light refracted through transparent objects and water.
 __version__ = "0.1.0"
 
 from .camera import Camera
+from .golden.check import check
 from .render import METHODS, render
 from .result import Result, load_result
 from .scene import Scene, SceneError, default_scene, load_scene
 from .session import Session
 
-__all__ = ["Camera", "METHODS", "Result", "Scene", "SceneError", "default_scene", "load_result",
+__all__ = ["Camera", "METHODS", "Result", "Scene", "SceneError", "check", "default_scene", "load_result",
            "load_scene", "render", "Session", "__version__"]

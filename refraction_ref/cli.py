@@ -137,12 +137,15 @@ def _cmd_check(a):
     from .golden.check import check
 
     out = check(a.candidate, a.golden, require=a.require or (), report=a.report, panels=not a.no_panels,
-                cases=[c for c in a.cases.split(",") if c] if a.cases else None)
+                cases=[c for c in a.cases.split(",") if c] if a.cases else None, allow_extra=a.allow_extra)
     for name, c in out["cases"].items():
         why = ("" if c["ok"] else f"  earliest failing stage: {c['earliest_failing_stage']}"
                if c["earliest_failing_stage"] else "  " + "; ".join(c["problems"][:2]))
-        print(f"  {'pass' if c['ok'] else 'FAIL'}  {name}{why}")
-    print(f"{'PASS' if out['ok'] else 'FAIL'}: report in {out['report']} ({out['seconds']:.1f} s)")
+        extra = f"  (extra keys, not judged: {', '.join(c['extra'])})" if c["extra"] else ""
+        print(f"  {'pass' if c['ok'] else 'FAIL'}  {name}{why}{extra}")
+    n_ok = sum(c["ok"] for c in out["cases"].values())
+    print(f"{'PASS' if out['ok'] else 'FAIL'}: {n_ok} of {len(out['cases'])} cases pass; report in {out['report']} "
+          f"({out['seconds']:.1f} s)")
     return 0 if out["ok"] else 1
 
 
@@ -250,6 +253,9 @@ def main(argv=None):
     k.add_argument("--report", help="folder for report.md, summary.json and panels (default CANDIDATE/report)")
     k.add_argument("--cases", metavar="NAME,...", help="judge only these cases")
     k.add_argument("--no-panels", action="store_true", help="no PNG panels for failures")
+    k.add_argument("--allow-extra", action="store_true",
+                   help="accept keys the contract does not have (listed in the report, not judged); by default "
+                        "they fail the case, so a typo'd key cannot pass unjudged")
     k.set_defaults(fn=_cmd_check)
     w = sub.add_parser("sweep", help="run a grid of scenes x methods x knobs on dask.distributed (error vs time)")
     w.add_argument("spec", help="sweep spec (JSON; see refraction_ref/sweep.py)")
