@@ -11,15 +11,142 @@ from __future__ import annotations
 
 import contextlib
 import os
+import tempfile
 
-__all__ = ["atomic_path", "atomic_open", "savefig_atomic"]
+__all__ = ["atomic_path", "atomic_open", "savefig_atomic", "OutputError", "check_out_file", "check_out_folder",
+           "NotNpzError", "load_npz"]
+
+
+class OutputError(ValueError):
+    """An output path that cannot be written, found before any work (the message names it and the fix)."""
+
+
+def _missing_folders(folder):
+    """The folders :func:`os.makedirs` would create for ``folder``, outermost first; raises OutputError when a
+    part of the path is a file."""
+    missing = []
+    f = os.path.abspath(folder)
+    while not os.path.exists(f):
+        missing.append(f)
+        parent = os.path.dirname(f)
+        if parent == f:
+            break
+        f = parent
+    if not os.path.isdir(f):
+        raise OutputError(f"cannot write under '{folder}': '{f}' is a file, not a folder; choose another path")
+    return missing[::-1]
+
+
+def _probe_folder(folder, what):
+    """Check that files can be created in ``folder`` by creating (and removing) one, and the missing folders
+    on the way; leaves nothing behind."""
+    missing = _missing_folders(folder or ".")
+    made = []
+    try:
+        for m in missing:
+            os.mkdir(m)
+            made.append(m)
+        fd, probe = tempfile.mkstemp(prefix=".probe", dir=folder or ".")
+        os.close(fd)
+        os.remove(probe)
+    except OSError as e:
+        raise OutputError(f"cannot write {what} in '{folder or '.'}' ({e.strerror or e}); choose a folder you "
+                          "can write to") from None
+    finally:
+        for m in reversed(made):
+            with contextlib.suppress(OSError):
+                os.rmdir(m)
+
+
+def check_out_file(path, what="the output"):
+    """Refuse, before any work, a file path that cannot be written (:class:`OutputError`).
+
+    Refused: an empty path, a path ending in a folder separator or naming an existing folder, a hidden or
+    extension-only file name (``out/.npz``), a folder that is a file or where files cannot be created.
+    Nothing is left on disk.
+    """
+    path = os.fspath(path)
+    folder, name = os.path.split(path)
+    stem = os.path.splitext(name)[0]
+    if not path.strip():
+        raise OutputError(f"{what} path is empty; give a path such as out/render")
+    if not name or os.path.isdir(path):
+        raise OutputError(f"{what} '{path}' is a folder; give a file prefix inside it, e.g. "
+                          f"{os.path.join(path, 'render')}")
+    if stem in ("", ".", ".."):
+        raise OutputError(f"{what} '{path}' has no file name; give one such as {os.path.join(folder, 'render')}")
+    _probe_folder(folder, what)
+
+
+def check_out_folder(path, what="the output folder"):
+    """Refuse, before any work, a folder that cannot hold our outputs (:class:`OutputError`): an empty path,
+    an existing file, or a place where files cannot be created. Nothing is left on disk."""
+    path = os.fspath(path)
+    if not path.strip():
+        raise OutputError(f"{what} is empty; give a folder such as out/golden")
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise OutputError(f"{what} '{path}' is a file, not a folder; give a new or existing folder")
+    _probe_folder(path, what)
+
+
+class NotNpzError(ValueError):
+    """A file given as a ``.npz`` result that is not one (a PNG, a text file, a truncated file)."""
+
+
+def load_npz(path, what="result"):
+    """``numpy.load(path, allow_pickle=False)`` for a ``.npz``, or :class:`NotNpzError` naming the file.
+
+    NumPy reads any non-zip file as a pickle and, refused one, says "load it unsafely"; a user who
+    gave the wrong file should instead hear that it is not a ``.npz`` and what it looks like.
+    A missing file raises :class:`FileNotFoundError` with the path.
+
+    Returns
+    -------
+    numpy.lib.npyio.NpzFile
+        Use as a context manager.
+    """
+    import zipfile
+
+    import numpy as np
+
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise NotNpzError(f"{path} is a folder, not a .npz {what}")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{what} file '{path}' does not exist")
+    if not zipfile.is_zipfile(path):
+        raise NotNpzError(f"{path} is not a .npz {what} ({_looks_like(path)}); give a .npz written by "
+                          "refraction-ref render or by a backend (numpy.savez)")
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
+        raise NotNpzError(f"{path} is not a readable .npz {what} ({type(e).__name__}: {e})") from None
+    return z
+
+
+def _looks_like(path):
+    """A few words on what a file is, from its first bytes."""
+    with open(path, "rb") as f:
+        head = f.read(512)
+    for magic, kind in ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"#?RADIANCE", "an HDR image"),
+                        (b"\x93NUMPY", "a .npy array"), (b"\x80", "a pickle"), (b"ply", "a PLY mesh")):
+        if head.startswith(magic):
+            return kind
+    if not head:
+        return "an empty file"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError:
+        return f"{os.path.getsize(path)} bytes of binary data, not a zip archive"
+    return "a text file" + (", JSON" if head.lstrip()[:1] in (b"{", b"[") else "")
 
 
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success.
 
-    On an exception the temporary file is removed and ``path`` is untouched.
+    On an exception the temporary file is removed, and so are the folders this call created,
+    and ``path`` is untouched.
 
     Examples
     --------
@@ -28,16 +155,24 @@ def atomic_path(path):
     """
     path = os.fspath(path)
     folder, name = os.path.split(path)
+    made = _missing_folders(folder) if folder else []
     if folder:
         os.makedirs(folder, exist_ok=True)
     stem, ext = os.path.splitext(name)
     tmp = os.path.join(folder, f".{stem}.tmp{os.getpid()}{ext}")
+    ok = False
     try:
         yield tmp
         os.replace(tmp, path)
+        ok = True
     finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        for t in (tmp, tmp + ".npz"):  # numpy.savez adds .npz to a name without it
+            if os.path.exists(t):
+                os.remove(t)
+        if not ok:
+            for m in reversed(made):
+                with contextlib.suppress(OSError):
+                    os.rmdir(m)  # only if empty
 
 
 @contextlib.contextmanager

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .files import atomic_path
+from .files import OutputError, atomic_path, check_out_file, load_npz
 
 __all__ = ["Result", "tonemap", "load_result", "output_paths", "check_writable"]
 
@@ -55,16 +55,25 @@ def output_paths(prefix, png=True):
     prefix = os.fspath(prefix)
     if prefix.endswith(".npz"):
         prefix = prefix[:-4]
+    name = os.path.basename(prefix)
+    if not prefix.strip():
+        raise OutputError("the output prefix (--out) is empty; give one such as out/render "
+                          "(writes out/render.npz and out/render.png)")
+    if name in ("", ".", ".."):
+        raise OutputError(f"the output prefix (--out) '{prefix}' has no file name"
+                          f"{' (it ends in a folder separator)' if not name else ''}; give a prefix such as "
+                          f"{os.path.join(os.path.dirname(prefix), 'render')} (writes render.npz and render.png)")
     return [prefix + ".npz"] + ([prefix + ".png"] if png else [])
 
 
 def check_writable(paths, overwrite=False):
-    """Refuse, before any work, to overwrite existing outputs unless asked (``FileExistsError``)."""
-    if overwrite:
-        return
+    """Refuse, before any work, outputs that cannot be written (:class:`~refraction_ref.files.OutputError`: a
+    folder that is a file or not writable) or that exist, unless ``overwrite`` (``FileExistsError``).
+    Nothing is left on disk."""
     for p in paths:
-        if os.path.exists(p):
+        if not overwrite and os.path.exists(p):
             raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite (CLI: --force)")
+        check_out_file(p, "the output")
 
 
 def _json_default(o):
@@ -78,9 +87,7 @@ def _json_default(o):
 def load_result(path):
     """Read a ``.npz`` written by :meth:`Result.save`."""
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"result file '{path}' does not exist")
-    with np.load(path, allow_pickle=False) as z:
+    with load_npz(path) as z:  # a PNG or a text file: NotNpzError naming it, not NumPy's pickle advice
         arrays = {k: z[k] for k in z.files if k != "meta"}
         meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
     return Result(arrays, meta)

@@ -57,8 +57,9 @@ linked keys
 
 Output (``--out DIR``): ``NAME.csv`` (one row per task: scene, method, the
 grid's values, error statistics, median stage timings, total, worker, thread
-count, status), ``NAME.parquet`` where pyarrow is installed, and
-``NAME.png`` (error against time per method).
+count, status), ``NAME.parquet`` where pyarrow is installed (it is not a
+dependency), and ``NAME.png`` (error against time: one line per scene and
+method, or family, each point labelled with the knob values that vary).
 """
 
 from __future__ import annotations
@@ -330,21 +331,18 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
     client : distributed.Client, optional
         Use this client (tests).
     """
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
+
+    from .cluster import dask_client
+    from .files import check_out_folder
 
     spec = load_spec(spec) if not isinstance(spec, dict) or "scenes" not in spec or "name" not in spec else spec
     tasks = tasks_of(spec)
-    own = client is None
-    cluster = None
+    if client is None and not scheduler and int(workers) < 1:
+        raise SweepError(f"sweep: workers is {workers}; give at least 1 worker process (or a scheduler)")
+    check_out_folder(out, "the sweep's output folder (--out)")  # before any work, not after it
     t0 = time.perf_counter()
-    if own:
-        if scheduler:
-            client = Client(scheduler)
-        else:
-            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=int(threads_per_worker),
-                                   processes=True, dashboard_address=None)
-            client = Client(cluster)
-    try:
+    with dask_client(scheduler, workers, threads_per_worker, client) as client:
         refs = {}
         futures = []
         follows = tuple(spec.get("reference_follows", ()))
@@ -375,11 +373,6 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
                 rows.append(f.result())
             except Exception as e:  # the reference task failed: its dependants land here
                 rows.append({"status": f"failed: {type(e).__name__}: {e}"})
-    finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
     keys = _grid_keys(spec)
     fn = bool(spec.get("task"))
     order = {json.dumps([None if fn else t["scene_name"], None if fn else t["method"], t.get("family"),
@@ -387,14 +380,37 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
     rows.sort(key=lambda r: order.get(json.dumps([r.get("scene"), r.get("method"), r.get("family"),
                                                   {k: r[k] for k in keys if k in r}], sort_keys=True), 1e9))
     wall = time.perf_counter() - t0
-    paths = write_rows(rows, out, spec["name"], spec.get("error"), spec.get("time") or "total_ms")
+    paths = write_rows(rows, out, spec["name"], spec.get("error"), spec.get("time") or "total_ms", knobs=keys)
     return rows, paths, wall
 
 
-def write_rows(rows, out, name, err_key=None, time_key="total_ms"):
+def plot_series(rows, err_key, time_key="total_ms", knobs=()):
+    """The plot's series: one per scene, method and family, its points in the rows' (the grid's) order.
+
+    Returns
+    -------
+    list of (label, points, notes)
+        ``label`` names the series (``"bunny, imagespace"``); ``points`` are
+        ``(time, error)`` pairs; ``notes`` label each point with the values
+        of the grid keys that vary along the series (``"iterations=5"``).
+    """
+    ok = [r for r in rows if r.get("status") == "ok" and time_key in r and err_key in r]
+    parts = [k for k in ("scene", "method", "family") if any(r.get(k) is not None for r in ok)]
+    out = []
+    for key in dict.fromkeys(tuple(r.get(k) for k in parts) for r in ok):
+        pts = [r for r in ok if tuple(r.get(k) for k in parts) == key]
+        varying = [k for k in knobs if len({json.dumps(r.get(k)) for r in pts}) > 1]
+        notes = [", ".join(f"{k.rsplit('.', 1)[-1]}={r.get(k)}" for k in varying) for r in pts]
+        label = ", ".join(str(x) for x in key if x is not None) or "runs"
+        out.append((label, [(r[time_key], r[err_key]) for r in pts], notes))
+    return out
+
+
+def write_rows(rows, out, name, err_key=None, time_key="total_ms", knobs=()):
     """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot
-    (``err_key`` against ``time_key``, one colour per method or family)."""
-    from .files import atomic_open, savefig_atomic
+    (``err_key`` against ``time_key``: one line per scene, method and family, each point labelled with
+    the values of the grid keys ``knobs`` that vary along it; :func:`plot_series`)."""
+    from .files import atomic_open, atomic_path, savefig_atomic
 
     os.makedirs(out, exist_ok=True)
     cols = list(dict.fromkeys(k for r in rows for k in r))
@@ -412,7 +428,8 @@ def write_rows(rows, out, name, err_key=None, time_key="total_ms"):
         import pyarrow.parquet
 
         p = os.path.join(out, f"{name}.parquet")
-        pyarrow.parquet.write_table(pyarrow.csv.read_csv(paths[0]), p)
+        with atomic_path(p) as tmp:
+            pyarrow.parquet.write_table(pyarrow.csv.read_csv(paths[0]), tmp)
         paths.append(p)
     except ImportError:
         pass
@@ -428,11 +445,11 @@ def write_rows(rows, out, name, err_key=None, time_key="total_ms"):
         fig = Figure(figsize=(7, 4.5))
         FigureCanvasAgg(fig)
         ax = fig.subplots()
-        group = "family" if any("family" in r for r in ok) else "method"
-        for m in list(dict.fromkeys(r.get(group) for r in ok)):
-            pts = [(r[time_key], r[err_key]) for r in ok if r.get(group) == m and err_key in r]
-            if pts:
-                ax.scatter(*zip(*pts), label=m, s=14)
+        for label, pts, notes in plot_series(rows, err_key, time_key, knobs):
+            ax.plot(*zip(*pts), "o-", label=label, ms=4, lw=0.8)
+            for (x, y), note in zip(pts, notes):
+                if note:
+                    ax.annotate(note, (x, y), xytext=(3, 3), textcoords="offset points", fontsize=6)
         ax.set_xlabel("median render time (ms)" if time_key == "total_ms" else time_key)
         ax.set_ylabel(err_key.replace("_", " "))
         ax.set_title(f"sweep {name}: error against the exact reference versus run time" if time_key == "total_ms"

@@ -121,3 +121,69 @@ def test_scene_files_with_a_key_twice_or_a_folder_are_refused(tmp_path, capsys):
     (tmp_path / "img.json").write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff")
     assert main(["scene", str(tmp_path / "img.json")]) == 2
     assert "not a text (JSON) file" in capsys.readouterr().err
+
+
+def test_workers_0_is_refused_before_any_work(tmp_path, capsys):
+    spec = tmp_path / "s.json"
+    spec.write_text(json.dumps({"name": "t", "scenes": {"bunny": None}, "methods": ["imagespace"],
+                                "grid": {"imagespace.iterations": [1]}, "base": {"camera.width": 16}}))
+    assert main(["golden", "build", str(tmp_path / "g"), "--workers", "0"]) == 2
+    assert "--workers is 0; give at least 1 worker process" in capsys.readouterr().err
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
+    assert "--workers is 0; give at least 1 worker process" in capsys.readouterr().err
+    assert os.listdir(tmp_path) == ["s.json"]
+
+
+def test_a_sweep_is_quiet_and_its_plot_labelled_per_scene_and_knob(tmp_path, capfd):
+    from refraction_ref.sweep import plot_series
+
+    (tmp_path / "f.py").write_text("def f(n, scale):\n    return {'total_ms': n * scale, 'err': 1.0 / n}\n")
+    spec = tmp_path / "s.json"
+    spec.write_text(json.dumps({"name": "t", "task": "f.py:f", "grid": {"n": [1, 2, 4]}, "base": {"scale": 2.0},
+                                "error": "err"}))
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--workers", "1", "--quiet"]) == 0
+    out, err = capfd.readouterr()  # the worker processes' output too
+    assert "3 tasks ok" in out and err == ""  # no CommClosedError, "still alive ... killing", port warnings
+    assert sorted(os.listdir(tmp_path / "o")) == ["t.csv", "t.png"]
+    rows = [{"scene": s, "method": "imagespace", "imagespace.iterations": i, "camera.width": 16, "status": "ok",
+             "total_ms": 10.0 * i, "e": 1.0 / i} for s in ("bunny", "sphere") for i in (1, 5)]
+    series = plot_series(rows, "e", knobs=["imagespace.iterations", "camera.width"])
+    assert [s[0] for s in series] == ["bunny, imagespace", "sphere, imagespace"]
+    assert series[0][1] == [(10.0, 1.0), (50.0, 0.2)] and series[1][2] == ["iterations=1", "iterations=5"]
+
+
+def test_bad_out_paths_are_refused_before_any_work_and_leave_nothing(tmp_path, monkeypatch, capsys):
+    import sys
+
+    def no_render(*a, **k):
+        raise AssertionError("rendered before checking --out")
+
+    monkeypatch.setattr(sys.modules["refraction_ref.render"], "run_method", no_render)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "f").write_text("a file")
+    small = ["--set", "camera.width=16", "--set", "camera.height=16", "--quiet"]
+    for out, message in (("o/dir/", "has no file name (it ends in a folder separator)"),
+                         ("", "the output prefix (--out) is empty"),
+                         ("/proc/nope/x", "cannot write the output in '/proc/nope'"),
+                         ("f/x", "is a file, not a folder")):
+        assert main(["render", "--out", out] + small) == 2, out
+        err = capsys.readouterr().err
+        assert err.startswith("refraction-ref: error:") and message in err, (out, err)
+        assert os.listdir(tmp_path) == ["f"], out  # no hidden temporary file, no empty folder
+    assert main(["golden", "build", "f"]) == 2
+    err = capsys.readouterr().err
+    assert "golden suite folder 'f' is a file, not a folder" in err and "Errno" not in err
+
+
+def test_a_failed_save_removes_its_temporary_file_and_new_folders(tmp_path, monkeypatch):
+    from refraction_ref.result import Result
+
+    def broken(path, **arrays):
+        with open(path, "wb") as f:
+            f.write(b"PK partial")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez_compressed", broken)
+    with pytest.raises(OSError):
+        Result({"x": np.zeros(3)}).save(tmp_path / "new" / "deeper" / "r")
+    assert os.listdir(tmp_path) == []
