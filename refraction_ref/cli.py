@@ -66,6 +66,12 @@ def _cmd_render(a):
     return 0
 
 
+def _run_name(path, res):
+    """A run's name in plots: its file name and method, e.g. ``bunny_is.npz (imagespace)``."""
+    method = res.meta.get("method")
+    return os.path.basename(path) + (f" ({method})" if method else "")
+
+
 def _cmd_compare(a):
     from .compare import check_comparable, compare_arrays, format_comparison
     from .result import load_result
@@ -84,7 +90,7 @@ def _cmd_compare(a):
     if a.plot:
         from .compare import plot_comparison
 
-        print("wrote " + plot_comparison(A.arrays, B.arrays, a.plot, "A", "B"))
+        print("wrote " + plot_comparison(A.arrays, B.arrays, a.plot, _run_name(a.a, A), _run_name(a.b, B)))
     return 0
 
 

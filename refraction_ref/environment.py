@@ -22,7 +22,7 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["environment_lookup", "latlong_uv"]
+__all__ = ["environment_lookup", "latlong_uv", "read_latlong"]
 
 
 def latlong_uv(dirs):
@@ -38,6 +38,8 @@ def _load_image(path):
     import imageio.v3 as iio
 
     img = np.asarray(iio.imread(path))
+    if img.ndim not in (2, 3) or min(img.shape[:2]) < 1 or img.dtype.kind not in "uif":
+        raise ValueError(f"not a single still image (array {img.shape}, dtype {img.dtype})")
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=2)
     img = img[..., :3]
@@ -47,6 +49,28 @@ def _load_image(path):
     img = img.astype(np.float32)
     img.setflags(write=False)
     return img
+
+
+def read_latlong(path, where="environment.path"):
+    """Read a ``latlong`` image (when the scene is loaded, so a bad file is refused before any work).
+
+    The image is cached: the shade stage's :func:`environment_lookup` reuses it.
+
+    Raises
+    ------
+    SceneError
+        Naming the key, the file and what it holds, for a file imageio cannot read as a still image.
+    """
+    import os
+
+    from .files import file_kind
+    from .scene import SceneError
+
+    try:
+        return _load_image(os.path.abspath(path))
+    except Exception as e:  # imageio raises many types
+        raise SceneError(f"scene: {where} '{path}' is not an image imageio can read ({file_kind(path)}; "
+                         f"{type(e).__name__}: {e}); give a latitude-longitude image (PNG, JPEG, EXR, HDR)") from None
 
 
 @nb.njit(cache=True, parallel=True)

@@ -14,7 +14,7 @@ import os
 import tempfile
 
 __all__ = ["atomic_path", "atomic_open", "savefig_atomic", "OutputError", "check_out_file", "check_out_folder",
-           "NotNpzError", "load_npz"]
+           "NotNpzError", "load_npz", "file_kind"]
 
 
 class OutputError(ValueError):
@@ -115,7 +115,7 @@ def load_npz(path, what="result"):
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{what} file '{path}' does not exist")
     if not zipfile.is_zipfile(path):
-        raise NotNpzError(f"{path} is not a .npz {what} ({_looks_like(path)}); give a .npz written by "
+        raise NotNpzError(f"{path} is not a .npz {what} ({file_kind(path)}); give a .npz written by "
                           "refraction-ref render or by a backend (numpy.savez)")
     try:
         z = np.load(path, allow_pickle=False)
@@ -124,12 +124,13 @@ def load_npz(path, what="result"):
     return z
 
 
-def _looks_like(path):
+def file_kind(path):
     """A few words on what a file is, from its first bytes."""
     with open(path, "rb") as f:
         head = f.read(512)
     for magic, kind in ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"#?RADIANCE", "an HDR image"),
-                        (b"\x93NUMPY", "a .npy array"), (b"\x80", "a pickle"), (b"ply", "a PLY mesh")):
+                        (b"\x93NUMPY", "a .npy array"), (b"PK\x03\x04", "a zip archive"), (b"\x80", "a pickle"),
+                        (b"ply", "a PLY mesh")):
         if head.startswith(magic):
             return kind
     if not head:
@@ -137,7 +138,7 @@ def _looks_like(path):
     try:
         head.decode("utf-8")
     except UnicodeDecodeError:
-        return f"{os.path.getsize(path)} bytes of binary data, not a zip archive"
+        return f"{os.path.getsize(path)} bytes of binary data"
     return "a text file" + (", JSON" if head.lstrip()[:1] in (b"{", b"[") else "")
 
 

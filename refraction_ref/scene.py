@@ -230,6 +230,9 @@ def validate(data, base_dir="."):
         p = env["path"] if os.path.isabs(env["path"]) else os.path.join(base_dir, env["path"])
         if not os.path.isfile(p):
             raise SceneError(f"scene: environment.path '{env['path']}' does not exist (looked for {p})")
+        from .environment import read_latlong
+
+        read_latlong(p)  # now, not in the shade stage after the geometry work
     from .lights import validate_lights
 
     for block in BLOCKS.values():  # blocks given partially (water) are filled before the lights are checked

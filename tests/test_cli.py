@@ -187,3 +187,51 @@ def test_a_failed_save_removes_its_temporary_file_and_new_folders(tmp_path, monk
     with pytest.raises(OSError):
         Result({"x": np.zeros(3)}).save(tmp_path / "new" / "deeper" / "r")
     assert os.listdir(tmp_path) == []
+
+
+def test_files_that_are_not_npz_results_are_named_as_such(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from refraction_ref.files import NotNpzError, load_npz
+
+    iio.imwrite(tmp_path / "r.png", np.zeros((4, 4, 3), np.uint8))
+    (tmp_path / "r.txt").write_text("hello\n")
+    np.savez(tmp_path / "ok.npz", x=np.zeros(2))
+    for name, kind in (("r.png", "a PNG image"), ("r.txt", "a text file")):
+        assert main(["compare", str(tmp_path / name), str(tmp_path / "ok.npz")]) == 2
+        err = capsys.readouterr().err
+        assert f"{tmp_path / name} is not a .npz result ({kind})" in err, err
+        assert "pickle" not in err and "unsafe" not in err
+        with pytest.raises(NotNpzError, match="is not a .npz result"):
+            load_npz(tmp_path / name)
+    with load_npz(tmp_path / "ok.npz") as z:
+        assert z.files == ["x"]
+
+
+def test_inputs_that_are_not_what_the_scene_says_are_refused_at_load(tmp_path, capsys):
+    from refraction_ref import load_scene
+    from refraction_ref.scene import SceneError
+
+    (tmp_path / "env.txt").write_text("not an image\n")
+    assert main(["scene", "--set", "environment.type=latlong", "--set", f"environment.path={tmp_path / 'env.txt'}"]) == 2
+    err = capsys.readouterr().err
+    assert "environment.path" in err and "is not an image imageio can read (a text file" in err
+    (tmp_path / "ior.npy").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))
+    with pytest.raises(SceneError, match=r"'volume.ior' names .* which is not a .npy array \(a PNG image\)") as e:
+        load_scene({"volume": {"ior": str(tmp_path / "ior.npy"), "bounds": [[0, 0, 0], [1, 1, 1]]}})
+    assert "pickle" not in str(e.value)
+
+
+def test_compare_plot_names_its_panels_by_run(tmp_path, monkeypatch, capsys):
+    import refraction_ref as rr
+    from refraction_ref import compare
+
+    res = rr.render({"camera": {"width": 16, "height": 16}})
+    res.save(tmp_path / "mine")
+    res.save(tmp_path / "theirs")
+    seen = []
+    monkeypatch.setattr(compare, "plot_comparison", lambda a, b, path, name_a, name_b: seen.append((name_a, name_b))
+                        or str(path))
+    assert main(["compare", str(tmp_path / "mine.npz"), str(tmp_path / "theirs.npz"), "--plot",
+                 str(tmp_path / "p.png")]) == 0
+    assert seen == [("mine.npz (imagespace)", "theirs.npz (imagespace)")]

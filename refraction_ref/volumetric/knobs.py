@@ -202,6 +202,13 @@ def validate_volumetric(data, base_dir="."):
             if not os.path.isfile(p):
                 raise SceneError(f"scene: 'volume.{k}' names '{x}', which does not exist (looked for {p}); "
                                  "give an existing .npy file or an array")
+            with open(p, "rb") as f:
+                npy = f.read(6) == b"\x93NUMPY"
+            if not npy:  # NumPy would read it as a pickle, and advise loading it unsafely
+                from ..files import file_kind
+
+                raise SceneError(f"scene: 'volume.{k}' names '{x}', which is not a .npy array ({file_kind(p)}); "
+                                 "save the array with numpy.save")
     return data
 
 
