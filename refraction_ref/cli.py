@@ -11,6 +11,15 @@ import time
 __all__ = ["main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one error prefix for every verb: ``refraction-ref: error: render: ...``, exit 2."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        verb = self.prog.partition(" ")[2]
+        self.exit(2, f"refraction-ref: error: {verb + ': ' if verb else ''}{message}\n")
+
+
 class UsageError(ValueError):
     """A command line that cannot run as given (exit 2 with the error prefix, like argparse's own)."""
 
@@ -44,6 +53,9 @@ def _cmd_render(a):
     with compile_report(a.method):  # kernels done of total on a terminal, one line each way in logs
         res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
     paths = res.save(a.out, overwrite=a.force)
+    if a.quiet:  # the files written, nothing else (the stage report is in the .npz's meta)
+        print("wrote " + ", ".join(paths))
+        return 0
     import numpy as np
 
     t = res.meta["timings_ms"]
@@ -194,8 +206,11 @@ def _cmd_tables(a):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="refraction-ref",
-                                description="CPU reference renderer for refraction through transparent objects.")
+    p = _Parser(prog="refraction-ref",
+                description="CPU reference renderer for refraction through transparent objects.")
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene (default: the bundled glass bunny)")
     r.add_argument("scene", nargs="?", default=None, help="scene JSON (docs/oracle.md); omit for the default scene")
@@ -208,7 +223,8 @@ def main(argv=None):
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set imagespace.iterations=10 (repeatable)")
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress bar and no stage report: the output is the line of files written")
     r.add_argument("--keep", metavar="STAGES", default=None,
                    help="also write stage buffers as stage.<stage>.<buffer> (docs/oracle.md): 'stages' for "
                         "every stage, or a comma list of stage names, e.g. --keep peel,trace")
@@ -224,8 +240,10 @@ def main(argv=None):
                         "differs)")
     c.set_defaults(fn=_cmd_compare)
     s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
-    s.add_argument("scene", nargs="?", default=None)
-    s.add_argument("--set", action="append", metavar="KEY=VALUE")
+    s.add_argument("scene", nargs="?", default=None, help="scene JSON (docs/oracle.md); omit for the default scene")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene key, e.g. --set camera.width=64 or a whole block, --set "
+                        "'objects.0={\"mesh\": \"sphere\"}' (repeatable)")
     s.add_argument("--to", nargs=2, metavar=("FORMAT", "OUT"),
                    help="export instead of printing: 'mitsuba OUT.xml' writes a Mitsuba 3 scene (meshes and "
                         "environment bitmap beside it; needs the crosscheck extra)")
@@ -239,14 +257,14 @@ def main(argv=None):
     x.add_argument("--parts", default="paths,images", help="paths, images (default both)")
     x.add_argument("--workers", type=int, metavar="N", help="run the cases on a LocalCluster of N worker processes")
     x.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the cases on this Dask cluster")
-    x.add_argument("--quiet", action="store_true")
+    x.add_argument("--quiet", action="store_true", help="no progress lines")
     x.set_defaults(fn=_cmd_crosscheck)
     g = sub.add_parser("golden", help="the conformance kit's golden suite")
     gsub = g.add_subparsers(dest="golden_cmd", required=True)
     gb = gsub.add_parser("build", help="render the catalogue with the oracle into DIR (arrays, manifest)")
-    gb.add_argument("dir")
+    gb.add_argument("dir", help="folder of the suite (created if missing)")
     gb.add_argument("--only", metavar="NAME,...", help="only these cases (the others in DIR are kept)")
-    gb.add_argument("--quiet", action="store_true")
+    gb.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on terminals)")
     gb.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                     help="build the cases as tasks of this Dask cluster (the suite is the same as a local build's)")
     gb.add_argument("--workers", type=int, metavar="N",
@@ -270,7 +288,7 @@ def main(argv=None):
     w.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing dask cluster (default: a LocalCluster)")
     w.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     w.add_argument("--threads-per-worker", type=int, default=1, help="threads per LocalCluster worker (default 1)")
-    w.add_argument("--quiet", action="store_true")
+    w.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on terminals)")
     w.set_defaults(fn=_cmd_sweep)
     t = sub.add_parser("tables", help="reproduce every paper's tables and check their claims (Markdown report)")
     t.add_argument("--out", default="out/tables", help="folder for tables.md, claims.csv, one CSV per table, plots")

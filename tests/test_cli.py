@@ -235,3 +235,47 @@ def test_compare_plot_names_its_panels_by_run(tmp_path, monkeypatch, capsys):
     assert main(["compare", str(tmp_path / "mine.npz"), str(tmp_path / "theirs.npz"), "--plot",
                  str(tmp_path / "p.png")]) == 0
     assert seen == [("mine.npz (imagespace)", "theirs.npz (imagespace)")]
+
+
+def test_cli_conventions_version_help_and_usage_errors(capsys, monkeypatch):
+    import refraction_ref
+    from refraction_ref import cli
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"refraction-ref {refraction_ref.__version__}"
+    assert main(["render", "--set", "camera.width"]) == 2  # no '=': a usage error, before any work
+    err = capsys.readouterr().err
+    assert err.startswith("refraction-ref: error: --set expects KEY=VALUE, got 'camera.width'")
+    with pytest.raises(SystemExit) as e:
+        main(["render", "--method", "nope"])
+    assert e.value.code == 2 and "refraction-ref: error: render: argument --method" in capsys.readouterr().err
+    parser = []
+
+    def grab(self, *a, **k):  # the whole parser, as main builds it
+        parser.append(self)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(cli.argparse.ArgumentParser, "parse_args", grab)
+    with pytest.raises(SystemExit):
+        main([])
+    monkeypatch.undo()
+
+    def undocumented(p, name):
+        for act in p._actions:
+            if isinstance(act, cli.argparse._SubParsersAction):
+                for n, sp in act.choices.items():
+                    yield from undocumented(sp, f"{name} {n}")
+            elif not act.help:
+                yield f"{name} {'/'.join(act.option_strings) or act.dest}"
+
+    assert list(undocumented(parser[0], "refraction-ref")) == []
+    sweep_help = " ".join(parser[0]._subparsers._group_actions[0].choices["sweep"].format_help().split())
+    assert "(and NAME.parquet where pyarrow is installed)" in sweep_help  # pyarrow is not a dependency
+
+
+def test_render_quiet_prints_only_the_files_written(tmp_path, capsys):
+    assert main(["render", "--out", str(tmp_path / "q"), "--set", "camera.width=16", "--set", "camera.height=16",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert out == f"wrote {tmp_path / 'q.npz'}, {tmp_path / 'q.png'}\n"
