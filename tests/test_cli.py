@@ -279,3 +279,59 @@ def test_render_quiet_prints_only_the_files_written(tmp_path, capsys):
                  "--quiet"]) == 0
     out = capsys.readouterr().out
     assert out == f"wrote {tmp_path / 'q.npz'}, {tmp_path / 'q.png'}\n"
+
+
+ORACLE = os.path.join(os.path.dirname(__file__), "..", "docs", "oracle.md")
+
+
+def _section(text, title):
+    """The lines of the oracle's section whose heading contains ``title``, up to the next heading."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("#") and title in ln)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("#")), len(lines))
+    return lines[start + 1:end]
+
+
+def _documented_buffers(rows):
+    """stage -> the buffer names its table rows list (``_r``, ``_l`` index suffixes dropped)."""
+    import re
+
+    out, stage = {}, None
+    for ln in rows:
+        cells = [c.strip() for c in ln.split("|")[1:-1]]
+        if len(cells) < 2 or set(cells[0]) <= {"-"} and cells[0]:
+            continue
+        if cells[0]:
+            stage = re.findall(r"`([a-z_]+)`", cells[0])
+            stage = stage[0] if stage else None
+        for name in re.findall(r"`([a-z_]+)`", cells[1]):
+            out.setdefault(stage, set()).add(re.sub(r"(_[rl])+$", "", name))
+    return out
+
+
+def test_the_contract_documents_every_knob_meta_key_and_stage_buffer():
+    import re
+
+    import refraction_ref as rr
+    from refraction_ref.scene import BLOCKS
+
+    text = open(ORACLE).read()
+    for name, block in BLOCKS.items():
+        if block.defaults is None:
+            continue
+        rows = "\n".join(_section(text, f"### `{name}` block"))
+        missing = [k for k in block.defaults if f"| `{k}` |" not in rows]
+        assert not missing, f"docs/oracle.md, `{name}` block: no row for {missing}"
+    pool = "refraction_ref/data/levelmap_default.json"
+    runs = {"imagespace": rr.render("refraction_ref/data/caustics_default.json", keep="stages", overrides={
+                "camera.width": 16, "camera.height": 16, "imagespace.photons": 32, "imagespace.caustic_map": 16}),
+            "levelmap": rr.render(pool, method="levelmap", keep="caustics,casting", overrides={
+                "camera.width": 16, "camera.height": 16, "levelmap.map_size": 16, "water.resolution": 8})}
+    meta = "\n".join(_section(text, "## meta"))
+    for res in runs.values():
+        assert not [k for k in res.meta if f"`{k}`" not in meta], "docs/oracle.md, meta: undocumented keys"
+    for method, res in runs.items():
+        documented = _documented_buffers(_section(text, f"### `{method}` ("))
+        for key in (k for k in res.arrays if k.startswith("stage.")):
+            _, stage, buf = key.split(".", 2)
+            assert re.sub(r"(_\d+)+$", "", buf) in documented.get(stage, ()), f"docs/oracle.md: {method} {key}"
