@@ -127,6 +127,8 @@ FINAL_KEY_STAGES = (
     ("image", "caustic_final"),              # with receivers the final image is the caustic pass's
     ("image_refraction", "shade"),           # ... and the refraction-only view the shading pass's
     ("hit", "trace"),                        # imagespace: status != 0 of the trace
+    ("ray_origin", "trace"),                 # exact: the trace makes its primary rays (imagespace: rays)
+    ("ray_dir", "trace"),
     ("ior", "voxelize"),                     # volumetric: the index volume (stage.voxelize.ior_volume)
     ("volume_bounds", "voxelize"),
     ("photon_*", "march"),                   # volumetric: the march's photon results

@@ -46,6 +46,11 @@ Every kind first says which elements fail; the verdict then *locates* them
     elements that may be located failures (0 for codes: a wrong value in
     the interior fails however few pixels carry it). Arrays with no pixel
     or texel axes (photons, volumes, frames) count every failure.
+``inside``
+    The share of the informative elements that may differ inside the mask
+    (:data:`INSIDE`, 2 % for codes): the mask explains ties along edges, not
+    a region decided wrongly (TIR pixels marked exited are thin slivers,
+    all beside a status change, and 7 % of the diamond's covered pixels).
 ``why``
     The tolerance's rationale, printed beside each verdict.
 
@@ -87,13 +92,13 @@ TOLERANCES = [
     ("*photon_status", {"kind": "exact", "fraction": 0.005, "over": "all",
                         "why": "photons grazing the volume's box or a receiver's edge"}),
     ("*status", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
-                 "why": _CODE}),
+                 "inside": 0.02, "why": _CODE}),
     ("*interfaces", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
-                     "why": _CODE}),
+                     "inside": 0.02, "why": _CODE}),
     ("*hit", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
-              "why": _CODE}),
+              "inside": 0.02, "why": _CODE}),
     ("*object_mask*", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
-                       "why": _CODE}),
+                       "inside": 0.02, "why": _CODE}),
     ("*.octree.level", {"kind": "exact", "fraction": 0.0, "over": "all",
                         "why": "the leaf test on the golden's own index volume: no ambiguity"}),
     ("*plane_index*", {"kind": "exact", "over": "all", "why": "the planes drawn: a decision of smart slicing"}),
@@ -139,6 +144,9 @@ TOLERANCES = [
     ("*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
            "why": _POS}),
 ]
+
+#: the share of the informative elements that may differ inside the ambiguity mask, unless a spec says
+INSIDE = 0.05
 
 #: keys of maps from jittered photons, judged by the Z-test when the oracle stored batches
 NOISY = ("caustic_map_*",)
@@ -292,11 +300,14 @@ def judge(cand, gold, spec, batches=None, ambiguous=None):
     located = bad & ~amb
     nonfinite = nonfinite_mismatch(c, g)
 
+    inside = float(spec.get("inside", INSIDE)) if ambiguous is not None else 1.0
+
     def verdict(loc, inf, b, a):
         n_info = int(np.count_nonzero(inf))
         n_loc = int(np.count_nonzero(loc))
         frac = n_loc / max(n_info, 1)
-        return {"ok": frac <= allowed, "failing": frac, "counts": {
+        n_in = int(np.count_nonzero(b & a))
+        return {"ok": frac <= allowed and n_in <= inside * max(n_info, 1), "failing": frac, "counts": {
             "failing": int(np.count_nonzero(b)), "inside_ambiguity": int(np.count_nonzero(b & a)),
             "located": n_loc, "informative": n_info}}
 
@@ -311,13 +322,13 @@ def judge(cand, gold, spec, batches=None, ambiguous=None):
         v = verdict(located, info, bad, amb)
     cn = v["counts"]
     detail += (f"; {cn['located']} failing outside the ambiguity mask of {cn['informative']} informative "
-               f"({cn['inside_ambiguity']} more inside it, allowed)")
+               f"({cn['inside_ambiguity']} more inside it, {100 * inside:.3g} % allowed there)")
     if parts:
         detail += "; " + ", ".join(f"{n}: {p['counts']['located']} of {p['counts']['informative']}"
                                    f"{'' if p['ok'] else ' FAIL'}" for n, p in parts.items())
     if nonfinite:
         detail += "; " + ", ".join(f"{n} {k}" for k, n in nonfinite.items())
-    return dict(v, allowed=allowed, error=err, detail=detail, why=spec.get("why", ""), nonfinite=nonfinite,
+    return dict(v, allowed=allowed, inside_allowed=inside, error=err, detail=detail, why=spec.get("why", ""), nonfinite=nonfinite,
                 parts=parts, bad=located)
 
 
