@@ -378,7 +378,8 @@ def _corners(lo, hi):
 
 
 def light_texels(light, lo, hi, N, M, bugs=()):
-    """Texel ray origins, directions and start radiance of one light's photon texture."""
+    """Texel ray origins, directions and start radiance of one light's photon texture, and its
+    grid (e1, e2, u0, du, v0, dv, M) for ``_first_hits``."""
     rad = _rgb(light["radiance"])
     h = (hi - lo) / N
     h2 = (h[0] * h[1] * h[2]) ** (2.0 / 3.0)
@@ -401,7 +402,8 @@ def light_texels(light, lo, hi, N, M, bugs=()):
     org = ((ca + s[q] * side)[:, None] * e1 + (cm + row_sign * s[rr] * side)[:, None] * e2
            + dmin * d)
     L = rad * (side / M) ** 2 / h2
-    return org, np.broadcast_to(d, org.shape).copy(), np.broadcast_to(L, org.shape).copy()
+    grid = (e1, e2, ca + s[0] * side, side / M, cm + row_sign * s[0] * side, row_sign * side / M, M)
+    return org, np.broadcast_to(d, org.shape).copy(), np.broadcast_to(L, org.shape).copy(), grid
 
 
 def _inflated_proxy(objs, hmin, inflate):
@@ -436,48 +438,52 @@ def _inflated_proxy(objs, hmin, inflate):
     return np.concatenate(Vs), np.concatenate(Fs)
 
 
-def _first_hits(org, d, V, F):
-    """Nearest hit of parallel rays (org + t d) on triangles (Moller-Trumbore, two-sided):
-    (t, front) with t = inf where none; front: the face normal opposes d."""
-    P = len(org)
-    best = np.full(P, np.inf)
-    front = np.zeros(P, bool)
-    v0, v1, v2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    e1, e2 = v1 - v0, v2 - v0
-    fn = np.cross(e1, e2)
-    # project onto the plane perpendicular to d to find candidate texels per triangle
-    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    b1 = np.cross(d, a)
-    b1 /= np.linalg.norm(b1)
-    b2 = np.cross(d, b1)
-    ou, ov = org @ b1, org @ b2
-    order = np.argsort(ou, kind="stable")
-    ou_s = ou[order]
-    tu = np.stack([v0 @ b1, v1 @ b1, v2 @ b1], 1)
-    tv = np.stack([v0 @ b2, v1 @ b2, v2 @ b2], 1)
-    pvec_all = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, pvec_all)
-    for f in range(len(F)):
-        if det[f] == 0.0:
-            continue
-        k0 = np.searchsorted(ou_s, tu[f].min() - 1e-9, "left")
-        k1 = np.searchsorted(ou_s, tu[f].max() + 1e-9, "right")
-        if k1 <= k0:
-            continue
-        idx = order[k0:k1]
-        idx = idx[(ov[idx] >= tv[f].min() - 1e-9) & (ov[idx] <= tv[f].max() + 1e-9)]
-        if len(idx) == 0:
-            continue
-        inv = 1.0 / det[f]
-        tvec = org[idx] - v0[f]
-        uu = (tvec @ pvec_all[f]) * inv
-        qvec = np.cross(tvec, e1[f])
-        vv = (qvec @ d) * inv
-        t = (qvec @ e2[f]) * inv
-        ok = (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & (t > 0) & (t < best[idx])
-        idx = idx[ok]
-        best[idx] = t[ok]
-        front[idx] = (fn[f] @ d) < 0
+def _first_hits(org, d, V, F, grid):
+    """Nearest hit of a light's parallel texel rays ``org + t d`` on triangles (Moller-Trumbore,
+    two-sided), every (triangle, texel) pair of the triangle's footprint at once.
+
+    grid = (e1, e2, u0, du, v0, dv, M): texel (rr, q) has ``org . e1 = u0 + q du`` and
+    ``org . e2 = v0 + rr dv``.
+
+    Returns
+    -------
+    t (T,) float64, inf where no hit; front (T,) bool: the hit face's normal opposes d (ties in t
+    go to the lower triangle index).
+    """
+    e1g, e2g, u0, du, v0, dv, M = grid
+    T = len(org)
+    v0_, v1_, v2_ = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    q = (np.stack([v0_ @ e1g, v1_ @ e1g, v2_ @ e1g], 1) - u0) / du
+    r = (np.stack([v0_ @ e2g, v1_ @ e2g, v2_ @ e2g], 1) - v0) / dv
+    q0 = np.clip(np.ceil(q.min(1) - 1e-6), 0, M).astype(np.int64)
+    q1 = np.clip(np.floor(q.max(1) + 1e-6), -1, M - 1).astype(np.int64)
+    r0 = np.clip(np.ceil(r.min(1) - 1e-6), 0, M).astype(np.int64)
+    r1 = np.clip(np.floor(r.max(1) + 1e-6), -1, M - 1).astype(np.int64)
+    nq = np.maximum(q1 - q0 + 1, 0)
+    n = nq * np.maximum(r1 - r0 + 1, 0)
+    tri = np.repeat(np.arange(len(F)), n)
+    k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+    tex = (r0[tri] + k // nq[tri]) * M + q0[tri] + k % nq[tri]
+    e1, e2 = v1_ - v0_, v2_ - v0_
+    pvec = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, pvec)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det[tri]
+        tvec = org[tex] - v0_[tri]
+        uu = np.einsum("ij,ij->i", tvec, pvec[tri]) * inv
+        qv = np.cross(tvec, e1[tri])
+        vv = (qv @ d) * inv
+        t = np.einsum("ij,ij->i", qv, e2[tri]) * inv
+        ok = (det[tri] != 0) & (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & (t > 0)
+    tri, tex, t = tri[ok], tex[ok], t[ok]
+    o = np.lexsort((tri, t, tex))
+    tri, tex, t = tri[o], tex[o], t[o]
+    firsts = np.ones(len(tex), bool)
+    firsts[1:] = tex[1:] != tex[:-1]
+    best = np.full(T, np.inf)
+    front = np.zeros(T, bool)
+    best[tex[firsts]] = t[firsts]
+    front[tex[firsts]] = (np.cross(e1, e2)[tri[firsts]] @ d) < 0
     return best, front
 
 
@@ -498,7 +504,7 @@ def photons(sc, ior, lo, hi, objs, bugs=()):
     hmin = float(h.min())
     pos, dirs, rads = [], [], []
     for light in sc["lights"]:
-        org, d, L = light_texels(light, lo, hi, N, M, bugs)
+        org, d, L, grid = light_texels(light, lo, hi, N, M, bugs)
         t_box, t_out_box = _slab(org, d, lo, hi)
         hit_box = t_out_box > t_box
         if vol["proxy"] == "box":
@@ -518,7 +524,7 @@ def photons(sc, ior, lo, hi, objs, bugs=()):
                 keep = t_out > t
         else:
             Vp, Fp = _inflated_proxy(objs, hmin, float(vol["proxy_inflate"]))
-            th, front = _first_hits(org, d[0], Vp, Fp)
+            th, front = _first_hits(org, d[0], Vp, Fp, grid)
             keep = np.isfinite(th) & hit_box & (th <= t_out_box)
             use_box = (~front) | (th < t_box)
             t = np.where(use_box, t_box, th)
