@@ -85,6 +85,9 @@ def test_volumetric_walkthrough():
     # the hand-run gradient (eq. 3) and octree (§4.2, §5.3) equal the pipeline's buffers
     assert k["field_equal"] and k["octree_equal"]
     assert k["paths_used"]["euler"] >= 10 and k["paths_used"]["rk4"] >= 10
+    # photon_steps is the total over the photons: per photon, each step at least ds_min = 1 voxel, on paths that
+    # cross the lens's box once (under twice its side)
+    assert 1 <= k["photon_steps"] / k["photons_generated"] <= 2 * k["VOL"]
     # the Luneburg lens's closed form: parallel photons pass through the antipodal focus (forward Euler, eqs. 4-5,
     # within a voxel; RK4 ten times closer) and leave it at asin(b / R) from the axis (Bouguer's invariant)
     m, d = k["miss_median_vox"], k["exit_dir_median_deg"]
