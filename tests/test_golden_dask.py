@@ -25,7 +25,7 @@ def _files(root):
     out = {}
     for r, _, fs in os.walk(root):
         for f in fs:
-            if f != "manifest.json":
+            if f not in ("manifest.json", "complete.json"):  # both hold build_s (the marker: the manifest's hash)
                 with open(os.path.join(r, f), "rb") as fh:
                     out[os.path.relpath(os.path.join(r, f), root)] = fh.read()
     return out
