@@ -353,12 +353,13 @@ def planes_pass(rverts, p0, light, eta, n_planes, bugs=()):
     ext = 2 * np.linalg.norm(loc[far], axis=1)
     ext = np.maximum(ext, 1e-6 * ext.max())
     h = ext[1]
-    if n_planes == 1:
+    if n_planes == 1:           # one plane at the centre accepts the whole box
         s, zeta = h, np.zeros(1)
+        zlo = -h / 2.0
     else:
         s = h / (n_planes - 1)
         zeta = -h / 2 + s * np.arange(n_planes)
-    zlo = -h / 2.0 - s / 2.0
+        zlo = -h / 2.0 - s / 2.0
     if "half_slice" in bugs:        # planted: slab centres of `tight` with the thesis's s
         zeta = zeta + s / 2
         zlo = zeta[0] - s / 2.0
@@ -381,8 +382,9 @@ def map_coords(p, box, Hc, Wc):
 def level_map_pass(tris, owner, r, albedo, box, Hc, Wc, bugs=()):
     """Pass `level_map`: position, diffuse and normal maps of receiver r.
 
-    ``tris`` (T, 3, 3) are every receiver's world triangles (shadows on: the
-    first surface along the light wins), ``owner`` (T,) their receiver index.
+    ``tris`` (T, 3, 3) are the receivers' world triangles (with ``shadows``
+    every receiver's: the first surface along the light wins; else receiver
+    r's own), ``owner`` (T,) their receiver index.
 
     References
     ----------
@@ -570,8 +572,6 @@ def render(scene, bugs=()):
     recs = [place_receiver(r) for r in receivers]
     tris = np.concatenate([v[f] for v, f, _, _ in recs])
     owner = np.concatenate([np.full(len(f), k) for k, (_, f, _, _) in enumerate(recs)])
-    if not lmk["shadows"]:
-        raise ValueError("numpy_backend.levelmap ports only levelmap.shadows = true")
     out = {}
     waters = [water_pass(water, light, eta, bugs) for light in lights]
     out["stage.water.water_vertices"] = waters[0]["vertices"]
@@ -582,7 +582,9 @@ def render(scene, bugs=()):
         for l, light in enumerate(lights):
             tag = f"{r}_{l}"
             pl = planes_pass(rv, p0, light, eta, n_planes, bugs)
-            lm = level_map_pass(tris, owner, r, albedo, pl["box"], Hc, Wc, bugs)
+            # shadows: every receiver occludes; otherwise receiver r's own triangles only
+            mine = slice(None) if lmk["shadows"] else owner == r
+            lm = level_map_pass(tris[mine], owner[mine], r, albedo, pl["box"], Hc, Wc, bugs)
             lm["plane_index"] = acceptance(lm["position"], lm["own"], pl, n_planes)
             if lmk["smart_slicing"]:
                 used = smart_slicing(lm["position"], lm["own"], lm["plane_index"], pl,
