@@ -138,8 +138,9 @@ class Method:
         ``skipped(scene) -> list of {stage, ran: False, why}`` for stages the
         scene does not need (said in ``meta.plan``).
     warm : callable or None
-        Compile the method's kernels on a tiny scene (once per process), so
-        that ``timings_ms`` measure run time, not JIT time.
+        ``warm(scene)``: compile the kernels this scene's plan needs on a tiny
+        copy of it (once per process and plan), so that ``timings_ms``
+        measure run time, not JIT time.
     check : callable or None
         ``check(scene)``: the method's preconditions on a loaded scene
         (e.g. the memory its buffers need), raising
@@ -391,7 +392,7 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
     active = [st for st in stages if not st.diagnostic or st.name in kept]
     last_reader = {u: st.name for st in active for u in st.after}
     if warm and method.warm is not None:
-        method.warm()
+        method.warm(scene)  # the kernels this scene's plan needs, on a tiny copy of it
     timings, plan, stats = {}, [], {}
     bufs, ran = {}, {}
     tic = time.perf_counter

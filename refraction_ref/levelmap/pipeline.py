@@ -57,7 +57,6 @@ __all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAU
 
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
-_warm = set()
 
 
 def default_scene(overrides=None):
@@ -230,20 +229,14 @@ def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=
     return out
 
 
-def warm_up():
-    """Compile (or load from Numba's cache) every kernel on a tiny scene, once per process."""
-    if "levelmap" in _warm:
-        return
-    _warm.add("levelmap")
-    base = {"camera": {"width": 8, "height": 8, "eye": [0, 2, 2], "target": [0, -1, 0]},
-            "objects": [],
-            "receivers": [{"mesh": "plane", "size": [1, 1], "transform": {"translate": [0, -0.5, 0]}}],
-            "water": {"size": [1, 1], "resolution": 4, "absorption": 0.1,
-                      "waves": [{"amplitude": 0.01, "wavelength": 0.5}]},
-            "lights": [{"type": "directional", "direction": [0.1, -1, 0]}],
-            "levelmap": {"planes": 3, "map_size": 8}}
-    for v in ("levelmap", "volumetric", "per_ray"):
-        render_levelmap(load_scene(base, {"levelmap.variant": v}), warm=False)
+def warm_up(scene=None):
+    """Compile (or load from Numba's cache) the kernels this scene's plan needs, on a tiny copy of it.
+
+    ``scene`` None warms the bundled ``levelmap_default.json``; see ``refraction_ref._warmup.warm``.
+    """
+    from .. import _warmup
+
+    _warmup.warm("levelmap", scene)
 
 
 # --------------------------------------------------------------------- stages
@@ -468,7 +461,7 @@ def _assemble(scene, bufs, stats):
 
 
 METHOD = register_method(Method(
-    "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble, warm=lambda: warm_up(),
+    "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble, warm=warm_up,
     results=("level_map.pairs", "casting", "image"),
     doc="Tipprasert (2006): water caustics by reference planes, position maps and a caustics map"))
 

@@ -197,31 +197,14 @@ def _run_voxelize(scene):
             "mesh": (geom.vertices, geom.faces)}
 
 
-def _warm():
-    """Compile (or load from numba's cache) every kernel on a tiny volume, once per process."""
-    if _warm.done:
-        return
-    _warm.done = True
-    from ..scene import load_scene
+def _warm(scene=None):
+    """Compile (or load from numba's cache) the kernels this scene's plan needs, on a tiny copy of it.
 
-    n = np.ones((8, 8, 8))
-    n[3:5, 3:5, 3:5] = 1.2
-    for integ in ("euler", "rk4"):
-        sc = load_scene({"camera": {"width": 4, "height": 4}, "objects": [],
-                         "volume": {"ior": n, "bounds": [[-1, -1, -1], [1, 1, 1]]},
-                         "volumetric": {"photons": 4, "integrator": integ, "phase_g": 0.3}})
-        render_volumetric(sc, warm=False)
-    for stepping in ("paper", "robust"):
-        sc = load_scene({"camera": {"width": 4, "height": 4},
-                         "objects": [{"mesh": "sphere", "fit": 1.0}],
-                         "lights": [{"type": "directional", "direction": [0, -1, 0]}],
-                         "receivers": [{"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, -0.6, 0]}}],
-                         "imagespace": {"caustic_map": 4},
-                         "volumetric": {"photons": 4, "resolution": 16, "padding": 2, "stepping": stepping}})
-        render_volumetric(sc, warm=False)
+    ``scene`` None warms the default scene; see ``refraction_ref._warmup.warm``.
+    """
+    from .. import _warmup
 
-
-_warm.done = False
+    _warmup.warm("volumetric", scene)
 
 
 # --------------------------------------------------------------------- the stage graph
@@ -562,7 +545,7 @@ def _assemble(scene, bufs, stats):
 
 
 METHOD = register_method(Method(
-    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=lambda: _warm(),
+    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=_warm,
     skipped=_skipped,
     results=("voxelize.ior", "voxelize.bounds", "voxelize.triangles", "march.minfo", "smooth.radiance",
              "smooth.direction", "view", "caustics"),

@@ -1,0 +1,73 @@
+"""The first run (refraction_ref._warmup): the warm-up compiles the scene's own plan, the cache is checked
+kernel by kernel, and compilation is shown while it happens."""
+
+from __future__ import annotations
+
+import io
+
+import numba
+import pytest
+from numba.core.registry import CPUDispatcher
+
+import refraction_ref as rr
+from refraction_ref import _warmup
+from refraction_ref.scene import load_scene
+
+POOL = "refraction_ref/data/levelmap_default.json"
+
+
+@numba.njit(cache=True)
+def _never_called(x):  # its cache index is never written: a kernel missing from a part-filled cache
+    return x + 1
+
+
+def test_every_listed_kernel_is_a_kernel_of_the_package():
+    for method in ("imagespace", "exact", "levelmap", "volumetric"):
+        names = _warmup.expected_kernels(method)
+        assert names, f"data/kernels.json lists no kernel for {method}"
+        for q in names:
+            assert isinstance(_warmup._dispatcher(q), CPUDispatcher), f"{method}: {q} is not a Numba kernel"
+
+
+def test_the_cache_is_checked_kernel_by_kernel(monkeypatch):
+    rr.render({"camera": {"width": 16, "height": 16}})  # the default plan: its kernels are now on disk
+    assert _warmup.kernels_cached("imagespace")
+    names = _warmup.expected_kernels("imagespace") + [f"{__name__}._never_called"]
+    monkeypatch.setattr(_warmup, "expected_kernels", lambda method: names)
+    assert not _warmup.kernels_cached("imagespace")  # one kernel missing: not cached, whatever the others
+
+
+@pytest.mark.parametrize("method,src,block", [("imagespace", None, "imagespace"),
+                                              ("levelmap", POOL, "levelmap"),
+                                              ("volumetric", None, "volumetric")])
+def test_the_warm_up_renders_the_scene_s_own_knobs_small(method, src, block):
+    knobs = {"imagespace": {"imagespace.peeling": "lut", "imagespace.tir": True},
+             "levelmap": {"levelmap.variant": "per_ray"},
+             "volumetric": {"volumetric.integrator": "rk4"}}[method]
+    scene = load_scene(src, knobs)
+    tiny = _warmup.tiny_scene(method, scene)
+    assert tiny.data["camera"]["width"] * tiny.data["camera"]["height"] <= 256
+    for k, v in knobs.items():  # the variant the scene asks for, not every variant
+        b, key = k.split(".")
+        assert tiny.data[b][key] == v
+    assert tiny.data["objects"] == scene.data["objects"] and tiny.data["environment"] == scene.data["environment"]
+    same_plan = load_scene(scene, {"camera.width": 100})
+    assert _warmup._key(method, same_plan) == _warmup._key(method, scene)  # a size does not warm again
+    assert _warmup._key(method, load_scene(src)) != _warmup._key(method, scene)  # another variant does
+
+
+def test_compilation_is_reported_once_each_way_off_a_terminal():
+    @numba.njit
+    def fresh(x):
+        return x * 2
+
+    out = io.StringIO()
+    with _warmup.compile_report("imagespace", stream=out):
+        assert fresh(3) == 6
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 2 and "compiling the imagespace kernels" in lines[0]
+    assert lines[1].startswith("refraction-ref: compiled 1 imagespace kernels in ")
+    out = io.StringIO()
+    with _warmup.compile_report("imagespace", stream=out):
+        assert fresh(4) == 8  # compiled already: nothing to say
+    assert out.getvalue() == ""
