@@ -316,4 +316,118 @@ def _run(quick, out, log):
               "half the steps of a march of one voxel per step everywhere, counted as each photon's chord "
               "length in voxels (a lower bound for the uniform march)."),
         timing=False))
-    return Report(paper=PAPER, tables=[table1, table2], claims=claims, seconds=time.perf_counter() - t_start)
+    log("Sun et al. 2008: caustic quality against the exact reference (blur, tolerance, resolution) ...")
+    table3, qclaims = quality_study(quick, log)
+    claims += qclaims
+    return Report(paper=PAPER, tables=[table1, table2, table3], claims=claims,
+                  seconds=time.perf_counter() - t_start)
+
+
+QUOTE_BLUR = ("we saw a small improvement as the blur kernel increased in size from 5 to 7 to 9, but no substantial "
+              "change as the kernel size increased to 11.")
+QUOTE_TOL = ("A slight increase in the tolerance may cause many octree nodes to be merged, resulting in much larger "
+             "step sizes and dramatically reduced rendering quality.")
+QUOTE_RES = ("The amount of video memory on current graphics hardware limits our approach to volume resolutions of "
+             "128 × 128 × 128 . As a result, we cannot render very complex scenes, and surface caustics and shadows "
+             "become blurred.")
+
+
+def quality_scene(N, M, cmap):
+    """A glass sphere (IOR 1.5, radius 0.8) over a floor in the cube [-1, 1]^3, no medium (the exact reference has
+    none), a slanted directional light; ``N``^3 voxels, ``M``^2 photons, ``cmap``^2 caustic map."""
+    return {"camera": {"width": 8, "height": 8},
+            "objects": [{"mesh": "sphere", "fit": 0.8, "material": {"ior": 1.5}}],
+            "lights": [{"type": "directional", "direction": [0.2, -1.0, -0.1]}],
+            "receivers": [{"mesh": "plane", "size": [1.9, 1.9], "transform": {"translate": [0.0, -0.9, 0.0]}}],
+            "imagespace": {"caustic_map": cmap}, "exact": {"photons": 1024},
+            "volumetric": {"resolution": N, "photons": M, "scattering": 0.0, "bounds": [[-1, -1, -1], [1, 1, 1]]}}
+
+
+def quality_study(quick, log=print):
+    """§4.1's blur kernels, §5.3's tolerance and §7's resolution, judged on the caustic map against the exact reference.
+
+    Quality claims are judged by error against the exact caustics reference
+    (:mod:`refraction_ref.exact_render`, 1024^2 jittered photons), never by
+    time: the relative L1 of the receiver's caustic map, both blurred by one
+    texel. Quick: 32^3 and 64^3, 128^2 photons, a 64^2 map; full: 128^3 and
+    256^3, 512^2 photons, a 128^2 map. Not timed: rendered on every Numba thread.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1, §5.3, §7.
+    """
+    import numba
+
+    import refraction_ref as rr
+
+    from ..levelmap.metrics import relative_l1
+
+    N, M, cmap = (32, 128, 64) if quick else (128, 512, 128)
+    sc = quality_scene(N, M, cmap)
+    before = numba.get_num_threads()
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    try:
+        ex = rr.render(sc, method="exact").arrays["caustic_map_0"]
+        runs = [("paper defaults (blur 9, eps 0.005, eps' 0.02)", {}),
+                ("blur 5", {"volumetric.blur": 5}), ("blur 7", {"volumetric.blur": 7}),
+                ("blur 11", {"volumetric.blur": 11}),
+                ("one tolerance eps = eps' = 0.005", {"volumetric.eps": 0.005, "volumetric.eps2": 0.005}),
+                ("one tolerance eps = eps' = 0.02 (4x)", {"volumetric.eps": 0.02, "volumetric.eps2": 0.02}),
+                ("one tolerance eps = eps' = 0.08 (16x)", {"volumetric.eps": 0.08, "volumetric.eps2": 0.08}),
+                (f"resolution {2 * N}^3", {"volumetric.resolution": 2 * N})]
+        res = {}
+        for name, o in runs:
+            r = rr.render(sc, method="volumetric", overrides=o)
+            res[name] = (relative_l1(r.arrays["caustic_map_0"], ex, blur=1.0), int(r.meta["stats"]["photon_steps"]))
+            log(f"  {name}: rel L1 {res[name][0]:.4f}, {res[name][1]:,} steps")
+    finally:
+        numba.set_num_threads(before)
+    e = {k: v[0] for k, v in res.items()}
+    d = runs[0][0]
+    table = Table(
+        key="sun_quality", title="Caustic accuracy against the exact reference: blur kernel, tolerance, resolution",
+        columns=["setting", "volume", "rel L1 vs exact", "photon steps"],
+        rows=[[k, f"{2 * N}^3" if k.startswith("resolution") else f"{N}^3", round(v[0], 4), v[1]]
+              for k, v in res.items()],
+        note=(f"A glass sphere (IOR 1.5, radius 0.8) over a floor, no participating medium (the exact reference "
+              f"has none), light (0.2, -1, -0.1); {N}^3 volume, {M}^2 photons, 4^3 supersampling, a {cmap}^2 caustic "
+              "map against the exact reference's (1024^2 jittered photons); rel L1 of both maps blurred by one "
+              "texel. The paper chose its blur on a sphere's refracted background pattern at 128^3 and its "
+              "tolerance and resolution by eye; the caustic map against an exact reference is our stand-in."))
+    claims = []
+    b5, b7, b9, b11 = e["blur 5"], e["blur 7"], e[d], e["blur 11"]
+    ok = b9 <= b7 <= b5 and abs(b11 - b9) <= 0.1 * b9
+    claims.append(Claim(
+        PAPER, "§4.1", QUOTE_BLUR, HELD if ok else NOT_HELD,
+        f"rel L1 vs exact: blur 5 {b5:.3f}, 7 {b7:.3f}, 9 {b9:.3f}, 11 {b11:.3f} ({N}^3)",
+        "Larger kernels widen the boundary band up to 9 voxels with a gain each time, and 11 adds nothing."
+        if ok else "At this resolution the error does not fall from 5 to 7 to 9 and level off at 11: a wider "
+        "kernel spreads the sphere's boundary over more of a coarse volume and moves the caustic.",
+        rule=f"The caustic of the quality scene ({N}^3, 4^3 supersampling) against the exact reference: held if the "
+             "rel L1 does not rise from blur 5 to 7 to 9 and blur 11 changes it by at most 10% of blur 9's."))
+    t5, t20, t80 = (e["one tolerance eps = eps' = 0.005"], e["one tolerance eps = eps' = 0.02 (4x)"],
+                    e["one tolerance eps = eps' = 0.08 (16x)"])
+    s5, s20 = res["one tolerance eps = eps' = 0.005"][1], res["one tolerance eps = eps' = 0.02 (4x)"][1]
+    ok = t20 >= 1.5 * t5
+    claims.append(Claim(
+        PAPER, "§5.3", QUOTE_TOL, HELD if ok else NOT_HELD,
+        f"one tolerance (eps' = eps, the octree before the paper's second tolerance): rel L1 {t5:.3f} at 0.005, "
+        f"{t20:.3f} at 0.02 ({s20 / max(s5, 1):.2f}x the steps), {t80:.3f} at 0.08; paper defaults {b9:.3f}",
+        "Raising the tolerance merged the nodes around the boundary and the larger steps moved the caustic."
+        if ok else "On a constant-index sphere the index varies by far more than 0.08 across its blurred boundary, "
+        "so a higher tolerance merges few nodes there and the caustic barely moves; the paper's case (smoothly "
+        "varying volumes) is not this scene's.",
+        rule=f"The quality scene ({N}^3) with one tolerance (eps' = eps): held if raising eps 4x (0.005 to 0.02) at "
+             "least multiplies the caustic's rel L1 against the exact reference by 1.5."))
+    r2 = e[f"resolution {2 * N}^3"]
+    ok = r2 <= 0.8 * b9
+    claims.append(Claim(
+        PAPER, "§7", QUOTE_RES, HELD if ok else NOT_HELD,
+        f"rel L1 vs exact {b9:.3f} at {N}^3, {r2:.3f} at {2 * N}^3 (no medium)",
+        "The voxelized, blurred boundary spreads the surface caustic over several voxels; a finer volume narrows "
+        "the band and the caustic sharpens towards the exact one." if ok else
+        "Doubling the resolution did not bring the caustic much closer to the exact one here.",
+        rule=f"The quality scene without a medium: held if doubling the volume ({N}^3 to {2 * N}^3, the paper's "
+             "128^3 limit and twice it in the full run) lowers the caustic's rel L1 against the exact reference by "
+             "at least 20% (the blur at the lower resolution is error the finer volume removes)."))
+    return table, claims
