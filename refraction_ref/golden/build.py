@@ -290,18 +290,11 @@ def build(folder, only=None, progress=False, log=print, scheduler=None, workers=
             done(case["name"], _build_case(case, os.path.join(folder, case["name"]), progress))
         _mark_complete(folder, manifest)
         return manifest
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
-    own = client is None
-    cluster = None
-    if own:
-        if scheduler:
-            client = Client(scheduler)
-        else:
-            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            client = Client(cluster)
-    try:
+    from ..cluster import dask_client
+
+    with dask_client(scheduler, workers, 1, client) as client:  # closed quietly: no shutdown noise
         futures = [client.submit(_case_task, case, int(threads), pure=False) for case in cases]
         for fu in as_completed(futures):
             name, entry, files = fu.result()
@@ -312,11 +305,6 @@ def build(folder, only=None, progress=False, log=print, scheduler=None, workers=
                     with open(tmp, "wb") as f:
                         f.write(data)
             done(name, entry)
-    finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
     _mark_complete(folder, manifest)
     return manifest
 
