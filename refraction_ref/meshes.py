@@ -29,7 +29,7 @@ import numba as nb
 import numpy as np
 
 from .scene import SceneError
-from .vec3 import affine, dot
+from .vec3 import affine, dot, readonly
 
 __all__ = ["BUILTIN_MESHES", "Geometry", "corner_normals", "crease_edge_angles", "eye_inside", "file_vertex_normals",
            "load_mesh", "object_mesh", "scene_geometry", "rotation_matrix", "sine_displacement"]
@@ -408,7 +408,7 @@ def bounds(v):
     """Axis-aligned bounds (lo, hi) of points (N, 3), N >= 1 (NaN coordinates are skipped)."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
-    _bounds_kernel(np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 3), lo, hi)
+    _bounds_kernel(readonly(np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 3)), lo, hi)  # one signature
     return lo, hi
 
 

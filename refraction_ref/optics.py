@@ -28,6 +28,8 @@ import math
 import numba as nb
 import numpy as np
 
+from .vec3 import readonly
+
 __all__ = [
     "refract3",
     "reflect3",
@@ -158,7 +160,7 @@ def refract(d, n, eta):
     ee = np.ascontiguousarray(np.broadcast_to(np.asarray(eta, dtype=np.float64), shape)).reshape(-1)
     out = np.empty_like(dd)
     tir = np.empty(dd.shape[0], dtype=np.bool_)
-    _refract_many(dd, nn, ee, out, tir)
+    _refract_many(readonly(dd), readonly(nn), readonly(ee), out, tir)  # one signature (vec3.readonly)
     return out.reshape(d.shape), tir.reshape(shape)
 
 
@@ -175,7 +177,7 @@ def fresnel(cos_i, eta):
     c = np.ascontiguousarray(cos_i).reshape(-1)
     e = np.ascontiguousarray(np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)).reshape(-1)
     out = np.empty_like(c)
-    _fresnel_many(c, e, out)
+    _fresnel_many(readonly(c), readonly(e), out)  # one signature (vec3.readonly)
     return out.reshape(cos_i.shape)
 
 

@@ -22,7 +22,19 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["affine", "dot"]
+__all__ = ["affine", "dot", "readonly"]
+
+
+def readonly(a):
+    """A read-only view of ``a`` (no copy), for a kernel's input arrays.
+
+    Numba compiles one version per argument type, and a read-only array (the
+    mesh cache freezes its arrays) is another type than a writable one: passing
+    every input as read-only gives each kernel one signature, not two.
+    """
+    a = a.view()
+    a.flags.writeable = False
+    return a
 
 
 @nb.njit(cache=True, parallel=True)
@@ -54,7 +66,7 @@ def affine(p, m, t=None):
                                                                       dtype=np.float64)
     flat = np.ascontiguousarray(p).reshape(-1, 3)
     out = np.empty((len(flat), m.shape[1]))
-    _affine_kernel(flat, m, t, out)
+    _affine_kernel(readonly(flat), readonly(m), readonly(t), out)  # one signature (see readonly)
     return out.reshape(p.shape[:-1] + (m.shape[1],))
 
 
@@ -71,5 +83,5 @@ def dot(p, v):
         raise ValueError(f"dot: p (..., 3) expected, got {p.shape}")
     flat = np.ascontiguousarray(p).reshape(-1, 3)
     out = np.empty(len(flat))
-    _dot_kernel(flat, v, out)
+    _dot_kernel(readonly(flat), readonly(v), out)
     return out.reshape(p.shape[:-1])

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 
 import numba
+import numpy as np
 import pytest
 from numba.core.registry import CPUDispatcher
 
@@ -71,3 +72,21 @@ def test_compilation_is_reported_once_each_way_off_a_terminal():
     with _warmup.compile_report("imagespace", stream=out):
         assert fresh(4) == 8  # compiled already: nothing to say
     assert out.getvalue() == ""
+
+
+def test_read_only_and_writable_inputs_share_one_signature():
+    from refraction_ref import meshes, optics, vec3
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(40, 3))
+    frozen = p.copy()
+    frozen.flags.writeable = False  # as the mesh cache hands out its arrays
+    m, t = rng.normal(size=(3, 3)), rng.normal(size=3)
+    d = p / np.linalg.norm(p, axis=1, keepdims=True)
+    for f, args in ((vec3.affine, (m, t)), (vec3.dot, (t,)), (meshes.bounds, ()),
+                    (optics.refract, (d[::-1].copy(), 0.8))):
+        a, b = f(p, *args), f(frozen, *args)
+        for x, y in zip(a, b) if isinstance(a, tuple) else ((a, b),):
+            assert np.array_equal(x, y)
+    for k in (vec3._affine_kernel, vec3._dot_kernel, meshes._bounds_kernel, optics._refract_many):
+        assert len(k.signatures) == 1, f"{k.py_func.__name__}: {k.signatures}"
