@@ -106,3 +106,24 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv", "chaudhari_tables.png", "claims.csv",
         "tables.md"]
+
+
+def test_component_box_reads_eq_4_3_along_each_axis():
+    """The eq. 4-3 study's component-wise box: a receiver symmetric about its origin gets the tight box's extents,
+    while the default full-norm reading takes the farthest vertices' whole lengths (larger in every axis)."""
+    from refraction_ref.levelmap.planes import reference_box
+    from refraction_ref.tables.tipprasert import component_box
+
+    floor = np.array([[x, -1.0, z] for x in (-2.0, 2.0) for z in (-2.0, 2.0)])
+    T0 = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])
+    origin = np.array([0.0, -1.0, 0.0])
+    comp = component_box(floor, T0, 64, "thesis", origin)
+    tight = reference_box(floor, T0, 64, "tight")
+    full = reference_box(floor, T0, 64, "thesis", origin)
+    assert np.allclose([comp.w, comp.h, comp.d], [tight.w, tight.h, tight.d])
+    assert np.allclose(comp.center, origin) and np.allclose(comp.V, full.V)
+    assert all(f > c + 0.1 for f, c in zip((full.w, full.h, full.d), (comp.w, comp.h, comp.d)))
+    assert np.isclose(full.h, 2 * np.sqrt(8.0))  # |P| of a corner: 2 sqrt(2^2 + 2^2) = 5.66
+    # other placements pass through unchanged
+    same = component_box(floor, T0, 64, "tight")
+    assert all(np.array_equal(x, y) for x, y in zip(same, tight))
