@@ -118,25 +118,25 @@ def test_every_knob_is_read_by_a_stage():
             assert f"{name}.{k}" in read or name in read, f"no stage reads '{name}.{k}'"
 
 
-@pytest.mark.parametrize("method,base,blocks", CASES, ids=[f"{m}-{'water' if 'water' in b else 'mesh'}"
-                                                            for m, b, _ in CASES])
-def test_every_knob_reruns_its_readers_and_matches_a_fresh_render(method, base, blocks):
+#: one test per (method, scene, mutated key): each prints its own progress line, none runs for minutes
+MUTATION_CASES = [(method, base, key, value) for method, base, blocks in CASES
+                  for key, value in _mutations(base, blocks, method)]
+
+
+@pytest.mark.parametrize("method,base,key,value", MUTATION_CASES,
+                         ids=[f"{m}-{'water' if 'water' in b else 'mesh'}-{k}" for m, b, k, _ in MUTATION_CASES])
+def test_every_knob_reruns_its_readers_and_matches_a_fresh_render(method, base, key, value):
     s = rr.Session(base)
     s.render(method)
-    for key, value in _mutations(base, blocks, method):
-        before = s.scene
-        s.update({key: value})
-        res = s.render(method)
-        ran = {p["stage"] for p in res.meta["plan"] if p["ran"]}
-        readers = {st.name for st in get_method(method).stages(s.scene) if _reads_key(st, key)
-                   and not st.diagnostic}
-        if readers:
-            assert readers <= ran, f"{method}: after changing {key}, {sorted(readers - ran)} did not re-run"
-        else:  # a key this method does not read (the exact water reference has no environment)
-            assert not ran, f"{method}: {key} is read by no stage, yet {sorted(ran)} re-ran"
-        _same(res, rr.render(s.scene, method=method))
-        s.scene = before  # back to the base, so each mutation is tested alone
-        s.render(method)
+    s.update({key: value})
+    res = s.render(method)
+    ran = {p["stage"] for p in res.meta["plan"] if p["ran"]}
+    readers = {st.name for st in get_method(method).stages(s.scene) if _reads_key(st, key) and not st.diagnostic}
+    if readers:
+        assert readers <= ran, f"{method}: after changing {key}, {sorted(readers - ran)} did not re-run"
+    else:  # a key this method does not read (the exact water reference has no environment)
+        assert not ran, f"{method}: {key} is read by no stage, yet {sorted(ran)} re-ran"
+    _same(res, rr.render(s.scene, method=method))
 
 
 def test_only_trace_and_shade_rerun_after_iterations():
