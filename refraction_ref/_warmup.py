@@ -35,6 +35,7 @@ _TINY = {
     "imagespace": {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "imagespace.caustic_map": 8},
     "levelmap": {"camera.width": 8, "camera.height": 8, "levelmap.map_size": 8, "levelmap.exact_samples": 16,
                  "imagespace.caustic_map": 8},
+    "exact": {"camera.width": 16, "camera.height": 16, "exact.photons": 8, "imagespace.caustic_map": 8},
     "volumetric": {"camera.width": 4, "camera.height": 4, "volumetric.photons": 4, "volumetric.resolution": 16,
                    "volumetric.padding": 2, "imagespace.photons": 8, "imagespace.caustic_map": 8},
 }
@@ -45,8 +46,8 @@ def tiny_scene(method, scene):
     from .scene import load_scene
 
     over = dict(_TINY.get(method, {}))
-    if method == "levelmap" and scene.data.get("water") is not None:
-        over["water.resolution"] = 4
+    if method in ("levelmap", "exact") and scene.data.get("water") is not None:
+        over.update({"water.resolution": 4, "levelmap.map_size": 8, "levelmap.exact_samples": 16})
     return load_scene(scene, over)
 
 

@@ -205,6 +205,18 @@ def _cmd_tables(a):
     return 0
 
 
+def _cmd_warmup(a):
+    from ._warmup import compile_report, kernels_cached, warm
+
+    for m in a.method or ["imagespace", "exact", "levelmap", "volumetric"]:
+        t0, before = time.perf_counter(), kernels_cached(m)
+        with compile_report(m):  # a bar of kernels on terminals, a line each way in logs
+            warm(m)
+        print(f"{m}: kernels {'already cached' if before else 'compiled and cached'} "
+              f"({time.perf_counter() - t0:.1f} s)", flush=True)
+    return 0
+
+
 def main(argv=None):
     p = _Parser(prog="refraction-ref",
                 description="CPU reference renderer for refraction through transparent objects.")
@@ -296,6 +308,11 @@ def main(argv=None):
     t.add_argument("--only", metavar="PAPER,...", help="chaudhari, sun, tipprasert (default: all)")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
     t.set_defaults(fn=_cmd_tables)
+    u = sub.add_parser("warmup", help="compile every method's kernels for its default scene now (first run only; "
+                                      "later runs load them from Numba's cache)")
+    u.add_argument("--method", action="append", choices=list(method_names()),
+                   help="only this method (repeatable; default: all four)")
+    u.set_defaults(fn=_cmd_warmup)
     a = p.parse_args(argv)
     from .compare import CompareError
     from .files import NotNpzError, OutputError

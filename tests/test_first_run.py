@@ -90,3 +90,13 @@ def test_read_only_and_writable_inputs_share_one_signature():
             assert np.array_equal(x, y)
     for k in (vec3._affine_kernel, vec3._dot_kernel, meshes._bounds_kernel, optics._refract_many):
         assert len(k.signatures) == 1, f"{k.py_func.__name__}: {k.signatures}"
+
+
+def test_warmup_verb_compiles_or_loads_and_says_which(capsys):
+    from refraction_ref import cli
+
+    assert cli.main(["warmup", "--method", "imagespace"]) == 0
+    assert cli.main(["warmup", "--method", "imagespace"]) == 0
+    first, second = capsys.readouterr().out.splitlines()
+    assert first.startswith("imagespace: kernels ") and "cached (" in first
+    assert second.startswith("imagespace: kernels already cached (")  # the first call left them all on disk
