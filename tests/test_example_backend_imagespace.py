@@ -41,6 +41,7 @@ EXPOSED = {
     "floor_slice": ("voxelize", CONVEX),
     "y_flip": ("rays", set()),
     "half_pixel": ("rays", set()),
+    "texture_y_flip": ("trace", set()),
     "ior_off": ("trace", set()),
     "cull_back": ("minmax", set()),
     "outward_normals": ("normals", set()),

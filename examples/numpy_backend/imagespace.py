@@ -42,6 +42,7 @@ BUGS = {
     "floor_slice": "voxelize: floor((d - zlo)/(zhi - zlo) (S - 1)) instead of rounding to the nearest slice",
     "y_flip": "rays: row 0 taken as the bottom of the image (y = (2 (i + 0.5)/H - 1) sy)",
     "half_pixel": "rays: pixel corners instead of centres (j, i instead of j + 0.5, i + 0.5)",
+    "texture_y_flip": "trace: the layer textures read with v flipped (a bottom-left texture origin), row i reads row H - 1 - i",
     "ior_off": "trace: the object's index 0.5 % too large (1.005 ior)",
     "cull_back": "minmax/voxelize: back faces culled by the rasterizer (GPU default state)",
     "outward_normals": "normals: back layers' normals flipped to point out of the object (n_z < 0)",
@@ -512,6 +513,9 @@ def pass_trace(c, k, v_view, ray_dir, ldi, total, zmax, zlo, zhi, bounds_hi, bou
         thr = (zhi - zlo) * (k.exit_threshold / (S - 1))
     thr = np.where(np.isfinite(thr), thr, 0.0)
     tot = total.astype(np.int64)
+    if "texture_y_flip" in bugs:                       # every texture the trace reads, read upside down
+        ldi64, nrm, thr, tot, zmax = (a[..., ::-1, :, :] if a.ndim == 4 else a[..., ::-1, :]
+                                      for a in (ldi64, nrm, thr, tot, zmax))
     bhi = np.concatenate([np.asarray(bounds_hi, np.float64), [-np.inf]])   # index L: no such layer
     blo = np.concatenate([np.asarray(bounds_lo, np.float64), [np.inf]])
 
