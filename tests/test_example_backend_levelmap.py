@@ -15,7 +15,7 @@ import sys
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CASES = ["lm_flat", "lm_point_light", "lm_slanted_sun", "lm_steep"]
+CASES = ["lm_all_planes", "lm_flat", "lm_point_light", "lm_slanted_sun", "lm_steep", "lm_steep_slanted"]
 
 # bug -> {case: the earliest failing stage `check` must name, or None where the
 # case cannot expose the bug (the backend then passes, which is asserted too)}.
@@ -27,26 +27,33 @@ EXPECTED = {
     # is, and the flux does not depend on it, so nothing changes. lm_steep: the
     # sun is vertical, so T0 and the box are right, but the wavy vertices
     # refract wrongly (`caustics`). The slanted sun and the point light turn T0.
+    # lm_steep_slanted (steep waves, slanted sun) shows it in `planes`;
+    # lm_all_planes (steep waves, vertical sun) like lm_steep.
     "inverted_eta": {"lm_flat": None, "lm_point_light": "planes",
-                     "lm_slanted_sun": "planes", "lm_steep": "caustics"},
+                     "lm_slanted_sun": "planes", "lm_steep": "caustics",
+                     "lm_steep_slanted": "planes", "lm_all_planes": "caustics"},
     # lm_flat: on flat water both splits give beams of the same flux per area
     # tiling the same prism, so the map is the same; the three wavy cases differ.
     "other_diagonal": {"lm_flat": None, "lm_point_light": "caustics",
-                       "lm_slanted_sun": "caustics", "lm_steep": "caustics"},
+                       "lm_slanted_sun": "caustics", "lm_steep": "caustics",
+                       "lm_steep_slanted": "caustics", "lm_all_planes": "caustics"},
     # the unsnapped rasterizer moves position-map depths on every receiver.
     "no_snap": dict.fromkeys(CASES, "level_map"),
     # only beams focused below one texel feel the floor: flat water does not
     # focus, and the point light's gentle waves do not focus that far on the
     # receivers; the slanted sun's and the steep waves' caustics do.
     "no_ad_floor": {"lm_flat": None, "lm_point_light": None,
-                    "lm_slanted_sun": "caustics", "lm_steep": "caustics"},
+                    "lm_slanted_sun": "caustics", "lm_steep": "caustics",
+                    "lm_steep_slanted": "caustics", "lm_all_planes": "caustics"},
     # the sphere receiver's normal is never the box axis, in every case.
     "receiver_cos_axis": dict.fromkeys(CASES, "caustics"),
 }
-# Not in EXPECTED: the backend's `two_comparisons` bug (plane acceptance by two
-# comparisons). With 24 planes a floor at zeta = 0 passes both comparisons of
-# planes 11 and 12, but smart slicing draws only plane 12 there in every
-# catalogue case, so no case can expose it.
+# Plane acceptance by two inclusive comparisons: with 24 planes and a vertical
+# sun the floor lies on the boundary between planes 11 and 12 and passes both;
+# smart slicing draws only plane 12 there, so only lm_all_planes (smart_slicing
+# off) draws the floor twice and shows it.
+EXPECTED["two_comparisons"] = {c: None for c in CASES}
+EXPECTED["two_comparisons"]["lm_all_planes"] = "caustics"
 
 
 def _load_backend():
