@@ -331,7 +331,7 @@ def pass_reduce(c, k, ldi, zmin, zmax, bugs=()):
     blk = a.reshape(L, hb, f, wb, f)
     ok = np.isfinite(blk)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (np.where(ok, blk, 0.0).sum(axis=(2, 4)) / ok.sum(axis=(2, 4))).reshape(L, -1)
+        mean = (np.where(ok, blk, 0.0).sum(axis=(2, 4)) / ok.sum(axis=(2, 4))).reshape(L, hb * wb)
     hi = np.where(np.isnan(mean), -np.inf, mean).max(axis=1, initial=-np.inf)
     lo = np.where(np.isnan(mean), np.inf, mean).min(axis=1, initial=np.inf)
     if k.bounds == "mip" and "no_margin" not in bugs:
