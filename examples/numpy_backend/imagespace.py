@@ -172,9 +172,8 @@ def _clip_near(c, V, F):
     near = c.near
     T = V[F]                                          # (F, 3, 3) view space
     keep = (-T[..., 2] - near) >= 0
-    polys = [[] for _ in range(4)]                    # up to 4 output vertices per triangle
     cnt = np.zeros(len(F), np.int64)
-    out = np.full((len(F), 4, 3), np.nan)
+    out = np.full((len(F), 4, 3), np.nan)             # up to 4 output vertices per triangle
     for e in range(3):
         a, b = T[:, e], T[:, (e + 1) % 3]
         ka, kb = keep[:, e], keep[:, (e + 1) % 3]
@@ -190,7 +189,6 @@ def _clip_near(c, V, F):
         pt[:, 2] = -near
         out[rows, cnt[rows]] = pt
         cnt[rows] += 1
-    del polys
     tris = []
     for k in (1, 2):                                  # fan from the first vertex
         rows = np.nonzero(cnt >= k + 2)[0]
@@ -548,7 +546,6 @@ def pass_trace(c, k, v_view, ray_dir, ldi, total, zmax, zlo, zhi, bounds_hi, bou
     events = np.zeros(len(pix), np.int64)
     nint = np.zeros(len(pix), np.int64)
     plen = np.zeros(len(pix))
-    state = None
 
     def finish(mask, code, pos=None, dirv=None, last=None):
         idx = pix[mask]
@@ -642,17 +639,15 @@ def pass_trace(c, k, v_view, ray_dir, ldi, total, zmax, zlo, zhi, bounds_hi, bou
         rq, cq = screen(c, P)
         dq = _sample(c, ldi64, t, rq, cq, bil)
         m = ~np.isfinite(dq)
-        nint_keep = nint
         finish(m & outside, EXITED, p, v, v)
         finish(m & ~outside, LOST, last=v)
         keep = ~m
         pix, v, p, t, g, fwd = pix[keep], v[keep], p[keep], t[keep], g[keep], fwd[keep]
-        events, nint, plen = events[keep], nint_keep[keep], plen[keep]
+        events, nint, plen = events[keep], nint[keep], plen[keep]
         rq, cq, dq = rq[keep], cq[keep], dq[keep]
         x, y, z = unproject(c, cq, rq, dq)             # R_n: the line of sight through P_n at the layer
         q = np.stack([x, y, z], -1)
         ti, tj = np.floor(rq).astype(np.int64), np.floor(cq).astype(np.int64)
-    del state
 
     if "path_length_ior" in bugs:
         plen_out = plen_out * ior
