@@ -131,8 +131,8 @@ def _cmd_crosscheck(a):
 
     parts = tuple(x for x in a.parts.split(",") if x)
     res = run(a.out, only=a.only, parts=parts, workers=a.workers, scheduler=a.scheduler,
-              log=(lambda m: None) if a.quiet else print)
-    print(f"{len(res['cases'])} cases; wrote {os.path.join(a.out, 'crosscheck.md')}")
+              log=(lambda m: None) if a.quiet else print, report=a.report)
+    print(f"{len(res['cases'])} cases; wrote {a.report or os.path.join(a.out, 'crosscheck.md')}")
     return 0 if "**FAIL**" not in report_markdown(res).split("\n## ")[0] else 1
 
 
@@ -266,7 +266,9 @@ def main(argv=None):
     x = sub.add_parser("crosscheck", help="the exact references against Mitsuba 3, per golden case (Markdown report)")
     x.add_argument("--out", default="out/crosscheck", help="folder for crosscheck.md, crosscheck.json, figures")
     x.add_argument("--only", metavar="NAME,...", help="only these golden cases")
-    x.add_argument("--parts", default="paths,images", help="paths, images (default both)")
+    x.add_argument("--parts", default="paths,images,caustics", help="paths, images, caustics (default all)")
+    x.add_argument("--report", metavar="FILE.md", help="write the Markdown report here (default OUT/crosscheck.md; "
+                                                     "figure links relative to it)")
     x.add_argument("--workers", type=int, metavar="N", help="run the cases on a LocalCluster of N worker processes")
     x.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the cases on this Dask cluster")
     x.add_argument("--quiet", action="store_true", help="no progress lines")

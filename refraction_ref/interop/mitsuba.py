@@ -177,9 +177,15 @@ def _bsdf(kind, ior, outside_ior):
     raise ValueError(f"mitsuba export: bsdf must be 'dielectric' or 'refract', got {kind!r}")
 
 
+#: the smallest ``sigma_t`` a medium channel is exported with: ``volpath`` samples a channel's free
+#: flight by its majorant, and a channel of zero gives 0 / 0 (NaN pixels); 1e-6 per unit length moves a
+#: transmittance by 1e-6 relative over a path of length one
+SIGMA_T_MIN = 1e-6
+
+
 def _medium(sigma_t):
     return {"type": "homogeneous", "albedo": {"type": "rgb", "value": [0.0, 0.0, 0.0]},
-            "sigma_t": {"type": "rgb", "value": [float(s) for s in sigma_t]}, "scale": 1.0}
+            "sigma_t": {"type": "rgb", "value": [max(float(s), SIGMA_T_MIN) for s in sigma_t]}, "scale": 1.0}
 
 
 def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resolution=None,
