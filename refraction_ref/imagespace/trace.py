@@ -93,7 +93,7 @@ def _screen(x, y, z, W, H, sx, sy, ortho=False):
     return row, col
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)  # a call, not inlined (compiles once, not per call site)
 def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho, filt):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
     r, c = _screen(x, y, z, W, H, sx, sy, ortho)
@@ -202,7 +202,7 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 vx = dirs[i, j, 0]
                 vy = dirs[i, j, 1]
                 vz = dirs[i, j, 2]
-            d0 = layer_depth(ldi, 0, i, j, lut) if L > 0 else np.inf
+            d0 = layer_depth(ldi, np.int64(0), i, j, lut) if L > 0 else np.inf  # int64: one signature
             if not math.isfinite(d0):
                 status[i, j] = MISSED
                 interfaces[i, j] = 0
@@ -221,7 +221,7 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
                 qx, qy, qz = vx * s, vy * s, vz * s
             px, py, pz = qx, qy, qz
-            t = 0
+            t = np.int64(0)  # not a literal 0: callees compile for int64 only
             ti, tj = i, j
             rq, cq = i + 0.5, j + 0.5  # screen position of the pending hit (the normal is read there)
             g = -1

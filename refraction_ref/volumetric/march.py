@@ -110,7 +110,7 @@ def _lerp_axis(u, na):
     return c, u - c
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)  # a call, not inlined: its callers would compile its body at every call site
 def sample_field(field, lo, ih, x, y, z):
     """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume)."""
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
@@ -134,7 +134,7 @@ def sample_field(field, lo, ih, x, y, z):
     return a0, a1, a2, a3
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)  # a call, not inlined: its callers would compile its body at every call site
 def advance(field, lo, ih, integ, p, v, g, ds):
     """One step of eqs. 4-5 (``integ`` 0) or of RK4 on eqs. 2-3 (``integ`` 1).
 
@@ -655,7 +655,8 @@ def _march_kernel(grid, photons, sel, knobs, dep, out, recv):
             if (q // chunk) % nbuf != g:
                 continue
             p = sel[q]
-            st, ss, dr = _trace_one(p, grid, photons, knobs, dep, g, out, paths[p] if rec else dummy_path, recv)
+            st, ss, dr = _trace_one(p, grid, photons, knobs, dep, np.int64(g), out,  # int64: one signature
+                                    paths[p] if rec else dummy_path, recv)
             out_steps[p] = st
             out_status[p] = ss
             out_drift[p] = dr
