@@ -866,7 +866,8 @@ def render_case(scene_path, bugs=()):
         "stage.march.exit_pos": m["exit_pos"], "stage.march.exit_dir": m["exit_dir"],
         "stage.march.photon_status": m["photon_status"],
         # no receivers in this port: no photon meets one
-        "stage.march.hit_pos": np.full((len(sp), 3), np.nan), "stage.march.hit_receiver": np.full(len(sp), -1, np.int32),
+        "stage.march.hit_pos": np.full((len(sp), 3), np.nan),
+        "stage.march.hit_receiver": np.full(len(sp), -1, np.int32),
         "photon_exit_pos": m["exit_pos"], "photon_exit_dir": m["exit_dir"],
         "photon_status": m["photon_status"], "photon_steps": total,
         "stage.photon_paths.paths": m["paths"], "stage.photon_paths.path_index": rec,
