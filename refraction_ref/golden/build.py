@@ -129,12 +129,17 @@ FINAL_KEY_STAGES = (
     ("hit", "trace"),                        # imagespace: status != 0 of the trace
     ("ray_origin", "trace"),                 # exact: the trace makes its primary rays (imagespace: rays)
     ("ray_dir", "trace"),
+    ("ray_origin", "view"),                  # volumetric: the curved-ray viewing pass (§4.5) also
+    ("ray_dir", "view"),                     # makes the per-pixel keys its stage does not list
+    ("interfaces", "view"),
+    ("path_length", "view"),
     ("ior", "voxelize"),                     # volumetric: the index volume (stage.voxelize.ior_volume)
     ("volume_bounds", "voxelize"),
     ("photon_*", "march"),                   # volumetric: the march's photon results
     ("caustic_map_*", "caustics"),           # volumetric caustics (made inside the stage's arrays)
     ("caustic_frame_*", "caustics"),
     ("caustic_rgb_*", "caustics"),
+    ("caustic_frame_*", "planes"),           # exact water: the map's rectangle is the receiver's box
     ("stage.caustics.planes_[0-9]*", "planes"),  # level map: the plane offsets follow from the box (eqs. 4-1..4-9)
 )
 #: owners in FINAL_KEY_STAGES that win over a stage making a buffer of the same name
@@ -187,16 +192,6 @@ def key_stage(key, stages):
         return makers[-1]
     raise KeyError(f"golden build: no stage owns the final key {key!r}; name its stage in "
                    "refraction_ref.golden.build.FINAL_KEY_STAGES")
-    if key.startswith("stage."):
-        return key.split(".")[1]
-    owner = None
-    for st in stages:
-        if key in st.makes:
-            owner = st.name
-    if owner is None:
-        raise KeyError(f"golden build: no stage owns the final key {key!r}; name its stage in "
-                       "refraction_ref.golden.build.FINAL_KEY_STAGES")
-    return owner
 
 
 def _seed_key(scene):
