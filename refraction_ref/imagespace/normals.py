@@ -232,7 +232,7 @@ def _footprint(ldi, n, r, c, lut, filt):
     return i0, j0, 2, u - fj, v - fi
 
 
-@nb.njit(cache=True)  # a call, not inlined: the trace kernel would compile its body at every call site
+@nb.njit(cache=True, inline="always")
 def sample_depth(ldi, n, r, c, lut, filt):
     """Depth of layer ``n`` at screen position (row ``r``, column ``c``), pixel units.
 
@@ -261,7 +261,7 @@ def sample_depth(ldi, n, r, c, lut, filt):
     return out
 
 
-@nb.njit(cache=True)  # a call, not inlined: the trace kernel would compile its body at every call site
+@nb.njit(cache=True, inline="always")
 def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt):
     """Unit view-space normal of layer ``n`` at screen position (row ``r``, column ``c``).
 

@@ -93,7 +93,7 @@ def _screen(x, y, z, W, H, sx, sy, ortho=False):
     return row, col
 
 
-@nb.njit(cache=True)  # a call, not inlined (compiles once, not per call site)
+@nb.njit(cache=True, inline="always")
 def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho, filt):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
     r, c = _screen(x, y, z, W, H, sx, sy, ortho)
