@@ -127,3 +127,19 @@ def test_component_box_reads_eq_4_3_along_each_axis():
     # other placements pass through unchanged
     same = component_box(floor, T0, 64, "tight")
     assert all(np.array_equal(x, y) for x, y in zip(same, tight))
+
+
+def test_chaudhari_quality_normals_and_bounds():
+    """§3.5/§3.7 studies: the hand-run tight bound is the renderer's trace; eq. 3.1 is worse than eq. 3.2."""
+    from refraction_ref.render import render
+    from refraction_ref.tables import chaudhari_quality as Q
+
+    d, _ = Q._scene("bunny", 64)
+    r = render(d)
+    tr = Q.layered(Q._Prepared(d), "tight", 5)
+    assert np.array_equal(tr["status"], r["status"])
+    assert np.array_equal(tr["exit_dir"], r["exit_dir"], equal_nan=True)
+    rows = {x["option"]: x for x in Q.normals_study(64, scenes=("bunny",))}
+    assert all(np.isfinite(x["normal_median"]) and np.isfinite(x["exit_p90"]) and x["pixels"] > 500
+               for x in rows.values())
+    assert rows["forward (eq. 3.1)"]["normal_median"] > 2 * rows["central delta=2 (thesis)"]["normal_median"]
