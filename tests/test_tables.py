@@ -104,7 +104,7 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     assert (tmp_path / "chaudhari_tables.png").stat().st_size > 5000
     # nothing but the report: the decimated bunny stays in memory
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv", "chaudhari_tables.png", "claims.csv",
+        "chaudhari_3_5.csv", "chaudhari_3_7.csv", "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv", "chaudhari_tables.png", "claims.csv",
         "tables.md"]
 
 
