@@ -184,6 +184,8 @@ def compile_report(method, stream=None, bar=None):
 
     def end(ev):
         state["depth"] -= 1
+        if state["depth"] > 0:  # a helper compiled inside a kernel's compilation: part of that kernel
+            return
         state["n"] += 1
         b = state["bar"]
         if b is not None:
