@@ -84,6 +84,27 @@ def _np3(v):
     return np.array(v, dtype=np.float64).reshape(3, -1).T
 
 
+def _interface(d, sh, ng, eta):
+    """One interface crossed with Mitsuba's shading normal ``sh``, as the exact tracer crosses it.
+
+    Where the shading normal sends the refracted (or reflected) ray to the wrong
+    side of the geometric normal ``ng``, the geometric normal is used instead;
+    a non-finite result keeps the incoming direction and is reported ``lost``.
+    Returns ``(out, tir, lost)``.
+    """
+    sh = np.where((np.sum(sh * ng, axis=1) < 0)[:, None], -sh, sh)
+    out, tir = _refract(d, sh, eta)
+    sn = np.sign(np.sum(out * ng, axis=1))
+    sg = np.sign(np.sum(d * ng, axis=1))
+    wrong = np.where(tir, sn == sg, sn != sg)
+    if wrong.any():
+        o2, t2 = _refract(d[wrong], ng[wrong], eta[wrong])
+        out[wrong], tir[wrong] = o2, t2
+    lost = ~np.all(np.isfinite(out), axis=1)
+    out[lost] = d[lost]
+    return out, tir, lost
+
+
 def _refract(d, n, eta):
     """Snell / TIR of unit directions ``d`` at normals ``n`` (any side), relative index ``eta``, float64."""
     s = np.where(np.sum(d * n, axis=1) < 0, 1.0, -1.0)[:, None]
@@ -222,16 +243,7 @@ def mitsuba_paths(scene, folder, variant="llvm_ad_rgb", max_bounces=None, spawn=
         n1 = ior[medium[a]]
         n2 = np.where(entering, ior[obj], ior[outside])
         eta = n1 / n2
-        sh = np.where((np.sum(sh * g, axis=1) < 0)[:, None], -sh, sh)
-        out, tir = _refract(dd, sh, eta)
-        sn = np.sign(np.sum(out * g, axis=1))
-        sg = np.sign(cos_g)
-        wrong = np.where(tir, sn == sg, sn != sg)
-        if wrong.any():
-            o2, t2 = _refract(dd[wrong], g[wrong], eta[wrong])
-            out[wrong], tir[wrong] = o2, t2
-        lost = ~np.all(np.isfinite(out), axis=1)
-        out[lost] = dd[lost]
+        out, tir, lost = _interface(dd, sh, g, eta)
         crossed = ~tir & ~lost
         medium[a[crossed]] = np.where(entering[crossed], obj[crossed], outside)
         interfaces[a[crossed]] += 1
@@ -733,16 +745,7 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
             entering = cos_g < 0
             obj = owner[prim[a_]]
             eta = ior[medium[a_]] / np.where(entering, ior[obj], ior[outside])
-            sh = np.where((np.sum(sh * ng, axis=1) < 0)[:, None], -sh, sh)
-            out, tir = _refract(dd, sh, eta)
-            sn = np.sign(np.sum(out * ng, axis=1))
-            sg = np.sign(cos_g)
-            wrong = np.where(tir, sn == sg, sn != sg)
-            if wrong.any():
-                o2, t2 = _refract(dd[wrong], ng[wrong], eta[wrong])
-                out[wrong], tir[wrong] = o2, t2
-            lost = ~np.all(np.isfinite(out), axis=1)
-            out[lost] = dd[lost]
+            out, tir, lost = _interface(dd, sh, ng, eta)
             crossed = ~tir & ~lost
             medium[a_[crossed]] = np.where(entering[crossed], obj[crossed], outside)
             inter[a_[crossed]] += 1
@@ -796,10 +799,9 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     flux_ours = q * texel_min / max([float(np.max(lt.get("radiance", [1.0]))) for lt in scene.data["lights"]]
                                    + [1.0])
     # photons per side for Mitsuba's window at `oversample` times our density
-    from .meshes import bounds
+    from .interop.mitsuba import object_meshes
 
-    ov = np.concatenate([m["vertices"] for m in __import__("refraction_ref.interop.mitsuba",
-                                                          fromlist=["object_meshes"]).object_meshes(scene)])
+    ov = np.concatenate([m["vertices"] for m in object_meshes(scene)])
     L = np.asarray(scene.data["lights"][0]["direction"], np.float64)
     L /= np.linalg.norm(L)
     a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
