@@ -9,16 +9,15 @@ interface events and search iterations with all live pixels at once (one
 "draw" per event, as a multi-pass shader would).
 
 ``run(golden_dir, out_dir)`` reads each image-space case's ``scene.json``
-from a golden suite and writes ``out_dir/<case>/result.npz`` with the final
+and ``geometry.npz`` (the placed triangles) from a golden suite and writes ``out_dir/<case>/result.npz`` with the final
 keys and every stage buffer from ``rays`` to ``shade``, ready for
 ``refraction-ref check out_dir --golden golden_dir``. ``bugs=`` plants the
 mistakes porters really make (``BUGS``), to show that ``check`` names the
 pass to fix.
 
-The only things taken from the package are the public scene loader
-(``refraction_ref.load_scene``, defaults filled in) and the merged
-world-space triangles (``refraction_ref.meshes.scene_geometry``), which
-``docs/oracle.md`` names as the input geometry.
+The only thing taken from the package is its public scene loader
+(``refraction_ref.load_scene``, defaults filled in); the triangles come from
+the golden suite's ``geometry.npz`` (``docs/backends.md``).
 
 References
 ----------
@@ -152,18 +151,15 @@ def pass_rays(c, bugs=()):
 
 
 # ----------------------------------------------------------------------------- geometry
-def pass_geometry(scene):
-    """``geometry``: merged world triangles and the shared material."""
-    from refraction_ref.meshes import scene_geometry
-
+def pass_geometry(scene, case_dir):
+    """``geometry``: merged world triangles (the case's ``geometry.npz``) and the shared material."""
     data = scene.data
-    g = scene_geometry(scene)
+    with np.load(os.path.join(case_dir, "geometry.npz")) as g:
+        V, F = g["vertices"], g["faces"]
     mats = [o["material"] for o in data["objects"]]
     ior = float(mats[0]["ior"])
     absorption = np.asarray(mats[0]["absorption"], np.float64)
-    return {"absorption": absorption}, (np.asarray(g.vertices, np.float64),
-                                        np.asarray(g.faces, np.int64), ior,
-                                        float(data["outside_ior"]))
+    return {"absorption": absorption}, (V, F, ior, float(data["outside_ior"]))
 
 
 # ----------------------------------------------------------------------------- rasterizer
@@ -704,7 +700,7 @@ def render_case(scene_path, bugs=()):
     c = camera(data["camera"])
     st = {}
     st["rays"], v_view = pass_rays(c, bugs)
-    st["geometry"], (Vw, F, ior, outside_ior) = pass_geometry(scene)
+    st["geometry"], (Vw, F, ior, outside_ior) = pass_geometry(scene, os.path.dirname(scene_path))
     pix, depth = fragments(c, Vw, F, bugs)
     st["minmax"] = pass_minmax(c, pix, depth)
     zmin, zmax = st["minmax"]["zmin"], st["minmax"]["zmax"]

@@ -193,25 +193,17 @@ def _gauss_blur(a, blur):
 
 
 def scene_objects(sc):
-    """World-space triangles per object (``refraction_ref.meshes.scene_geometry``, the documented
-    way to get the placed meshes), as a list of (V, F, material)."""
-    import refraction_ref as rr
-    from refraction_ref.meshes import scene_geometry
-    objs = sc["raw"].get("objects", [])
+    """World-space triangles per object, from the case's ``geometry.npz`` (``docs/backends.md``:
+    the placed triangles merged in object order, ``face_object`` naming each one's object), as a
+    list of (V, F, ior, absorption)."""
+    with np.load(os.path.join(sc["dir"], "geometry.npz")) as g:
+        V, F, owner = g["vertices"], g["faces"], g["face_object"]
     out = []
-    for k, o in enumerate(objs):
-        one = dict(sc["raw"])
-        one["objects"] = [o]
-        one.pop("volume", None)
-        path = os.path.join(sc["dir"], f".__vol_port_obj{k}.json")
-        with open(path, "w") as f:
-            json.dump(one, f)
-        try:
-            g = scene_geometry(rr.load_scene(path))
-        finally:
-            os.remove(path)
+    for k, o in enumerate(sc["raw"].get("objects", [])):
+        Fk = F[owner == k]
+        used, Fk = np.unique(Fk, return_inverse=True)   # the object's own vertices, in their order
         mat = o.get("material", {})
-        out.append((np.asarray(g.vertices, np.float64), np.asarray(g.faces, np.int64),
+        out.append((V[used], Fk.reshape(-1, 3).astype(np.int64),
                     float(mat.get("ior", 1.5)), _rgb(mat.get("absorption", [0.0, 0.0, 0.0]))))
     return out
 

@@ -332,6 +332,21 @@ def _case_task(case, threads=1):
     return case["name"], entry, files
 
 
+def _geometry_arrays(scene):
+    """The placed triangles every pass rasterizes (``docs/backends.md``: ``geometry.npz``).
+
+    A port outside this package cannot reproduce the mesh loading bit for bit
+    (trimesh's vertex merging, ``fit``, ``transform``, ``deform``), so the
+    suite carries its result: the objects' world-space triangles merged in
+    object order, and the object each triangle belongs to.
+    """
+    from ..meshes import scene_geometry
+
+    g = scene_geometry(scene)
+    return {"vertices": np.asarray(g.vertices, np.float64), "faces": np.asarray(g.faces, np.int64),
+            "face_object": np.asarray(g.face_object, np.int32)}
+
+
 def _build_case(case, d, progress=False):
     """Render one case into folder ``d``; its manifest entry."""
     import refraction_ref as rr
@@ -351,6 +366,9 @@ def _build_case(case, d, progress=False):
     _save_npz(os.path.join(d, "golden.npz"), res.arrays)
     entry = {"method": method, "purpose": case["purpose"], "stages": stage_order(stages),
              "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
+    if scene.data["objects"]:
+        _save_npz(os.path.join(d, "geometry.npz"), _geometry_arrays(scene))
+        entry["files"].append("geometry.npz")
     if noisy:
         K = int(case["batches"])
         sk = _seed_key(scene)
