@@ -129,6 +129,7 @@ def _cmd_scene(a):
 def _cmd_crosscheck(a):
     from .crosscheck import report_markdown, run
 
+    _check_workers(a.workers)
     parts = tuple(x for x in a.parts.split(",") if x)
     res = run(a.out, only=a.only, parts=parts, workers=a.workers, scheduler=a.scheduler,
               log=(lambda m: None) if a.quiet else print, report=a.report)

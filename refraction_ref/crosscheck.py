@@ -1015,26 +1015,14 @@ def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, sch
         for c in cases:
             done(c["name"], run_case(c, os.path.join(out, c["name"]), parts))
     else:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import as_completed
 
-        own = client is None
-        cluster = None
-        if own:
-            if scheduler:
-                client = Client(scheduler)
-            else:
-                cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                                       dashboard_address=None)
-                client = Client(cluster)
-        try:
+        from .cluster import dask_client
+
+        with dask_client(scheduler, workers, 1, client) as client:  # closed quietly, as golden build's
             futures = [client.submit(_case_task, c, tuple(parts), pure=False) for c in cases]
             for fu in as_completed(futures):
                 done(*fu.result())
-        finally:
-            if own:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
     from .contract import software_versions
 
     result = {"targets": TARGETS, "tir_chaos": list(TIR_CHAOS), "versions": _versions(software_versions()),

@@ -131,6 +131,8 @@ def test_workers_0_is_refused_before_any_work(tmp_path, capsys):
     assert "--workers is 0; give at least 1 worker process" in capsys.readouterr().err
     assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
     assert "--workers is 0; give at least 1 worker process" in capsys.readouterr().err
+    assert main(["crosscheck", "--only", "is_ior_1", "--out", str(tmp_path / "x"), "--workers", "0"]) == 2
+    assert "--workers is 0; give at least 1 worker process" in capsys.readouterr().err
     assert os.listdir(tmp_path) == ["s.json"]
 
 
