@@ -843,15 +843,33 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     return num, figs
 
 
-def _caustics_figure(figs, path, name):
+def _panels(n):
+    """A row of ``n`` square panels (the report's figures: A, B, A-B, ...)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt.subplots(1, n, figsize=(4 * n, 4))
+
+
+def _save_panels(fig, ax, path, title):
+    """Write a figure of :func:`_panels` to ``path`` and close it; its file name, as the report links it."""
+    import matplotlib.pyplot as plt
+
+    for a in ax:
+        a.axis("off")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return os.path.basename(path)
+
+
+def _caustics_figure(figs, path, name):
     f = figs[0]
     vmax = float(np.percentile(f["ours"], 99.5)) or 1.0
-    fig, ax = plt.subplots(1, 3, figsize=(12, 4))
+    fig, ax = _panels(3)
     ax[0].imshow(f["ours"], vmin=0, vmax=vmax, cmap="inferno", interpolation="nearest")
     ax[0].set_title("A: ours (exact), K-batch mean")
     ax[1].imshow(f["mitsuba"], vmin=0, vmax=vmax, cmap="inferno", interpolation="nearest")
@@ -859,13 +877,7 @@ def _caustics_figure(figs, path, name):
     im = ax[2].imshow(f["ours"] - f["mitsuba"], vmin=-vmax / 4, vmax=vmax / 4, cmap="RdBu", interpolation="nearest")
     ax[2].set_title("A-B")
     fig.colorbar(im, ax=ax[2], fraction=0.046)
-    for a in ax:
-        a.axis("off")
-    fig.suptitle(name + ": caustic_map_0")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return os.path.basename(path)
+    return _save_panels(fig, ax, path, name + ": caustic_map_0")
 
 
 # --------------------------------------------------------------------------- cases, report, cluster
@@ -925,12 +937,7 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
 
 
 def _paths_figure(f, path, name):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 3, figsize=(12, 4))
+    fig, ax = _panels(3)
     ax[0].imshow(f["status_ours"], vmin=0, vmax=4, cmap="tab10", interpolation="nearest")
     ax[0].set_title("A: status, ours (exact)")
     ax[1].imshow(f["status_mitsuba"], vmin=0, vmax=4, cmap="tab10", interpolation="nearest")
@@ -938,22 +945,11 @@ def _paths_figure(f, path, name):
     im = ax[2].imshow(np.log10(np.maximum(f["angle"], 1e-7)), vmin=-6, vmax=1, cmap="magma", interpolation="nearest")
     ax[2].set_title("A-B: exit angle, log10 deg")
     fig.colorbar(im, ax=ax[2], fraction=0.046)
-    for a in ax:
-        a.axis("off")
-    fig.suptitle(name)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return os.path.basename(path)
+    return _save_panels(fig, ax, path, name)
 
 
 def _images_figure(f, path, name):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 5, figsize=(20, 4))
+    fig, ax = _panels(5)
     ax[0].imshow(np.clip(f["ours"], 0, 1), interpolation="nearest")
     ax[0].set_title("A: ours (exact)")
     ax[1].imshow(np.clip(f["mitsuba"], 0, 1), interpolation="nearest")
@@ -967,13 +963,7 @@ def _images_figure(f, path, name):
     ax[3].set_title("Mitsuba path integrator")
     ax[4].imshow(np.clip(f["fresnel"], 0, 1), interpolation="nearest")
     ax[4].set_title("Mitsuba dielectric (Fresnel)")
-    for a in ax:
-        a.axis("off")
-    fig.suptitle(name)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return os.path.basename(path)
+    return _save_panels(fig, ax, path, name)
 
 
 def _case_task(case, parts, threads=1):
