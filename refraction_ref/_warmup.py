@@ -26,7 +26,7 @@ import os
 import sys
 import time
 
-__all__ = ["warm", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report", "imagespace"]
+__all__ = ["warm", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report"]
 
 _done = set()
 
@@ -76,21 +76,14 @@ def warm(method, scene=None):
     from .scene import load_scene
 
     if scene is None:
-        scene = load_scene(_default_levelmap() if method == "levelmap" else None)
+        from .levelmap.pipeline import DEFAULT_SCENE_PATH
+
+        scene = load_scene(DEFAULT_SCENE_PATH if method == "levelmap" else None)
     key = _key(method, scene)
     if key in _done:
         return
     run_graph(method, tiny_scene(method, scene), warm=False)
     _done.add(key)
-
-
-def _default_levelmap():
-    return os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "levelmap_default.json")
-
-
-def imagespace():
-    """Warm the image-space method for its default scene (kept for older callers)."""
-    warm("imagespace")
 
 
 # ------------------------------------------------------------- the cache, kernel by kernel

@@ -58,7 +58,6 @@ __all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAU
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
 
-
 def default_scene(overrides=None):
     """The default level-map scene: the teapot on a pool floor under a wavy surface in sunlight."""
     return load_scene(DEFAULT_SCENE_PATH, overrides)
