@@ -47,9 +47,9 @@ def _read_mesh_file(path, mtime):
 
     try:
         # the file's own data first: processing drops NaN vertices and their faces in silence
-        raw = trimesh.load(path, force="mesh", process=False)
-        _check_raw_mesh(path, np.asarray(raw.vertices), np.asarray(raw.faces))
-        m = trimesh.load(path, force="mesh", process=True)
+        m = trimesh.load(path, force="mesh", process=False)
+        _check_raw_mesh(path, np.asarray(m.vertices), np.asarray(m.faces))
+        m.process()  # what load(process=True) runs, on the arrays already read
     except SceneError:
         raise
     except IndexError as e:  # trimesh's OBJ reader indexes its vertices with the faces while parsing
