@@ -43,7 +43,7 @@ import numpy as np
 
 from ..contract import CONTRACT_VERSION
 from ..files import NotNpzError, atomic_open, atomic_path, load_npz, savefig_atomic
-from .tolerances import judge
+from .tolerances import finiteness, judge
 
 __all__ = ["check", "CheckError", "CheckReport", "CaseReport", "format_report"]
 
@@ -167,9 +167,7 @@ def _changes(a):
 def _codes(a):
     """A float array as codes for :func:`_changes` (NaN, inf kept apart); other dtypes as they are."""
     a = np.asarray(a)
-    if a.dtype.kind == "f":
-        return np.where(np.isnan(a), 0, np.where(np.isposinf(a), 1, np.where(np.isneginf(a), 2, 3)))
-    return a
+    return finiteness(a) if a.dtype.kind == "f" else a
 
 
 def _jumps(z):

@@ -62,7 +62,8 @@ import fnmatch
 
 import numpy as np
 
-__all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch"]
+__all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
+           "FINITENESS"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
         "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
@@ -164,16 +165,21 @@ def tolerance_for(key, noisy=False):
     raise KeyError(key)
 
 
+#: the categories of :func:`finiteness`, by code
+FINITENESS = ("NaN", "+inf", "-inf", "finite")
+
+
+def finiteness(a):
+    """Per element of a float array its :data:`FINITENESS` code: 0 NaN, 1 +inf, 2 -inf, 3 finite."""
+    return np.where(np.isnan(a), 0, np.where(a == np.inf, 1, np.where(a == -np.inf, 2, 3)))
+
+
 def nonfinite_mismatch(c, g):
     """Counts of NaN / inf / finite mismatches by category (``{"NaN where the golden has +inf": n, ...}``)."""
     if c.dtype.kind not in "fc" or g.dtype.kind not in "fc":
         return {}
-
-    def cat(a):
-        return np.where(np.isnan(a), 0, np.where(a == np.inf, 1, np.where(a == -np.inf, 2, 3)))
-
-    names = ("NaN", "+inf", "-inf", "finite")
-    cc, gc = cat(c), cat(g)
+    names = FINITENESS
+    cc, gc = finiteness(c), finiteness(g)
     out = {}
     for i in range(4):
         for j in range(4):
