@@ -45,10 +45,11 @@ import time
 
 import numpy as np
 
+from .compare import angular_error_deg
 from .status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = ["crosscheck_cases", "mitsuba_paths", "paths_case", "images_case", "run_case", "run", "TARGETS",
-           "angle_deg", "relative_rmse"]
+           "relative_rmse"]
 
 #: the targets of the cross-check (issue "Ground truth checked by an independent renderer")
 TARGETS = {"median_deg": 0.01, "p99_deg": 0.5, "status_agree": 0.99, "image_rel_rmse": 0.01}
@@ -62,14 +63,6 @@ def crosscheck_cases(only=None):
     from .golden.build import catalogue
 
     return catalogue(only)
-
-
-def angle_deg(a, b):
-    """Angle in degrees between unit vectors (..., 3), accurate near zero (atan2 of cross and dot)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    c = np.linalg.norm(np.cross(a, b), axis=-1)
-    return np.degrees(np.arctan2(c, np.sum(a * b, axis=-1)))
 
 
 def relative_rmse(a, b):
@@ -299,12 +292,12 @@ def paths_case(case, folder, variant="llvm_ad_rgb"):
     mit = mitsuba_paths(scene, os.path.join(folder, "mitsuba"), variant)
     t2 = time.perf_counter()
     cam = Camera.from_dict(scene.data["camera"])
-    ray_ang = angle_deg(ours["ray_dir"], mit["ray_dir"])
+    ray_ang = angular_error_deg(ours["ray_dir"], mit["ray_dir"])
     # Mitsuba's rays start on the near plane (near_clip = 1e-4) along the same line
     off = mit["ray_origin"] - ours["ray_origin"]
     line = np.linalg.norm(np.cross(off, ours["ray_dir"]), axis=-1)
     both = (ours["status"] == EXITED) & (mit["status"] == EXITED)
-    ang = angle_deg(ours["exit_dir"], mit["exit_dir"])
+    ang = angular_error_deg(ours["exit_dir"], mit["exit_dir"])
     a = ang[both]
     from .meshes import bounds, scene_geometry
 
@@ -559,9 +552,9 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
             tr = np.where(e > 0, flat / e, 1.0)
         env_ours = env_ours * tr
     margin = ok & edge_margin_mask(ms, odir, kw["env_width"])
-    agree_line = angle_deg(line_dir, odir) <= PATH_AGREE_DEG
+    agree_line = angular_error_deg(line_dir, odir) <= PATH_AGREE_DEG
     judged = margin & agree_line
-    ang_sp = angle_deg(sp_dir, odir)
+    ang_sp = angular_error_deg(sp_dir, odir)
     both_sp = ok & (st.ravel() != MISSED) & np.all(np.isfinite(sp_dir), axis=1)
     mean_img = max(float(np.mean(np.abs(flat))), 1e-30)
 

@@ -15,7 +15,8 @@ import pytest
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip install -e \".[crosscheck]\")")
 
 from refraction_ref import load_scene  # noqa: E402
-from refraction_ref.crosscheck import angle_deg, mitsuba_paths, paths_case  # noqa: E402
+from refraction_ref.compare import angular_error_deg  # noqa: E402
+from refraction_ref.crosscheck import mitsuba_paths, paths_case  # noqa: E402
 from refraction_ref.golden.build import catalogue  # noqa: E402
 from refraction_ref.interop import mitsuba as M  # noqa: E402
 from refraction_ref.status import EXITED, MISSED  # noqa: E402
@@ -46,7 +47,7 @@ def test_mitsuba_spawn_offset_is_the_visible_difference(tmp_path):
     b = mitsuba_paths(scene, str(tmp_path / "b"), spawn="mitsuba")
     both = (a["status"] == EXITED) & (b["status"] == EXITED)
     assert both.sum() > 200
-    d = angle_deg(a["exit_dir"][both], b["exit_dir"][both])
+    d = angular_error_deg(a["exit_dir"][both], b["exit_dir"][both])
     assert np.median(d) > 1e-3
 
 
@@ -71,7 +72,7 @@ def test_export_round_trip_loads_in_mitsuba(tmp_path):
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))
     eye = np.array(scene.data["camera"]["eye"])
     fwd = np.array(scene.data["camera"]["target"]) - eye
-    assert angle_deg(np.array(ray.d), fwd / np.linalg.norm(fwd)) < 1e-4
+    assert angular_error_deg(np.array(ray.d), fwd / np.linalg.norm(fwd)) < 1e-4
 
 
 def test_export_normals_follow_the_exact_reference(tmp_path):
