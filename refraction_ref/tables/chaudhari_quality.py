@@ -158,6 +158,22 @@ class _Prepared:
         self.ior = check_materials(self.geom)[0]
         self.outside = float(self.scene.data["outside_ior"])
         self.cam = Camera.from_dict(self.scene.data["camera"])
+        self._passes = None
+
+    def passes(self):
+        """minmax, voxelize and peel of this view, run on the first call only (deterministic)."""
+        if self._passes is None:
+            self._passes = run_passes(self)
+        return self._passes
+
+
+def run_passes(prep):
+    """The passes before the search bound: minmax, voxelize, peel (§3.3-3.4)."""
+    from ..imagespace import pipeline as P
+
+    mm = P.pass_minmax(prep.geom, prep.cam, prep.p)
+    vox = P.pass_voxelize(mm, prep.cam, prep.p)
+    return mm, vox, P.pass_peel(vox, prep.cam.shape, prep.p)
 
 
 def layered(prep, bound="tight", iterations=5, timings=None):
@@ -178,9 +194,8 @@ def layered(prep, bound="tight", iterations=5, timings=None):
     tic = time.perf_counter
     t = {}
     t0 = tic()
-    mm = P.pass_minmax(prep.geom, prep.cam, p)
-    vox = P.pass_voxelize(mm, prep.cam, p)
-    pl = P.pass_peel(vox, prep.cam.shape, p)
+    # a timed frame runs every pass; an untimed one reuses the view's passes before the bound
+    mm, vox, pl = run_passes(prep) if timings is not None else prep.passes()
     t["passes"] = (tic() - t0) * 1e3
     t0 = tic()
     if bound == "loose":
