@@ -75,23 +75,15 @@ def require(variant="scalar_rgb"):
 
 # --------------------------------------------------------------------------- files
 def write_ply(path, vertices, faces, normals=None):
-    """A binary little-endian PLY: float32 ``x y z`` (and ``nx ny nz``), ``uchar``/``int`` face lists."""
-    v = np.asarray(vertices, dtype=np.float32)
-    f = np.asarray(faces, dtype=np.int32)
-    cols = [v] if normals is None else [v, np.asarray(normals, dtype=np.float32)]
-    vert = np.ascontiguousarray(np.concatenate(cols, axis=1))
-    head = ["ply", "format binary_little_endian 1.0", f"element vertex {len(v)}",
-            "property float x", "property float y", "property float z"]
-    if normals is not None:
-        head += ["property float nx", "property float ny", "property float nz"]
-    head += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
-    fr = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    fr["n"] = 3
-    fr["i"] = f
+    """A binary little-endian PLY (trimesh's writer): float32 ``x y z`` (and ``nx ny nz``), ``uchar``/``int``
+    face lists, the vertices and normals as given (no processing)."""
+    import trimesh
+    from trimesh.exchange.ply import export_ply
+
+    m = trimesh.Trimesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int64), process=False,
+                        vertex_normals=None if normals is None else np.asarray(normals, np.float64))
     with open(path, "wb") as fh:
-        fh.write(("\n".join(head) + "\n").encode("ascii"))
-        fh.write(vert.astype("<f4").tobytes())
-        fh.write(fr.tobytes())
+        fh.write(export_ply(m, encoding="binary", vertex_normal=normals is not None, include_attributes=False))
 
 
 def _split_corners(faces, corner_normals):
