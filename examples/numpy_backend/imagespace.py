@@ -48,6 +48,8 @@ BUGS = {
     "forward_normals": "normals: one-sided (forward) differences j..j+delta, i-delta..i instead of central",
     "no_margin": "reduce: the search bound without the bound_margin constant",
     "path_length_ior": "trace: optical length (times ior) stored in path_length instead of the geometric one",
+    "no_snap": "minmax/voxelize: the rasterizer samples the unsnapped triangle (no 1/256 pixel grid), as an "
+               "analytic rasterizer or a ray caster does; not a bug: check admits it (the depth keys' slope term)",
 }
 
 Camera = namedtuple("Camera", "W H sx sy eye B near")
@@ -196,6 +198,9 @@ def _clip_near(c, V, F):
 def fragments(c, Vw, F, bugs=()):
     """Every fragment (pixel index, depth) of the GPU-style rasterizer: 1/256 snap, top-left rule, no culling.
 
+    ``bugs=("no_snap",)`` samples the unsnapped triangle (float64 vertices and edge functions, the same
+    top-left rule): the depths of an analytic rasterizer, which ``check`` admits.
+
     References
     ----------
     Chaudhari 2008 §3.3; docs/oracle.md "Rasterization".
@@ -209,8 +214,11 @@ def fragments(c, Vw, F, bugs=()):
         col = (V[:, 0] / (d * sx) * 0.5 + 0.5) * W
         row = (0.5 - V[:, 1] / (d * sy) * 0.5) * H
         bad = (d <= 0) | ~(np.abs(col) < 2.0 ** 22) | ~(np.abs(row) < 2.0 ** 22)
-        X = np.rint(np.where(bad, 0.0, col * 256.0)).astype(np.int64)
-        Y = np.rint(np.where(bad, 0.0, row * 256.0)).astype(np.int64)
+        X = np.where(bad, 0.0, col * 256.0)
+        Y = np.where(bad, 0.0, row * 256.0)
+    if "no_snap" not in bugs:                         # the 1/256 sub-pixel grid; unsnapped: float64 vertices
+        X, Y = np.rint(X).astype(np.int64), np.rint(Y).astype(np.int64)
+    with np.errstate(divide="ignore"):
         D = 1.0 / d
     F = F[~bad[F].any(1)]
     x0, x1, x2 = X[F].T
@@ -233,10 +241,10 @@ def fragments(c, Vw, F, bugs=()):
     def last(a, n):                                   # last pixel centre <= a
         return np.minimum((a - 128) // 256, n - 1)
 
-    j0 = first(np.minimum(np.minimum(x0, x1), x2))
-    j1 = last(np.maximum(np.maximum(x0, x1), x2), W)
-    i0 = first(np.minimum(np.minimum(y0, y1), y2))
-    i1 = last(np.maximum(np.maximum(y0, y1), y2), H)
+    j0 = first(np.minimum(np.minimum(x0, x1), x2)).astype(np.int64)
+    j1 = last(np.maximum(np.maximum(x0, x1), x2), W).astype(np.int64)
+    i0 = first(np.minimum(np.minimum(y0, y1), y2)).astype(np.int64)
+    i1 = last(np.maximum(np.maximum(y0, y1), y2), H).astype(np.int64)
     nj = np.maximum(j1 - j0 + 1, 0)
     n = np.where(A > 0, np.maximum(i1 - i0 + 1, 0) * nj, 0)
     t = np.repeat(np.arange(len(F)), n)

@@ -10,6 +10,12 @@ Kinds (``docs/oracle.md``, "Conformance"):
     ``|c - g| <= atol + rtol |g|`` (positions, depths, path lengths, maps
     of deterministic photons, images); NaN must meet NaN. ``scale='max'``
     makes ``atol`` relative to the largest ``|g|`` (photon maps).
+    ``slope=s`` (rasterized depths) adds ``s * step(g)``, ``step(g)`` the
+    largest ``|g(p) - g(q)|`` over the finite 8 neighbours ``q`` of the
+    element in its picture (:func:`neighbour_step`): the depth sampled
+    ``s`` pixels away along x and y. :data:`SNAP_SLOPE` = 1/512 admits a
+    rasterizer that does not snap vertices to the oracle's 1/256 pixel
+    grid, or casts rays analytically (``docs/oracle.md``, "Conformance").
 ``angle``
     Unit vectors (directions, normals): the angle between them at most
     ``deg`` degrees, and ``|c|`` within ``norm`` of 1 (a normal that is not
@@ -63,7 +69,7 @@ import fnmatch
 import numpy as np
 
 __all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
-           "FINITENESS"]
+           "FINITENESS", "SNAP_SLOPE", "neighbour_step"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
         "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
@@ -76,6 +82,16 @@ _POS = ("positions and lengths: another order of float64 arithmetic; differences
 _MAP = ("maps of deterministic photons: another summation order; photons landing on the lit region's edge or "
         "beside a depth discontinuity of the receivers (1 % of the lit texels elsewhere)")
 _EXACT_F = "set-up arithmetic (frames, cameras, boxes): float64 rounding only"
+
+#: the sample shift, in pixels per axis, that a rasterizer without the oracle's 1/256 snap (or a ray caster)
+#: may have: rounding a vertex to 1/256 moves it by at most 1/512 per axis, and an attribute interpolated
+#: at a pixel centre of the snapped triangle is the unsnapped triangle's at a point moved by a convex
+#: combination of the vertices' moves, so by at most 1/512 per axis as well
+SNAP_SLOPE = 1.0 / 512.0
+_SLOPE = ("a rasterizer without the 1/256 vertex snap, or a ray caster, samples each depth up to 1/512 pixel "
+          "per axis from the snapped triangle's point: |c - g| may add (1/512) x the largest step to the 8 "
+          "neighbours; coverage differs only at silhouettes")
+_DEPTH = "rasterized depths: another order of float64 arithmetic; " + _SLOPE + " (0.5 % elsewhere)"
 
 #: (pattern on the key, spec): the first match wins. Stage buffers are ``stage.<stage>.<buffer>``.
 TOLERANCES = [
@@ -139,9 +155,18 @@ TOLERANCES = [
                         "(slice ties move a path)"}),
     ("*diffuse_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-6, "fraction": 0.0, "over": "nonzero",
                     "locate": True, "why": "albedo per texel: differs only beside a depth discontinuity"}),
-    ("*ldi*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "fraction": 0.0, "over": "finite", "locate": True,
+    ("*ldi*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "slope": SNAP_SLOPE, "fraction": 0.0, "over": "finite",
+               "locate": True,
                "why": "layer depths are slice centres: they differ only where the bitmask does (judged against "
-                      "the candidate's own bitmask) or at silhouettes"}),
+                      "the candidate's own bitmask) or at silhouettes; " + _SLOPE}),
+    ("stage.minmax.z*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "slope": SNAP_SLOPE, "fraction": 0.005,
+                         "over": "finite", "locate": True, "why": _DEPTH}),
+    ("stage.voxelize.z*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "slope": SNAP_SLOPE, "fraction": 0.005,
+                           "over": "finite", "locate": True, "why": _DEPTH}),
+    ("stage.receiver_depth.depth", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "slope": SNAP_SLOPE,
+                                    "fraction": 0.005, "over": "finite", "locate": True, "why": _DEPTH}),
+    ("stage.level_map.position_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "slope": SNAP_SLOPE,
+                                    "fraction": 0.005, "over": "finite", "locate": True, "why": _DEPTH}),
     ("*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
            "why": _POS}),
 ]
@@ -214,13 +239,16 @@ def _elementwise(c, g, spec, batches):
         fin = np.isfinite(g64)
         scale = float(np.max(np.abs(g64[fin]))) if spec.get("scale") == "max" and fin.any() else 1.0
         tol = spec["atol"] * scale + spec["rtol"] * np.abs(np.where(fin, g64, 0.0))
+        slope = float(spec.get("slope", 0.0))
+        if slope:
+            tol = tol + slope * neighbour_step(g64)
         with np.errstate(invalid="ignore"):
             diff = np.abs(c64 - g64)
             bad = (np.isnan(c64) != np.isnan(g64)) | (fin & ~(diff <= tol)) | (np.isinf(g64) & (c64 != g64))
         d = diff[fin & np.isfinite(c64)]
         err = {"max_abs": float(d.max()) if d.size else 0.0, "scale": scale}
         detail = (f"max |c - g| {err['max_abs']:.3g} over the finite pairs (tolerance {spec['atol']:g} x "
-                  f"{scale:.3g} + {spec['rtol']:g} |g|)")
+                  f"{scale:.3g} + {spec['rtol']:g} |g|" + (f" + {slope:.3g} step(g)" if slope else "") + ")")
     elif kind == "angle":
         c64, g64 = c.astype(np.float64), g.astype(np.float64)
         if c64.shape[-1] != 3:
@@ -266,6 +294,35 @@ def _elementwise(c, g, spec, batches):
     else:
         raise ValueError(f"unknown tolerance kind {kind!r}")
     return bad, err, detail
+
+
+def neighbour_step(g):
+    """Per element, the largest ``|g(p) - g(q)|`` over its finite 8 neighbours ``q`` in the picture.
+
+    The picture is the last two axes (rows and columns: (H, W), or (L, H, W) per layer); 0 where the
+    element or all its neighbours are not finite. Diagonal neighbours count, so ``step >= |g_x| + |g_y|``
+    on a plane: a sample moved by ``s`` pixels along both axes moves the value by at most ``s * step``.
+
+    References
+    ----------
+    docs/oracle.md, "Conformance" (the ``slope`` term of ``close``).
+    """
+    g = np.asarray(g, np.float64)
+    if g.ndim < 2:
+        raise ValueError("a slope tolerance needs an array with picture axes (..., H, W)")
+    H, W = g.shape[-2:]
+    fin = np.isfinite(g)
+    p = np.pad(np.where(fin, g, 0.0), [(0, 0)] * (g.ndim - 2) + [(1, 1), (1, 1)])
+    pf = np.pad(fin, [(0, 0)] * (g.ndim - 2) + [(1, 1), (1, 1)])
+    out = np.zeros(g.shape)
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            if di == dj == 1:
+                continue
+            ok = fin & pf[..., di:di + H, dj:dj + W]
+            d = np.abs(p[..., di:di + H, dj:dj + W] - np.where(fin, g, 0.0))
+            out = np.where(ok, np.maximum(out, d), out)
+    return out
 
 
 def _fold(a, shape):
