@@ -51,6 +51,15 @@ EXPOSED = {
 }
 QUICK_CASES = ["is_sphere_1_5", "is_bunny_1_2"]
 
+#: the depth keys the slope term admits for a rasterizer without the 1/256 snap (bugs=["no_snap"])
+DEPTH_KEYS = ("stage.minmax.zmin", "stage.minmax.zmax", "stage.voxelize.zlo", "stage.voxelize.zhi",
+              "stage.peel.ldi")
+#: what still fails downstream of the unsnapped depths: the trace's positions are the LDI's depths
+#: (unprojected at the probes), moved by up to 5e-4 where `close` allows 1e-6 + 1e-5 |g|; the
+#: directions, codes and image pass (a moved depth turns a normal by far less than 0.05 degrees)
+UNSNAPPED_FAILS = {"exit_pos", "path_length", "stage.trace.exit_pos", "stage.trace.path_length",
+                   "stage.trace.path_pos"}
+
 
 def _cli():
     exe = Path(sys.executable).with_name("refraction-ref")
@@ -134,6 +143,35 @@ def test_planted_bug_names_its_pass(golden, tmp_path, bug):
 @pytest.mark.parametrize("bug", sorted(EXPOSED))
 def test_planted_bug_full_matrix(golden, tmp_path, bug):
     _assert_bug(_verdicts(golden, tmp_path, bug, CASES), bug, CASES)
+
+
+def test_unsnapped_rasterizer_passes_the_depth_buffers(golden, tmp_path):
+    """A rasterizer without the 1/256 snap passes `minmax`, `voxelize`, `peel`, `reduce` and `normals`
+    (the depth keys by the slope term, 1/512 pixel of the local depth step; the LDI and the bounds against
+    its own bitmask and depths) and fails `trace` on the positions only (`UNSNAPPED_FAILS`)."""
+    from refraction_ref.golden.check import _ambiguity, _context
+    from refraction_ref.golden.tolerances import judge
+
+    rep = _verdicts(golden, tmp_path, "no_snap", QUICK_CASES)
+    man = json.load(open(os.path.join(golden, "manifest.json")))
+    for case in QUICK_CASES:
+        c = rep.cases[case]
+        assert c.earliest_failing_stage == "trace" and set(c.failing_keys) == UNSNAPPED_FAILS, \
+            (case, c.failing_keys)
+        for r in c.rows:
+            if r["stage"] in ("rays", "geometry", "minmax", "voxelize", "peel", "reduce", "normals", "shade"):
+                assert r["ok"], (case, r["key"], r["detail"])
+        assert all("step(g)" in c["keys"][k]["detail"] for k in DEPTH_KEYS)
+        # the depths really moved, beyond atol + rtol |g| on 5-8 % of the covered pixels: without the slope
+        # term zmin/zmax fail (located), with it they pass
+        g = dict(np.load(os.path.join(golden, case, "golden.npz")))
+        a = np.load(os.path.join(str(tmp_path), case, "result.npz"))
+        pics = _context(g)
+        for k in ("stage.minmax.zmin", "stage.minmax.zmax"):
+            spec = man["cases"][case]["keys"][k]["tolerance"]
+            amb = _ambiguity(k, g[k], spec, pics, a[k])
+            assert not judge(a[k], g[k], dict(spec, slope=0.0), ambiguous=amb)["ok"], (case, k)
+            assert judge(a[k], g[k], spec, ambiguous=amb)["ok"], (case, k)
 
 
 def test_exposure_sets_follow_from_the_golden(golden):

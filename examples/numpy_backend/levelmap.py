@@ -40,7 +40,8 @@ BUGS = {
     "inverted_eta": "the relative index inverted at the water: water.ior / "
                     "outside_ior instead of outside_ior / water.ior",
     "other_diagonal": "the water quads split on the other diagonal",
-    "no_snap": "the maps' rasterizer does not snap vertices to 1/256 texel",
+    "no_snap": "the maps' rasterizer does not snap vertices to 1/256 texel (an analytic rasterizer: not "
+               "a bug, check admits it by the depth keys' slope term)",
     "no_ad_floor": "A_d of eq. 4-18 not floored at one texel",
     "two_comparisons": "plane acceptance as two comparisons against "
                        "zeta_i -+ s/2 instead of one floor",
@@ -148,7 +149,7 @@ def resolve(scene):
 
 def snap(c, bugs=()):
     """Map coordinates to the rasterizer's fixed-point grid (1/256 texel)."""
-    if "no_snap" in bugs:       # planted: sample the unsnapped triangle
+    if "no_snap" in bugs:       # sample the unsnapped triangle (admitted: within 1/512 texel of the snap)
         return c * SNAP
     return np.rint(c * SNAP).astype(np.int64)
 
