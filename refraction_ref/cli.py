@@ -113,7 +113,7 @@ def _cmd_scene(a):
     if getattr(a, "to", None):
         fmt, path = a.to
         if fmt != "mitsuba":
-            from .scene import SceneError
+            from .validation import SceneError
 
             raise SceneError(f"scene --to: unknown format {fmt!r}; the one known is 'mitsuba'")
         from .interop.mitsuba import write_xml
@@ -320,7 +320,7 @@ def main(argv=None):
     from .compare import CompareError
     from .files import NotNpzError, OutputError
     from .golden.check import CheckError
-    from .scene import SceneError
+    from .validation import SceneError
     from .sweep import SweepError
     from .tables.report import TablesError
 

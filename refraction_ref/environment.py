@@ -64,7 +64,7 @@ def read_latlong(path, where="environment.path"):
     import os
 
     from .files import file_kind
-    from .scene import SceneError
+    from .validation import SceneError
 
     try:
         return _load_image(os.path.abspath(path))

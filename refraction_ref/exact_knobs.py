@@ -50,16 +50,16 @@ NORMALS = ("crease", "file", "smooth", "face")
 
 def validate_exact(data, base_dir="."):
     """Check ``data['exact']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
-    from .scene import SceneError, _num
+    from .validation import SceneError, check_number
 
     p = data["exact"]
     if p["normals"] not in NORMALS:
         raise SceneError(f"scene: 'exact.normals' is {p['normals']!r}; choose one of {', '.join(NORMALS)}")
-    _num(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
-    _num(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
-    _num(p["photons"], "exact.photons", 1, 16384, integer=True)
-    _num(p["photon_seed"], "exact.photon_seed", 0, integer=True)
-    _num(p["record"], "exact.record", 0, 64, integer=True)
+    check_number(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
+    check_number(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
+    check_number(p["photons"], "exact.photons", 1, 16384, integer=True)
+    check_number(p["photon_seed"], "exact.photon_seed", 0, integer=True)
+    check_number(p["record"], "exact.record", 0, 64, integer=True)
     return data
 
 

@@ -27,7 +27,7 @@ from .environment import environment_lookup
 from .graph import Method, Stage, register_method, run_graph
 from .exact import mesh_normals
 from .meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
-from .scene import SceneError
+from .validation import SceneError
 from .status import MISSED
 from .vec3 import affine
 

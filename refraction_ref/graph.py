@@ -29,6 +29,7 @@ parameter block; build systems (make, Dask graphs) key work on its inputs.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import importlib
 import json
@@ -39,8 +40,10 @@ from typing import Callable
 
 import numpy as np
 
+from .validation import SceneError
+
 __all__ = ["Stage", "Method", "KnobBlock", "Context", "UndeclaredRead", "register_method", "register_block",
-           "get_method", "method_names", "BLOCKS", "run_graph", "stage_inputs", "STAGE_PREFIX", "describe",
+           "get_method", "method_names", "BLOCKS", "load_builtin_blocks", "run_graph", "stage_inputs", "STAGE_PREFIX", "describe",
            "file_stamp"]
 
 #: prefix of kept stage buffers in a result's arrays: ``stage.<stage>.<buffer>``
@@ -175,6 +178,29 @@ _BUILTIN = {
 }
 
 
+#: the built-in knob blocks' modules, loaded by name (as the methods are) so that the scene loader
+#: imports no method: each module registers its blocks with :func:`register_block` on import
+_BUILTIN_BLOCKS = (
+    "refraction_ref.imagespace.knobs",
+    "refraction_ref.exact_knobs",
+    "refraction_ref.levelmap.knobs",
+    "refraction_ref.volumetric.knobs",
+)
+
+
+def load_builtin_blocks():
+    """Import the built-in knob blocks' modules (cheap: no kernels); returns :data:`BLOCKS`.
+
+    Returns
+    -------
+    dict
+        Block name -> :class:`KnobBlock`, every built-in block registered.
+    """
+    for module in _BUILTIN_BLOCKS:
+        importlib.import_module(module)
+    return BLOCKS
+
+
 def register_block(block):
     """Register a :class:`KnobBlock`; returns it."""
     BLOCKS[block.name] = block
@@ -197,8 +223,6 @@ def get_method(name):
     if name not in _METHODS and name in _BUILTIN:
         importlib.import_module(_BUILTIN[name])
     if name not in _METHODS:
-        from .scene import SceneError
-
         raise SceneError(f"unknown method {name!r}; choose one of {', '.join(method_names())}")
     return _METHODS[name]
 
@@ -334,9 +358,7 @@ class Context:
 
 
 def _scene_view(scene, stage):
-    from .scene import Scene
-
-    return Scene(_project(scene.data, stage.reads, stage.name), scene.base_dir, scene.callables)
+    return dataclasses.replace(scene, data=_project(scene.data, stage.reads, stage.name))
 
 
 def _keep_names(method_name, stages, keep):
@@ -349,8 +371,6 @@ def _keep_names(method_name, stages, keep):
     asked = [k.strip() for k in (keep.split(",") if isinstance(keep, str) else keep) if k.strip()]
     bad = [k for k in asked if k not in names]
     if bad:
-        from .scene import SceneError
-
         raise SceneError(f"keep: unknown stage {', '.join(repr(b) for b in bad)} for the {method_name} method "
                          f"on this scene; its stages are {', '.join(names)} (or 'stages' for all)")
     return set(asked)

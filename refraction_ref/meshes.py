@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .scene import SceneError
+from .validation import SceneError
 from .vec3 import affine, dot, readonly
 
 __all__ = ["BUILTIN_MESHES", "Geometry", "corner_normals", "crease_edge_angles", "eye_inside", "file_vertex_normals",

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .meshes import object_mesh
-from .scene import SceneError
+from .validation import SceneError
 
 __all__ = ["Receivers", "receiver_soup"]
 

@@ -10,7 +10,8 @@ import numpy as np
 from .contract import CONTRACT_VERSION, software_versions
 from .graph import get_method, method_names, run_graph
 from .result import Result
-from .scene import Scene, SceneError, load_scene
+from .validation import SceneError
+from .scene import Scene, load_scene
 
 __all__ = ["render", "METHODS", "run_method", "kernels_cached"]
 

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 from .graph import method_names
 from .render import run_method
-from .scene import Scene, SceneError, load_scene
+from .validation import SceneError
+from .scene import Scene, load_scene
 
 __all__ = ["Session"]
 

@@ -151,7 +151,8 @@ def load_spec(src):
             s = os.path.join(base_dir, s)
         scenes[name] = s
     spec["scenes"] = scenes
-    from .scene import SceneError, load_scene
+    from .validation import SceneError
+    from .scene import load_scene
 
     if spec.get("task"):
         return spec

@@ -55,7 +55,7 @@ def catalogue(only=None):
     SceneError
         For a name in ``only`` that is not a case (naming the known ones).
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     cases = {}
     for p in sorted(glob.glob(os.path.join(CATALOGUE_DIR, "*.json"))):
@@ -349,14 +349,13 @@ def _geometry_arrays(scene):
 
 def _build_case(case, d, progress=False):
     """Render one case into folder ``d``; its manifest entry."""
-    import refraction_ref as rr
-
     from ..graph import get_method
+    from ..render import render
 
     t0 = time.perf_counter()
     scene = case_scene(case, d)
     method = case["method"]
-    res = rr.render(scene, method=method, keep="stages", progress=progress)
+    res = render(scene, method=method, keep="stages", progress=progress)
     stages = get_method(method).stages(scene)
     noisy = bool(case.get("batches"))
     keys = {}
@@ -374,7 +373,7 @@ def _build_case(case, d, progress=False):
         sk = _seed_key(scene)
         maps = {}
         for b in range(K):
-            r = rr.render(scene, method=method, overrides={sk: b})
+            r = render(scene, method=method, overrides={sk: b})
             for k, a in r.arrays.items():
                 if k.startswith("caustic_map_"):
                     maps.setdefault(k, []).append(a)
@@ -385,7 +384,7 @@ def _build_case(case, d, progress=False):
         entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
         entry["files"].append("batches.npz")
     if case.get("reference"):
-        ref = rr.render(scene, method=case["reference"])
+        ref = render(scene, method=case["reference"])
         _save_npz(os.path.join(d, "reference.npz"), ref.arrays)
         entry["reference"] = case["reference"]
         entry["files"].append("reference.npz")

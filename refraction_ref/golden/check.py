@@ -261,7 +261,7 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
     ldi_ok = "stage.peel.ldi" in cand and passed.get("stage.peel.ldi")
     if not (bits_ok or ldi_ok):
         return out
-    from .. import load_scene
+    from ..scene import load_scene
     from ..imagespace.depth_bounds import global_bounds
     from ..imagespace.pipeline import pass_peel, pass_reduce
 

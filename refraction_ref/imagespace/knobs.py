@@ -64,33 +64,33 @@ CHOICES = {
 
 def validate_imagespace(data, base_dir="."):
     """Check ``data['imagespace']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
-    from ..scene import SceneError, _num
+    from ..validation import SceneError, check_number
 
     im = data["imagespace"]
     for key, choices in CHOICES.items():
         if im[key] not in choices:
             raise SceneError(f"scene: 'imagespace.{key}' is {im[key]!r}; choose one of {', '.join(choices)}")
-    _num(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
-    _num(im["layers"], "imagespace.layers", 1, 32, integer=True)
-    _num(im["slices"], "imagespace.slices", 32, 4096, integer=True)
+    check_number(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
+    check_number(im["layers"], "imagespace.layers", 1, 32, integer=True)
+    check_number(im["slices"], "imagespace.slices", 32, 4096, integer=True)
     if im["slices"] % 32:
         raise SceneError(f"scene: imagespace.slices is {im['slices']}; it must be a multiple of 32 "
                          "(slices are stored in 32-bit words)")
-    _num(im["mip_size"], "imagespace.mip_size", 1, integer=True)
-    _num(im["bound_margin"], "imagespace.bound_margin", 0.0)
-    _num(im["delta"], "imagespace.delta", 1, 8, integer=True)
-    _num(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
-    _num(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
-    _num(im["record"], "imagespace.record", 0, 64, integer=True)
+    check_number(im["mip_size"], "imagespace.mip_size", 1, integer=True)
+    check_number(im["bound_margin"], "imagespace.bound_margin", 0.0)
+    check_number(im["delta"], "imagespace.delta", 1, 8, integer=True)
+    check_number(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
+    check_number(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
+    check_number(im["record"], "imagespace.record", 0, 64, integer=True)
     for key in ("tir", "peel_all"):
         if not isinstance(im[key], bool):
             raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
-    _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
-    _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
+    check_number(im["photons"], "imagespace.photons", 1, 8192, integer=True)
+    check_number(im["gather"], "imagespace.gather", 1, 63, integer=True)
     if im["gather"] % 2 == 0:
         raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
                          "(a centred square of texels, e.g. 7), or 1 for no gathering")
-    _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
+    check_number(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
     return data
 
 
@@ -100,7 +100,7 @@ def check_memory(scene):
     Per pixel: S/8 bytes of bitmask, 8 bytes per layer of the LDI and the
     trace's outputs and temporaries (about 24 more 8-byte words).
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     im = scene.data["imagespace"]
     c = scene.data["camera"]

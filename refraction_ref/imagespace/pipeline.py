@@ -32,7 +32,7 @@ from ..graph import Method, Stage, register_method, run_graph
 from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
-from ..scene import SceneError
+from ..validation import SceneError
 from .depth_bounds import depth_bounds, global_bounds
 from .knobs import check_memory
 from .normals import layer_normals

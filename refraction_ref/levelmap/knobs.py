@@ -52,34 +52,34 @@ WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], 
 
 def merge_water(data, water_defaults=WATER_DEFAULTS, wave_defaults=WAVE_DEFAULTS):
     """Fill a present ``water`` block (and each wave) with the defaults; idempotent."""
-    from ..scene import SceneError, _merge
+    from ..validation import SceneError, merge_defaults
 
     w = data.get("water")
     if w is None:
         return data
-    w = _merge(water_defaults, w, "water")
+    w = merge_defaults(water_defaults, w, "water")
     waves = w.get("waves")
     if waves is None:
         waves = []
     if not isinstance(waves, list):
         raise SceneError(f"scene: 'water.waves' must be a list of waves, got {type(waves).__name__}")
-    w["waves"] = [_merge(wave_defaults, x, f"water.waves[{k}]") for k, x in enumerate(waves)]
+    w["waves"] = [merge_defaults(wave_defaults, x, f"water.waves[{k}]") for k, x in enumerate(waves)]
     data["water"] = w
     return data
 
 
 def validate_levelmap(data, base_dir="."):
     """Check the ``levelmap`` knobs and the ``water`` block (merged with its defaults first)."""
-    from ..scene import SceneError, _num, _vec
+    from ..validation import SceneError, check_number, check_vector
 
     merge_water(data)
     p = data["levelmap"]
-    _num(p["planes"], "levelmap.planes", 1, 4096, integer=True)
-    _num(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
-    _num(p["map_size"], "levelmap.map_size", 1, 8192, integer=True)
-    _num(p["ambient"], "levelmap.ambient", 0.0)
-    _num(p["exact_samples"], "levelmap.exact_samples", 2, 16384, integer=True)
-    _num(p["exact_seed"], "levelmap.exact_seed", 0, integer=True)
+    check_number(p["planes"], "levelmap.planes", 1, 4096, integer=True)
+    check_number(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
+    check_number(p["map_size"], "levelmap.map_size", 1, 8192, integer=True)
+    check_number(p["ambient"], "levelmap.ambient", 0.0)
+    check_number(p["exact_samples"], "levelmap.exact_samples", 2, 16384, integer=True)
+    check_number(p["exact_seed"], "levelmap.exact_seed", 0, integer=True)
     for k in ("smart_slicing", "shadows"):
         if not isinstance(p[k], bool):
             raise SceneError(f"scene: levelmap.{k} must be true or false, got {p[k]!r}")
@@ -91,21 +91,21 @@ def validate_levelmap(data, base_dir="."):
     w = data.get("water")
     if w is None:
         return data
-    size = _vec(w["size"], 2, "water.size")
+    size = check_vector(w["size"], 2, "water.size")
     if np.any(size <= 0):
         raise SceneError(f"scene: 'water.size' is {w['size']}; both extents must be > 0")
-    _num(w["height"], "water.height")
-    _num(w["resolution"], "water.resolution", 1, 4096, integer=True)
-    _num(w["ior"], "water.ior", 0.0, lo_open=True)
-    _num(w["absorption"], "water.absorption", 0.0)
+    check_number(w["height"], "water.height")
+    check_number(w["resolution"], "water.resolution", 1, 4096, integer=True)
+    check_number(w["ior"], "water.ior", 0.0, lo_open=True)
+    check_number(w["absorption"], "water.absorption", 0.0)
     amp = 0.0
     for k, wave in enumerate(w["waves"]):
-        amp += abs(_num(wave["amplitude"], f"water.waves[{k}].amplitude"))
-        _num(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
-        d = _vec(wave["direction"], 2, f"water.waves[{k}].direction")
+        amp += abs(check_number(wave["amplitude"], f"water.waves[{k}].amplitude"))
+        check_number(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
+        d = check_vector(wave["direction"], 2, f"water.waves[{k}].direction")
         if not np.any(d != 0):
             raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
-        _num(wave["phase"], f"water.waves[{k}].phase")
+        check_number(wave["phase"], f"water.waves[{k}].phase")
     slope = max_slope(w)
     if slope >= 1.0:
         raise SceneError(f"scene: the water's waves are too steep: the sum of 2 pi amplitude / wavelength is "
@@ -140,7 +140,7 @@ def check_water_depth(water, receiver_vertices):
         When the sum of the amplitudes is at least the depth from the water
         plane to the highest receiver point below it.
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     h = float(water["height"])
     amp = sum(abs(float(x["amplitude"])) for x in water["waves"])

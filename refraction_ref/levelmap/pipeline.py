@@ -39,7 +39,8 @@ import numpy as np
 from ..camera import Camera
 from ..graph import Method, Stage, register_method, run_graph
 from ..receivers import receiver_soup
-from ..scene import SceneError, load_scene
+from ..validation import SceneError
+from ..scene import load_scene
 from .caustics_map import beams_in_map, cull_beams, splat_plane, splat_planes
 from .casting import cast_between
 from .illumination import illumination_volumes

@@ -60,7 +60,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..optics import refract
-from ..scene import SceneError
+from ..validation import SceneError
 from ..vec3 import affine, dot
 
 __all__ = ["Box", "Lattice", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..optics import refract
-from ..scene import SceneError
+from ..validation import SceneError
 
 __all__ = ["WaterMesh", "wave_height", "wave_gradient", "water_mesh", "incident_directions",
            "refract_at_vertices", "light_weight"]

@@ -49,7 +49,7 @@ import numba as nb
 import numpy as np
 
 from ..camera import Camera
-from ..scene import SceneError
+from ..validation import SceneError
 
 __all__ = ["generate_photons", "box_entry", "inflate_mesh", "occupied_box"]
 

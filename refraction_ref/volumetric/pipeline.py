@@ -53,7 +53,7 @@ import numpy as np
 from ..camera import Camera
 from ..environment import environment_lookup
 from ..graph import Method, Stage, describe, register_method, run_graph
-from ..scene import SceneError
+from ..validation import SceneError
 from .gradient import gradient_field
 from .march import march_photons, receiver_tuple, smooth_radiance
 from .octree import build_octree
