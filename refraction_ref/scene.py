@@ -221,7 +221,7 @@ def apply_overrides(data, overrides):
     for key, value in (overrides or {}).items():
         parts = key.split(".")
         if len(parts) == 2:
-            parts[1] = _alias(parts[0], parts[1])
+            parts[0], parts[1] = _alias(parts[0], parts[1])
         node, where = data, ""
         for p in parts[:-1]:
             if isinstance(node, list):
@@ -265,18 +265,47 @@ def _list_index(items, p, key, where):
 
 
 def _alias(block, key):
-    """The current name of a knob that moved (``KnobBlock.aliases``), else ``key``."""
+    """The current ``(block, key)`` of a knob that moved (``KnobBlock.aliases``), else ``(block, key)``.
+
+    An alias is a key of the same block (``"old": "new"``) or, for a knob that
+    moved to another block, a dotted name (``"caustic_map": "caustics.map_size"``).
+    """
     b = BLOCKS.get(block)
-    return b.aliases.get(key, key) if b is not None else key
+    new = b.aliases.get(key, key) if b is not None else key
+    if "." in new:
+        nb, nk = new.split(".", 1)
+        return nb, nk
+    return block, new
 
 
 def _unalias(raw):
-    """Rename moved knobs in a scene's blocks to their current names (a key keeps its old name as an alias)."""
+    """Rename moved knobs in a scene's blocks to their current names (a key keeps its old name as an alias).
+
+    A knob given under its old name in another block moves there; given
+    twice (old and new name, or two old names of one knob) with different
+    values, it is an error naming both.
+    """
     out = dict(raw)
+    given_as = {}
     for name, b in BLOCKS.items():
         given = raw.get(name)
-        if b.aliases and isinstance(given, dict):
-            out[name] = {_alias(name, k): v for k, v in given.items()}
+        if not (b.aliases and isinstance(given, dict)):
+            continue
+        out[name] = dict(given)
+        for k in given:
+            nb, nk = _alias(name, k)
+            if (nb, nk) == (name, k):
+                continue
+            v = out[name].pop(k)
+            target = out.get(nb)
+            target = dict(target) if isinstance(target, dict) else {}
+            if nk in target and target[nk] != v:
+                first = given_as.get((nb, nk), f"{nb}.{nk}")
+                raise SceneError(f"scene: '{name}.{k}' (now '{nb}.{nk}') is {v!r} but '{first}' gives "
+                                 f"{target[nk]!r}; they are one knob: give it once, as '{nb}.{nk}'")
+            target[nk] = v
+            given_as[(nb, nk)] = f"{name}.{k}"
+            out[nb] = target
     return out
 
 
