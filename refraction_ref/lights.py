@@ -37,6 +37,23 @@ def validate_lights(data):
 
     For a scene with ``water``, a directional light must travel downwards
     (negative y) and a point light must sit above the highest crest.
+
+    Parameters
+    ----------
+    data : dict
+        The merged scene dictionary (``lights`` list, optional ``water``
+        block with ``height`` and ``waves``).
+
+    Returns
+    -------
+    dict
+        ``data`` itself, unchanged.
+
+    Raises
+    ------
+    SceneError
+        An unknown type, a zero direction, a missing position, a negative or
+        non-finite radiance, or a light that cannot reach the water from above.
     """
     from .validation import check_number, check_vector
 
@@ -127,6 +144,14 @@ def light_camera(light, vertices, photons):
 
 def light_direction_at(light, points):
     """Unit directions the light travels at world points (..., 3), and the distance factor.
+
+    Parameters
+    ----------
+    light : dict
+        A scene light: ``directional`` with ``direction`` or ``point`` with
+        ``position``.
+    points : (..., 3) array_like
+        World-space points.
 
     Returns
     -------

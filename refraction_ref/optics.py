@@ -81,7 +81,25 @@ def refract3(dx, dy, dz, nx, ny, nz, eta):
 
 @nb.njit(cache=True, inline="always")
 def reflect3(dx, dy, dz, nx, ny, nz):
-    """Mirror direction of ``d`` about the plane with normal ``n``."""
+    """Mirror direction of ``d`` about the plane with normal ``n``.
+
+    Parameters
+    ----------
+    dx, dy, dz : float
+        Incident direction (unit length for a unit result).
+    nx, ny, nz : float
+        Unit surface normal, either orientation (the sign cancels).
+
+    Returns
+    -------
+    rx, ry, rz : float
+        Reflected direction ``d - 2 (d . n) n``.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.2 (specular reflection).
+    """
     c = dx * nx + dy * ny + dz * nz
     return dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
 
@@ -165,14 +183,52 @@ def refract(d, n, eta):
 
 
 def reflect(d, n):
-    """Mirror directions ``d - 2 (d . n) n`` for unit normals ``n``."""
+    """Mirror directions ``d - 2 (d . n) n`` for unit normals ``n``.
+
+    Parameters
+    ----------
+    d : (..., 3) array_like
+        Incident directions.
+    n : (..., 3) array_like
+        Unit normals, broadcast against ``d``; either orientation.
+
+    Returns
+    -------
+    (..., 3) float64 ndarray
+        Reflected directions.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.2 (specular reflection).
+    """
     d = np.asarray(d, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
     return d - 2.0 * np.sum(d * n, axis=-1, keepdims=True) * n
 
 
 def fresnel(cos_i, eta):
-    """Unpolarised Fresnel reflectance (array version of :func:`fresnel_dielectric`)."""
+    """Unpolarised Fresnel reflectance (array version of :func:`fresnel_dielectric`).
+
+    Parameters
+    ----------
+    cos_i : array_like
+        Cosine of the incidence angle per direction (sign ignored), any shape.
+    eta : float or array_like
+        Index ratio n1 / n2 (incident over transmitted side), broadcast to
+        ``cos_i.shape``.
+
+    Returns
+    -------
+    float64 ndarray
+        Reflectance in [0, 1] with the shape of ``cos_i``; 1 under total
+        internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.1 (Fresnel reflectance of dielectrics).
+    """
     cos_i = np.asarray(cos_i, dtype=np.float64)
     c = np.ascontiguousarray(cos_i).reshape(-1)
     e = np.ascontiguousarray(np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)).reshape(-1)
