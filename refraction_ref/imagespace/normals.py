@@ -58,6 +58,27 @@ def layer_depth(ldi, n, i, j, lut):
     ``lut`` is ``(use_lut, bits, zlo, zhi, slices, pop8, sel8)``: with
     ``use_lut`` the depth is found on the fly in the bitmask (§3.4.1), else
     it is read from the peeled LDI array ``ldi`` (§3.4.2).
+
+    Parameters
+    ----------
+    ldi : (L, H, W) float32 or float64
+        Peeled layered depth images, ``+inf`` where absent.
+    n : int
+        Layer index, 0 the nearest.
+    i, j : int
+        Pixel row and column (any integers: off screen gives ``+inf``).
+    lut : tuple
+        ``(use_lut, bits, zlo, zhi, slices, pop8, sel8)``, see above;
+        :func:`no_lut` makes one that reads ``ldi``.
+
+    Returns
+    -------
+    float
+        View-space depth of the layer at the pixel.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.1 (on the fly) and §3.4.2 (LDI array).
     """
     H = ldi.shape[1]
     W = ldi.shape[2]
@@ -247,6 +268,28 @@ def sample_depth(ldi, n, r, c, lut, filt):
     there). It is written as differences (``a + f (b - a)``, rows then the
     column), so four equal depths give that depth exactly, and at a texel
     centre the texel's own depth.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) float32 or float64
+        Peeled layered depth images, ``+inf`` where absent.
+    n : int
+        Layer index.
+    r, c : float
+        Screen position, row and column in pixel units.
+    lut : tuple
+        Depth source of :func:`layer_depth`.
+    filt : int
+        0 nearest, 1 bilinear.
+
+    Returns
+    -------
+    float64
+        View-space depth of the layer at the position.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (hardware filtering) and §3.6.
     """
     i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
     if k == 0:
@@ -311,7 +354,24 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt)
 
 
 def no_lut(shape):
-    """The ``lut`` argument that makes :func:`layer_depth` read the LDI array."""
+    """The ``lut`` argument that makes :func:`layer_depth` read the LDI array.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Shape of the depth image (unused: the tuple's arrays are placeholders
+        of size one).
+
+    Returns
+    -------
+    tuple
+        ``(False, bits, zlo, zhi, 256, pop8, sel8)`` with placeholder arrays of
+        the types the kernels expect.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (reading the separately peeled LDI array).
+    """
     z = np.zeros((1, 1))
     return (False, np.zeros((1, 1, 1), np.uint32), z, z, 256, np.zeros(256, np.int64), np.zeros((256, 8), np.int64))
 
@@ -332,6 +392,31 @@ def layer_normals(layer, camera, method="central", delta=1):
 
     The per-pixel kernel :func:`normal_at` is what the tracer calls at
     each intersection; this array version serves plots and tests.
+
+    Parameters
+    ----------
+    layer : (H, W) float
+        One layered depth image, view-space depth, ``+inf`` where absent.
+    camera : Camera
+        The view the depth image was rendered from (unprojection of pixels).
+    method : {'forward', 'central', 'mesh3x3', 'cross'}
+        Estimator (see the module docstring).
+    delta : int
+        Pixel step of the differences (``central`` and ``cross``).
+
+    Returns
+    -------
+    (H, W, 3) float64
+        Unit view-space normals, NaN where the layer is absent.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``method``.
+
+    References
+    ----------
+    Chaudhari (2008), §3.5, eqs. 3.1, 3.2 and Fig. 3.4.
     """
     if method not in NORMAL_METHODS:
         raise ValueError(f"normals: unknown method {method!r}; choose one of {sorted(NORMAL_METHODS)}")
