@@ -89,6 +89,18 @@ class Scene:
         return json.dumps(self.data, indent=1, sort_keys=True)
 
     def resolve_path(self, p):
+        """A path of the scene, resolved against :attr:`base_dir` when relative.
+
+        Parameters
+        ----------
+        p : str
+            A path from the scene (mesh, image).
+
+        Returns
+        -------
+        str
+            ``p`` if absolute, else ``base_dir / p`` normalised.
+        """
         return p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
 
     def copy(self):
@@ -124,7 +136,29 @@ def _check_transform(t, where):
 
 
 def validate(data, base_dir="."):
-    """Check a merged scene; raise :class:`SceneError` on the first problem."""
+    """Check a merged scene; raise :class:`SceneError` on the first problem.
+
+    Also fills the partially given knob blocks (each block's ``merge``)
+    and the objects' ``deform`` defaults in place, reads a ``latlong``
+    environment image once, and runs each registered knob block's checks.
+
+    Parameters
+    ----------
+    data : dict
+        The merged scene dictionary (every key present).
+    base_dir : str
+        Folder for relative mesh and image paths.
+
+    Returns
+    -------
+    dict
+        ``data`` itself.
+
+    Raises
+    ------
+    SceneError
+        Naming the key and the fix.
+    """
     c = data["camera"]
     eye = check_vector(c["eye"], 3, "camera.eye")
     target = check_vector(c["target"], 3, "camera.target")
@@ -216,6 +250,24 @@ def apply_overrides(data, overrides):
 
     String values are parsed as JSON where they can be (``"10"`` -> 10,
     ``"[0,0,3]"`` -> a list), so CLI ``--set key=value`` works unchanged.
+
+    Parameters
+    ----------
+    data : dict
+        A scene dictionary (not modified: a deep copy is changed).
+    overrides : dict or None
+        Dotted key -> value; list items by index (``objects.0``); a knob
+        block's aliases apply to two-part keys.
+
+    Returns
+    -------
+    dict
+        The new scene dictionary.
+
+    Raises
+    ------
+    SceneError
+        An unknown key or a bad list index.
     """
     data = copy.deepcopy(data)
     for key, value in (overrides or {}).items():
