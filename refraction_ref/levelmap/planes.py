@@ -114,10 +114,19 @@ def refracted_axis(light, water, eta, target):
     target : (3,) array_like
         The receiver's origin (used for point lights only).
 
+    Returns
+    -------
+    (3,) float64
+        Unit refracted direction ``T0`` (pointing down into the water).
+
     Raises
     ------
     SceneError
         When the light cannot enter the water from above.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, Figs. 4-5 and 4-7; §2.6 (Snell's law).
     """
     up = np.array([0.0, 1.0, 0.0])
     if light["type"] == "directional":
@@ -158,6 +167,20 @@ def receiver_origin(receiver):
 
     ``p' = R (scale p) + translate`` maps the mesh's origin (after ``fit``'s
     centring on the bounding-box centre) to ``translate``.
+
+    Parameters
+    ----------
+    receiver : dict
+        A receiver of the scene (its optional ``transform.translate``).
+
+    Returns
+    -------
+    (3,) float64
+        ``P_0`` in world space (the origin when there is no translation).
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, eq. 4-2.
     """
     return np.asarray(receiver.get("transform", {}).get("translate", [0.0, 0.0, 0.0]), dtype=np.float64)
 
@@ -227,6 +250,21 @@ class Lattice(NamedTuple):
 def plane_lattice(box, n, placement="tight"):
     """The ``n`` reference planes of ``box`` (eqs. 4-6 to 4-9; module docstring).
 
+    Parameters
+    ----------
+    box : Box
+        The reference box (its extent ``h`` along ``V``).
+    n : int
+        Number of planes.
+    placement : {"tight", "thesis"}
+        Planes at slab centres of the tight box, or the thesis's ``n - 1``
+        slices with planes on the box faces (module docstring).
+
+    Returns
+    -------
+    Lattice
+        Plane depths, spacing and the start of the first acceptance slab.
+
     References
     ----------
     Tipprasert (2006), eqs. 4-6 to 4-9, 4-15.
@@ -245,6 +283,15 @@ def plane_lattice(box, n, placement="tight"):
 def slice_planes(box, n, placement="tight"):
     """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
 
+    Parameters
+    ----------
+    box : Box
+        The reference box.
+    n : int
+        Number of planes.
+    placement : {"tight", "thesis"}
+        The lattice (:func:`plane_lattice`).
+
     Returns
     -------
     zeta : (n,) float64
@@ -253,13 +300,35 @@ def slice_planes(box, n, placement="tight"):
         Spacing (eq. 4-8).
     eps : float
         Acceptance threshold ``s / 2`` (eq. 4-15).
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, eqs. 4-6 to 4-9; §4.4, eq. 4-15.
     """
     lat = plane_lattice(box, n, placement)
     return lat.zeta, lat.s, lat.s / 2.0
 
 
 def to_map(box, p):
-    """World points (..., 3) to map coordinates (col, row, zeta), (..., 3)."""
+    """World points (..., 3) to map coordinates (col, row, zeta), (..., 3).
+
+    Parameters
+    ----------
+    box : Box
+        The reference box defining the map frame.
+    p : (..., 3) array_like
+        World points.
+
+    Returns
+    -------
+    (..., 3) float64
+        ``col`` and ``row`` in texel units (centres at ``+0.5``) and ``zeta``,
+        the depth along ``T0`` from the box centre (world units).
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1 (box axes, eq. 4-1) and §4.2.2 (eqs. 4-10 to 4-13).
+    """
     q = np.asarray(p, dtype=np.float64) - box.center
     Hc, Wc = box.size
     col = (dot(q, box.U) / box.w + 0.5) * Wc
@@ -269,14 +338,51 @@ def to_map(box, p):
 
 
 def dir_to_map(box, t):
-    """World directions (..., 3) to map-space rates (dcol, drow, dzeta) per unit length."""
+    """World directions (..., 3) to map-space rates (dcol, drow, dzeta) per unit length.
+
+    Parameters
+    ----------
+    box : Box
+        The reference box defining the map frame.
+    t : (..., 3) array_like
+        World directions.
+
+    Returns
+    -------
+    (..., 3) float64
+        Texels of column and row and world units of ``zeta`` travelled per unit
+        length along ``t``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1 and §4.4 (edge rays of the beams, Fig. 4-14).
+    """
     t = np.asarray(t, dtype=np.float64)
     Hc, Wc = box.size
     return np.stack([dot(t, box.U) * (Wc / box.w), dot(t, box.W) * (Hc / box.d), -dot(t, box.V)], axis=-1)
 
 
 def from_map(box, col, row, zeta):
-    """Map coordinates back to world points (..., 3)."""
+    """Map coordinates back to world points (..., 3).
+
+    Parameters
+    ----------
+    box : Box
+        The reference box defining the map frame.
+    col, row : array_like
+        Map coordinates in texel units (texel centres at ``+0.5``).
+    zeta : array_like
+        Depth along ``T0`` from the box centre, broadcast with ``col``, ``row``.
+
+    Returns
+    -------
+    (..., 3) float64
+        World points, the inverse of :func:`to_map`.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.2 (positions from the position map's depth).
+    """
     Hc, Wc = box.size
     a = (np.asarray(col) / Wc - 0.5) * box.w
     b = (np.asarray(row) / Hc - 0.5) * box.d
@@ -290,6 +396,20 @@ def frame_of(box):
     The rectangle is the box face nearest the light; the normal is ``V``
     (towards the light); texel (a, b) holds the first receiver surface seen
     from ``origin + (b + .5)/Wc u + (a + .5)/Hc v`` looking along ``-V``.
+
+    Parameters
+    ----------
+    box : Box
+        The reference box of a receiver.
+
+    Returns
+    -------
+    (4, 3) float64
+        Rows ``origin``, ``u``, ``v``, ``normal`` in world units.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1 and §4.5 (caustics map over the box face).
     """
     origin = box.center - box.w / 2.0 * box.U - box.d / 2.0 * box.W + box.h / 2.0 * box.V
     return np.stack([origin, box.w * box.U, box.d * box.W, box.V]).astype(np.float64)

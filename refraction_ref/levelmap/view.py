@@ -505,11 +505,29 @@ def _direct_shade(eye, D, fwd, depths, look, out):
 def direct_view(camera, receivers, boxes, maps, ambient, rays=None):
     """The receivers seen directly, without the water (eq. 4-19; the level map's ``image`` before contract 4).
 
+    Parameters
+    ----------
+    camera : Camera
+    receivers : Receivers
+        The receivers' triangle soup.
+    boxes : list of Box
+        Frame (first light's box) of each receiver's caustics map.
+    maps : list of (Hc, Wc) arrays
+        ``caustic_map_r`` of each receiver.
+    ambient : float
+        Ambient term of eq. 4-19, a fraction of the albedo.
+    rays : (origins, directions), optional
+        ``camera.primary_rays()``, when already computed.
+
     Returns
     -------
     image : (H, W, 3) float32
     mask : (H, W) bool
         Pixels showing a receiver.
+
+    References
+    ----------
+    Tipprasert (2006), §4.6, eq. 4-19.
     """
     from ..raster import rasterize
 
@@ -534,6 +552,20 @@ def receiver_scene(tris):
     Keyed by the triangles' content (SHA-1 of their float64 bytes, ~1 ms per MB), not the array
     object: each render rebuilds the soup, but a scene rendered again (a sweep, a benchmark, the
     tables, a camera change) finds its BVH built. Up to four scenes are kept.
+
+    Parameters
+    ----------
+    tris : (T, 3, 3) array_like
+        The receivers' world-space triangles.
+
+    Returns
+    -------
+    Embree scene
+        The scene :func:`~refraction_ref.embree.soup_scene` builds of ``tris``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.6 (the receivers the eye rays reach after the water).
     """
     t = np.ascontiguousarray(tris, np.float64)
     key = (t.shape, hashlib.sha1(t.view(np.uint8)).hexdigest())
@@ -587,6 +619,11 @@ def water_surface_hits_mesh(mesh, origins, dirs, eta, water=None):
         Surface point and refracted unit direction (NaN where the ray misses the water).
     status : (N,) int8
         ``THROUGH`` (1), ``DIRECT`` (3, missed the water) or ``TIR`` (4).
+
+    References
+    ----------
+    Tipprasert (2006), §2.6 (Snell's law, eq. 2-8); ch. 5 (views through the
+    water).
     """
     n = int(water["resolution"])
     sx, sz = (float(v) for v in water["size"])
@@ -602,6 +639,26 @@ def water_surface_hits_analytic(water, origins, dirs, eta):
     """Where rays meet the analytic height field, refracted with its analytic normal (exact reference).
 
     Same returns as :func:`water_surface_hits_mesh`.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block (height, size, waves).
+    origins, dirs : (N, 3) float64
+        Ray origins and unit directions, world space.
+    eta : float
+        ``outside_ior / water.ior``.
+
+    Returns
+    -------
+    P, T : (N, 3) float64
+        Surface point and refracted unit direction (NaN where the ray misses the water).
+    status : (N,) int8
+        ``THROUGH`` (1), ``DIRECT`` (3, missed the water) or ``TIR`` (4).
+
+    References
+    ----------
+    Tipprasert (2006), §2.6 (Snell's law, eq. 2-8).
     """
     rays = _new_rays(origins, dirs)
     _analytic_surface(_waves(water), rays, float(eta))
@@ -639,6 +696,11 @@ def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, m
         float64 (NaN where the ray did not enter the water), ``receiver_pos``
         (H, W, 3) float64 (NaN where none), ``water_length`` (H, W) float64
         (distance in water, 0 for direct rays, NaN where none).
+
+    References
+    ----------
+    Tipprasert (2006), §4.6 (eq. 4-19), §4.5 (eq. 4-17, absorption), §2.6
+    (eq. 2-8).
     """
     H, W = camera.shape
     ro, rd = camera.primary_rays() if rays is None else rays
