@@ -593,7 +593,21 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
 
 
 def format_report(out):
-    """The Markdown report of a :func:`check`."""
+    """The Markdown report of a :func:`check`.
+
+    Parameters
+    ----------
+    out : CheckReport or dict
+        What :func:`check` returns: ``ok``, ``candidate``, ``golden``,
+        ``contract_version`` and per case ``ok``, ``method``,
+        ``earliest_failing_stage``, ``problems`` and ``keys``.
+
+    Returns
+    -------
+    str
+        The report: a summary table, then per case its problems and a table of
+        its judged keys.
+    """
     n_ok = sum(1 for c in out["cases"].values() if c["ok"])
     lines = [f"# Conformance report: {'PASS' if out['ok'] else 'FAIL'}", "",
              f"{n_ok} of {len(out['cases'])} cases pass; candidate `{out['candidate']}` against the golden suite "
