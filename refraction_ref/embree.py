@@ -2,7 +2,7 @@
 
 The exact reference (:mod:`refraction_ref.exact`), the caustics' receiver
 hits and shadow rays (:mod:`refraction_ref.caustics.receivers`) and the exact
-water reference (:mod:`refraction_ref.levelmap.exact_water`) all ask Embree
+water reference (:mod:`refraction_ref.exact.water`) all ask Embree
 (through embreex, float32) for the nearest triangle and then recompute the
 hit in float64 on that triangle. Embree's BVH build is the costly part, so
 triangle soups are cached by identity for the few scenes a render uses.

@@ -25,7 +25,7 @@ import trimesh
 
 import refraction_ref as rr
 from refraction_ref.exact import STATUS_EXITED, trace_exact
-from refraction_ref.exact_knobs import EXACT_DEFAULTS
+from refraction_ref.exact.knobs import EXACT_DEFAULTS
 from refraction_ref.meshes import (corner_normals, crease_edge_angles, file_vertex_normals, load_mesh, rotation_matrix,
                                    vertex_normals)
 from refraction_ref.scene import SceneError, load_scene

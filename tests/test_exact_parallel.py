@@ -25,7 +25,7 @@ import refraction_ref as rr
 from refraction_ref import embree, optics
 from refraction_ref.analytic import icosphere_mesh
 from refraction_ref.exact import area_weighted_vertex_normals, trace_exact
-from refraction_ref.levelmap import exact_water
+from refraction_ref.exact import water as exact_water
 from refraction_ref.meshes import corner_normals, load_mesh
 from refraction_ref.status import EXITED, LIMIT, LOST, MISSED, TIR
 

@@ -16,7 +16,8 @@ stage (``timings_ms``)      pass                                                
 ==========================  =====================================================  ===========
 
 These are stages of the image-space and exact methods' graphs
-(:func:`imagespace_caustic_stages`, :func:`exact_caustic_stages`), added
+(:func:`imagespace_caustic_stages`,
+:func:`refraction_ref.exact.caustics.exact_caustic_stages`), added
 when the scene has lights and receivers.
 
 Outputs (docs/oracle.md, per receiver ``r``): ``caustic_map_r`` (Hc, Wc) float32,
@@ -50,7 +51,7 @@ pass shades the receivers seen directly and both passes' rays in one call
 stream, drawn in fixed chunks that each jump to their own draws
 (:func:`~.light.window_samples`); its splat makes the whole map and the two
 halves' maps from one footprint and binning, the halves' blur for the noise
-estimate is a kernel (:func:`~refraction_ref.levelmap.metrics.relative_l1`),
+estimate is a kernel (:func:`~refraction_ref.metrics.relative_l1`),
 and the rows that NumPy's boolean masks and fancy indexing gathered or
 scattered (exited photons, receiver pixels, the energy book-keeping's
 subsets) are gathered by kernels in the same order. Sums that cross threads
@@ -72,30 +73,14 @@ from ..optics import beer_lambert, refract
 from ..status import EXITED
 from .light import texel_flux, window_samples
 from .receivers import IndexedTriangles, eye_buffers, hit_exact, march_eyespace, receiver_set
-from .shade import _take_rows, exact_visibility, shade_points, shadow_map_visibility
+from .shade import take_rows, exact_visibility, shade_points, shadow_map_visibility
 from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
                     splat_bilinear, splat_bilinear_groups)
 
-__all__ = ["has_caustics", "imagespace_caustic_stages", "exact_caustic_stages", "caustic_arrays", "receiver_hits",
-           "splat_maps", "merge_caustics", "skip_reason", "camera_array"]
-
-
-@nb.njit(cache=True, parallel=True)
-def _ray_points_kernel(o, t, d, idx, out):
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        for c in range(3):
-            out[k, c] = o[i, c] + t[i] * d[i, c]
-
-
-def _ray_points(o, t, d, idx):
-    """``o[idx] + t[idx, None] * d[idx]`` on every thread."""
-    out = np.empty((len(idx), 3))
-    if len(idx):
-        _ray_points_kernel(o, np.ascontiguousarray(t, dtype=np.float64), d, np.ascontiguousarray(idx, np.int64),
-                           out)
-    return out
+__all__ = ["has_caustics", "imagespace_caustic_stages", "caustic_arrays", "receiver_hits",
+           "splat_maps", "merge_caustics", "skip_reason", "camera_array", "receiver_stages", "photon_buffer_names",
+           "per_light_names", "gather_names", "receiver_hit_stage", "splat_stage", "gather_stage", "shade_rays",
+           "put_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -111,7 +96,7 @@ def _put_rows_kernel(a, idx, vals, scale):
                 a[i, c] = vals[k, c]
 
 
-def _put_rows(a, idx, vals):
+def put_rows(a, idx, vals):
     """``a[idx] = vals`` (rows of an (N, C) float64 array), on every thread."""
     if len(idx):
         _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64), False)
@@ -175,12 +160,6 @@ def _front_points_kernel(t, dv, oi, zfront, W, H, sx, sy, ortho, pv):
         pv[k, 2] = -dfront
 
 
-def _scale_rows(a, idx, vals):
-    """``a[idx] *= vals[idx]`` on every thread."""
-    if len(idx):
-        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), vals, True)
-
-
 @nb.njit(cache=True, parallel=True)
 def _row_means_kernel(a, out):
     # a.mean(axis=1) of an (N, C) array: NumPy adds the C values in order, then divides by C
@@ -225,20 +204,6 @@ def _row_means(a):
     if len(a):
         _row_means_kernel(a, out)
     return out
-
-
-@nb.njit(cache=True, parallel=True)
-def _distance_kernel(hp, o, out):
-    # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf): sqrt((x x + y y) + z z)
-    for k0 in nb.prange(hp.shape[0]):
-        k = np.int64(k0)
-        if not math.isfinite(hp[k, 0]):
-            out[k] = np.inf
-            continue
-        x = hp[k, 0] - o[k, 0]
-        y = hp[k, 1] - o[k, 1]
-        z = hp[k, 2] - o[k, 2]
-        out[k] = np.sqrt((x * x + y * y) + z * z)
 
 
 def has_caustics(scene):
@@ -463,7 +428,7 @@ def _st_receiver_depth(ctx):
     return {"eyebuf": (depth, tri), "depth": depth, "triangle": tri, "cam": cam}
 
 
-def _receiver_stages(n_receivers):
+def receiver_stages(n_receivers):
     return (
         Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
               makes=tuple(f"frame_{r}" for r in range(n_receivers)),
@@ -473,22 +438,22 @@ def _receiver_stages(n_receivers):
     )
 
 
-def _per_light_names(prefix, n):
+def per_light_names(prefix, n):
     return tuple(f"{prefix}_{l}" for l in range(n))
 
 
-def _gather_names(nr):
+def gather_names(nr):
     """The gather stage's outputs per receiver: the map, its frame and the per-channel map."""
-    return tuple(nm for k in ("caustic_map", "caustic_frame", "caustic_rgb") for nm in _per_light_names(k, nr))
+    return tuple(nm for k in ("caustic_map", "caustic_frame", "caustic_rgb") for nm in per_light_names(k, nr))
 
 
-def _photon_buffer_names(n, with_ldi):
+def photon_buffer_names(n, with_ldi):
     """Per-light buffers of ``photon_trace`` (None for a light whose photons meet no object)."""
     names = ("camera", "ldi", "exit_pos", "exit_dir") if with_ldi else ("camera", "exit_pos", "exit_dir")
-    return tuple(nm for k in names for nm in _per_light_names(k, n))
+    return tuple(nm for k in names for nm in per_light_names(k, n))
 
 
-def _st_gather(ctx, gather_key):
+def gather_stage(ctx, gather_key):
     d = ctx.scene.data
     rs = ctx.buf["receivers"]["rs"]
     per_light = ctx.buf["splat"]["maps"]
@@ -510,7 +475,7 @@ def _st_photon_trace_is(ctx):
     p = d["imagespace"]
     g = ctx.buf["geometry"]
     geom, ior, outside, absorption = g["geom"], g["ior"], g["outside_ior"], g["absorption"]
-    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), True))}
+    out = {"lights": [], **dict.fromkeys(photon_buffer_names(len(d["lights"]), True))}
     for l, light in enumerate(d["lights"]):
         lcam = light_camera(light, geom.vertices, int(p["photons"])) if len(geom.faces) else None
         if lcam is None:
@@ -541,11 +506,11 @@ def _st_photon_trace_is(ctx):
     return out
 
 
-def _st_receiver_hit(ctx, eyespace):
+def receiver_hit_stage(ctx, eyespace):
     rs = ctx.buf["receivers"]["rs"]
     rd = ctx.buf.get("receiver_depth") if eyespace else None
     nl = len(ctx.buf["photon_trace"]["lights"])
-    out = {"hits": [], **dict.fromkeys(_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl))}
+    out = {"hits": [], **dict.fromkeys(per_light_names("hit_pos", nl) + per_light_names("hit_face", nl))}
     for l, L in enumerate(ctx.buf["photon_trace"]["lights"]):
         if L is None:
             out["hits"].append(None)
@@ -560,7 +525,7 @@ def _st_receiver_hit(ctx, eyespace):
     return out
 
 
-def _st_splat(ctx, reference):
+def splat_stage(ctx, reference):
     """Splat each light's photons into the receivers' maps; the reference also splats its two halves."""
     d = ctx.scene.data
     size = int(d["imagespace"]["caustic_map"])
@@ -600,7 +565,7 @@ def _st_splat(ctx, reference):
 
 def _reference_noise(rs, halves):
     """Half the relative L1 difference of the two interleaved halves' maps, per receiver."""
-    from ..levelmap.metrics import relative_l1
+    from ..metrics import relative_l1
 
     noise = []
     for r in range(len(rs.boxes)):
@@ -646,21 +611,21 @@ def imagespace_caustic_stages(scene):
     eyespace = scene.data["imagespace"]["receiver_hit"] == "eyespace"
     knobs = tuple(dict.fromkeys(("photons",) + MINMAX_KNOBS + VOXELIZE_KNOBS + PEEL_KNOBS + REDUCE_KNOBS
                                 + TRACE_KNOBS))
-    return _receiver_stages(nr) + (
+    return receiver_stages(nr) + (
         Stage("photon_trace", _st_photon_trace_is, reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs),
               after=("geometry",),
-              makes=_photon_buffer_names(nl, True),
+              makes=photon_buffer_names(nl, True),
               doc="per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)"),
-        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, eyespace),
+        Stage("receiver_hit", lambda ctx: receiver_hit_stage(ctx, eyespace),
               reads=("imagespace.receiver_hit",),
               after=("receivers", "photon_trace") + (("receiver_depth",) if eyespace else ()),
-              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
+              makes=per_light_names("hit_pos", nl) + per_light_names("hit_face", nl),
               doc="where exiting photons meet the receivers (§4.1)"),
-        Stage("splat", lambda ctx: _st_splat(ctx, False), reads=("imagespace.caustic_map",),
-              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
+        Stage("splat", lambda ctx: splat_stage(ctx, False), reads=("imagespace.caustic_map",),
+              after=("receivers", "photon_trace", "receiver_hit"), makes=per_light_names("splat", nr),
               doc="bilinear splat of each photon's irradiance (§2.3.2)"),
-        Stage("gather", lambda ctx: _st_gather(ctx, True), reads=("imagespace.gather", "lights"),
-              after=("receivers", "splat"), makes=_gather_names(nr),
+        Stage("gather", lambda ctx: gather_stage(ctx, True), reads=("imagespace.gather", "lights"),
+              after=("receivers", "splat"), makes=gather_names(nr),
               doc="Gaussian gathering (Wyman & Davis 2006)"),
         Stage("caustic_final", _st_final_is,
               reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
@@ -687,7 +652,7 @@ def caustic_arrays(scene, method, bufs, stats):
     return arrays, info
 
 
-def _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
+def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
     """Colour seen along world rays: the receiver they meet (shaded), else the environment.
 
     ``direct``: (points, faces, ray directions) of receiver points seen directly, shaded in
@@ -727,7 +692,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # the boolean masks (row-major) gathered by kernels on every thread
     ri = np.flatnonzero(rec)
     rdir_f = np.ascontiguousarray(rdir.reshape(-1, 3))
-    dirs = _take_rows(rdir_f, ri)
+    dirs = take_rows(rdir_f, ri)
     fwd = -cam.basis[2]
     # origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None]
     direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
@@ -737,7 +702,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     if bg.any():
         base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
     if not obj.any():
-        _, base[rec] = _shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
+        _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
                                    direct)
         return base.astype(np.float32), base.astype(np.float32)
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
@@ -746,12 +711,12 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     oi = np.flatnonzero(obj)
     xi = np.flatnonzero(ex)
     trans = beer_lambert(absorption, tr["path_length"].reshape(-1)[oi], ior)  # per pixel: only the object's
-    o_full = _take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
-    d_full = _take_rows(tr["exit_dir"].reshape(-1, 3), xi)
+    o_full = take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
+    d_full = take_rows(tr["exit_dir"].reshape(-1, 3), xi)
     # the thesis's final pass: refraction at the front surface only
     nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
-    dv = _take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
-    t, _ = refract(dv, _take_rows(nrm.reshape(-1, 3), oi), outside / ior)
+    dv = take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
+    t, _ = refract(dv, take_rows(nrm.reshape(-1, 3), oi), outside / ior)
     # np.where(all(isfinite(t), axis=1), t, dv), and the front points in view space (pixel
     # centres (jj + .5, ii + .5) at depth zfront), on every thread
     pv = np.empty((len(oi), 3))
@@ -760,128 +725,18 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # both passes' rays in one march and one shading: each ray's colour is its own, and one call
     # instead of two halves the serial work around the kernels
     n_full = len(o_full)
-    c, cd = _shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
+    c, cd = shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
                         np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
     base = base.reshape(-1, 3)
-    _put_rows(base, ri, cd)
+    put_rows(base, ri, cd)
     full = base.copy()
     single = base.copy()
     if n_full:
-        _put_rows(full, xi, c[:n_full])
+        put_rows(full, xi, c[:n_full])
     stuck = obj & (st != 1)
     if stuck.any():
         full[stuck.reshape(-1)] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
     _mul_rows(full, oi, trans)  # full[obj] *= trans
-    _put_rows(single, oi, c[n_full:])
+    put_rows(single, oi, c[n_full:])
     full, single = full.reshape(H, W, 3), single.reshape(H, W, 3)
     return full.astype(np.float32), single.astype(np.float32)
-
-
-# ---------------------------------------------------------------------------
-# exact photon reference
-# ---------------------------------------------------------------------------
-
-def _st_photon_trace_exact(ctx):
-    from ..exact import trace_exact
-
-    d = ctx.scene.data
-    pe = d["exact"]
-    g = ctx.buf["geometry"]
-    geom = g["geom"]
-    n = int(pe["photons"])
-    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), False))}
-    for l, light in enumerate(d["lights"]):
-        if not len(geom.faces):
-            out["lights"].append(None)
-            continue
-        lcam = light_camera(light, geom.vertices, n)
-        o, dd, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
-        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, dd,
-                         normals=g["normals"], smooth=g["smooth"],
-                         outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
-        st = tr["status"].astype(np.int8)
-        ex = np.flatnonzero(st == EXITED)
-        # the exited photons' rows, gathered on every thread; the buffers are those arrays
-        eo, ed = _take_rows(tr["exit_pos"], ex), _take_rows(tr["exit_dir"], ex)
-        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex,
-                              "trans": _take_rows(tr["transmittance"], ex), "o": eo, "d": ed, "half": half[ex]})
-        out[f"camera_{l}"] = camera_array(lcam)
-        out[f"exit_pos_{l}"] = eo
-        out[f"exit_dir_{l}"] = ed
-    ctx.note(f"exact photon reference: {n}x{n} jittered photons per light through the triangles")
-    return out
-
-
-def _st_final_exact(ctx):
-    d = ctx.scene.data
-    b = ctx.buf
-    geom = b["geometry"]["geom"]
-    lights = d["lights"]
-    rs = b["receivers"]["rs"]
-    rgb_maps = b["gather"]["rgb_maps"]
-    eye_tr = b["trace"]["flat"]
-    origin, rdir = b["trace"]["ray_origin"], b["trace"]["ray_dir"]
-    # the objects' triangles read in place, and the exact tracer's scene of them (cached by
-    # content: primitive k is face k); building vertices[faces] was serial work every render
-    obj_tris = IndexedTriangles(geom.vertices, geom.faces)
-    obj_scene = mesh_scene(geom.vertices, geom.faces) if len(geom.faces) else None
-    scale = max(obj_tris.abs_max(), 1.0)
-
-    def vis(l, pts, nrm):
-        return exact_visibility(obj_tris, lights[l], pts, nrm, scene=obj_scene, scale=scale)
-
-    H, W = origin.shape[:2]
-    o = np.ascontiguousarray(origin.reshape(-1, 3), dtype=np.float64)
-    dd = np.ascontiguousarray(rdir.reshape(-1, 3), dtype=np.float64)
-    t_rec, f_rec = hit_exact(rs.tris, o, dd)
-    hp = eye_tr.get("hit_pos")
-    t_obj = np.full(len(o), np.inf)
-    if hp is not None:  # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf), on every thread
-        _distance_kernel(np.ascontiguousarray(hp, dtype=np.float64), o, t_obj)
-    rec = np.isfinite(t_rec) & (t_rec < t_obj)
-    img = np.zeros((len(o), 3))
-    obj = np.isfinite(t_obj) & ~rec
-    bg = ~rec & ~obj
-    env = d["environment"]
-    if bg.any():
-        img[bg] = environment_lookup(env, dd[bg], ctx.scene.base_dir)
-    st = eye_tr["status"]
-    ex = obj & (st == EXITED)
-    # the receivers seen directly (o + t d) and the exit rays' receivers in one shading call
-    # (every point's colour is its own): one pass of shadow rays, one of map look-ups
-    ri, xi = np.flatnonzero(rec), np.flatnonzero(ex)
-    if len(ri) or len(xi):
-        direct = (_ray_points(o, t_rec, dd, ri), f_rec[ri], _take_rows(dd, ri))
-        c, cd = _shade_rays(ctx.scene, rs, None, _take_rows(eye_tr["exit_pos"], xi),
-                            _take_rows(eye_tr["exit_dir"], xi), "exact", None, rgb_maps, vis, direct)
-        _put_rows(img, ri, cd)
-        _put_rows(img, xi, c)
-    stuck = obj & (st != EXITED)
-    if stuck.any():
-        img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], ctx.scene.base_dir)
-    _scale_rows(img, np.flatnonzero(obj), np.ascontiguousarray(eye_tr["transmittance"], dtype=np.float64))
-    ctx.note("receivers lit directly (exact shadow rays) and by the caustics; the object traced exactly")
-    return {"image_caustics": img.reshape(H, W, 3).astype(np.float32)}
-
-
-def exact_caustic_stages(scene):
-    """The caustic stages of the exact reference for a scene with lights and receivers."""
-    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
-    return _receiver_stages(nr)[:1] + (
-        Stage("photon_trace", _st_photon_trace_exact,
-              reads=("lights", "outside_ior", "exact.photons", "exact.photon_seed", "exact.max_bounces"),
-              after=("geometry",),
-              makes=_photon_buffer_names(nl, False),
-              doc="exact photons through the triangles (Embree)"),
-        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, False), after=("receivers", "photon_trace"),
-              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
-              doc="Embree on the receivers' triangles"),
-        Stage("splat", lambda ctx: _st_splat(ctx, True), reads=("imagespace.caustic_map", "exact.photons"),
-              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
-              doc="bilinear splat; the reference's own noise from two interleaved halves"),
-        Stage("gather", lambda ctx: _st_gather(ctx, False), reads=("lights",), after=("receivers", "splat"),
-              makes=_gather_names(nr), doc="sum over lights, no gathering"),
-        Stage("caustic_final", _st_final_exact, reads=("environment", "lights"),
-              after=("geometry", "trace", "receivers", "gather"), makes=("image_caustics",),
-              doc="receivers lit directly and by caustics, the object traced exactly"),
-    )

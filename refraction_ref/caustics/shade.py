@@ -38,7 +38,7 @@ from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
-__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility"]
+__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility", "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -122,7 +122,7 @@ def _take_rows_kernel(a, idx, out):
             out[k, c] = a[idx[k], c]
 
 
-def _take_rows(a, idx):
+def take_rows(a, idx):
     """``a[idx]`` of an (N, C) float64 array, on every thread."""
     a = np.ascontiguousarray(a, dtype=np.float64)
     out = np.empty((len(idx), a.shape[1]))
@@ -310,13 +310,13 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
         lit = np.flatnonzero(cos > 0)
         v = np.zeros(M)
         if len(lit):  # v[lit] = visibility(l, P[lit], n[lit]), the rows gathered on every thread
-            v[lit] = visibility(l, P if len(lit) == M else _take_rows(P, lit),
-                                n if len(lit) == M else _take_rows(n, lit))
+            v[lit] = visibility(l, P if len(lit) == M else take_rows(P, lit),
+                                n if len(lit) == M else take_rows(n, lit))
         _add_direct_kernel(np.asarray(lt["radiance"], dtype=np.float64), cos, fall, v, light_sum)
     for r in range(len(rs.boxes)):
         sel = np.flatnonzero(owner == r)
         if len(sel):
-            col, row = map_position(rs, r, P if len(sel) == M else _take_rows(P, sel))
+            col, row = map_position(rs, r, P if len(sel) == M else take_rows(P, sel))
             # light_sum[sel] += sample_bilinear(maps_rgb[r], col, row), on every thread
             _add_bilinear_kernel(np.ascontiguousarray(maps_rgb[r], dtype=np.float64),
                                  np.ascontiguousarray(col, dtype=np.float64),

@@ -20,7 +20,7 @@ def __getattr__(name):  # lazy: scene validation imports .knobs without the kern
 
         return getattr(pipeline, name)
     if name == "render_water_exact":
-        from .exact_water import render_water_exact
+        from ..exact.pipeline import render_water_exact
 
         return render_water_exact
     raise AttributeError(name)

@@ -347,7 +347,7 @@ def quality_study(quick, log=print):
     """§4.1's blur kernels, §5.3's tolerance and §7's resolution, judged on the caustic map against the exact reference.
 
     Quality claims are judged by error against the exact caustics reference
-    (:mod:`refraction_ref.exact_render`, 1024^2 jittered photons), never by
+    (:mod:`refraction_ref.exact.pipeline`, 1024^2 jittered photons), never by
     time: the relative L1 of the receiver's caustic map, both blurred by one
     texel. Quick: 32^3 and 64^3, 128^2 photons, a 64^2 map; full: 128^3 and
     256^3, 512^2 photons, a 128^2 map. Not timed: rendered on every Numba thread.
@@ -360,7 +360,7 @@ def quality_study(quick, log=print):
 
     import refraction_ref as rr
 
-    from ..levelmap.metrics import relative_l1
+    from ..metrics import relative_l1
 
     N, M, cmap = (32, 128, 64) if quick else (128, 512, 128)
     sc = quality_scene(N, M, cmap)

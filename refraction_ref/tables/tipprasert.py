@@ -236,7 +236,7 @@ def measure(meshes, planes, repeats, size=None, log=print):
     size : dict, optional
         Overrides for small runs (``levelmap.map_size``, ``water.resolution``, camera size).
     """
-    from ..levelmap.metrics import luv_difference
+    from ..metrics import luv_difference
     from ..scene import load_scene
 
     th = thesis_rows()
@@ -407,14 +407,15 @@ def placement_study(quick=False, log=print):
     """Eq. 4-3's readings against the exact water reference: one row per (scene, receiver, reading).
 
     Each reading's level-map caustic map is compared with the exact reference
-    rendered in the same box (:mod:`refraction_ref.levelmap.exact_water`):
-    the relative L1 of :func:`~refraction_ref.levelmap.metrics.relative_l1`
+    rendered in the same box (:mod:`refraction_ref.exact.water`):
+    the relative L1 of :func:`~refraction_ref.metrics.relative_l1`
     (both blurred by one texel, over the receiver's own texels) and the ratio
     of the blurred maps' peaks. Quick: the bundled floor alone, 256^2 maps,
     1024^2 exact samples; full: three scenes, 512^2 maps, 2048^2 samples.
     """
-    from ..levelmap.exact_water import render_water_exact
-    from ..levelmap.metrics import _gaussian_filter_constant, relative_l1
+    from ..exact.pipeline import render_water_exact
+    from ..filters import gaussian_filter_zero
+    from ..metrics import relative_l1
     from ..levelmap.pipeline import planes_pass, prepare, render_levelmap
     from ..scene import load_scene
 
@@ -434,8 +435,8 @@ def placement_study(quick=False, log=print):
             for r, pair in enumerate(ctx["pairs"]):
                 own = pair[0].lm.own
                 a, b = arrays[f"caustic_map_{r}"], exact[f"caustic_map_{r}"]
-                ab = _gaussian_filter_constant(np.where(own, np.nan_to_num(a), 0.0), 1.0)
-                bb = _gaussian_filter_constant(np.where(own, np.nan_to_num(b), 0.0), 1.0)
+                ab = gaussian_filter_zero(np.where(own, np.nan_to_num(a), 0.0), 1.0)
+                bb = gaussian_filter_zero(np.where(own, np.nan_to_num(b), 0.0), 1.0)
                 bx = boxes[r][0]
                 row = {"scene": name, "receiver": sc.data["receivers"][r].get("name", f"receiver {r}"),
                        "reading": reading, "box": f"{bx.w:.2f} x {bx.h:.2f} x {bx.d:.2f}",

@@ -32,10 +32,10 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from . import optics
-from .embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
-from .meshes import bounds, face_corner_normals
-from .status import EXITED, LIMIT, LOST, MISSED, TIR
+from .. import optics
+from ..embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
+from ..meshes import bounds, face_corner_normals
+from ..status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
     "trace_exact",
@@ -318,7 +318,7 @@ def mesh_normals(vertices, faces, crease_deg=None):
     .. [2] H. Hoppe et al., "Piecewise Smooth Surface Reconstruction",
        *Proc. SIGGRAPH 94*, 295-302, 1994 (crease edges).
     """
-    from .meshes import _CREASE_MARGIN
+    from ..meshes import _CREASE_MARGIN
 
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)

@@ -1,7 +1,7 @@
 """Exact water-caustics reference (``--method exact`` on a scene with water).
 
 The analytic water surface (not its mesh) is sampled very densely: one
-jittered sample per cell of an ``exact_samples x exact_samples`` grid over the
+jittered sample per cell of an ``exact.water_samples`` squared grid over the
 water rectangle. Each sample carries the flux the light pours through its
 patch, ``E_perp |I . (-h_x, 1, -h_z)| dx dz`` (the patch's area projected
 perpendicular to the light; zero where the light meets the surface from
@@ -37,11 +37,11 @@ import numpy as np
 
 from ..embree import nearest_hits, run_chunks, soup_scene
 from ..optics import refract3
-from .planes import to_map
-from .water import incident_directions, surface_normals, wave_gradient, wave_height
+from ..levelmap.planes import to_map
+from ..levelmap.water import incident_directions, surface_normals, wave_gradient, wave_height
 from ..vec3 import dot
 
-__all__ = ["render_water_exact", "trace_water_photons"]
+__all__ = ["trace_water_photons"]
 
 _CHUNK = 1 << 18
 
@@ -223,20 +223,3 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
         held.clear()  # now (the arrays refer back to `held`: a cycle the collector would free later)
     return {"photons": M * M, "hit": counts["hit"], "deposited": counts["deposited"]}
 
-
-def render_water_exact(scene, progress=False, cache=None, keep=None):
-    """Exact reference caustics maps for a water scene (same keys as the level map).
-
-    The exact method's graph for water scenes (:mod:`refraction_ref.exact_render`):
-    the level map's ``water``, ``planes`` and ``level_map`` stages, then
-    ``trace`` (:func:`trace_water_photons` per light) and ``image``.
-
-    Returns
-    -------
-    arrays, info : dict, dict
-        ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
-        ``timings_ms``, ``plan``, ``stats``.
-    """
-    from ..exact_render import render_exact
-
-    return render_exact(scene, progress=progress, cache=cache, keep=keep)
