@@ -133,6 +133,23 @@ def validate_volumetric(data, base_dir="."):
     bounds}`` (all None) in place; ``.npy`` paths must exist here, their
     contents are checked by :func:`refraction_ref.volumetric.pipeline.load_volume`
     before any work starts.
+
+    Parameters
+    ----------
+    data : dict
+        The scene's data, with ``volumetric`` (resolved knobs) and ``volume``
+        blocks; ``volume`` is completed in place.
+    base_dir : str
+        Folder that relative ``.npy`` paths of ``volume`` are resolved against.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    SceneError
+        On the first knob or volume entry out of range.
     """
     from ..validation import SceneError, merge_defaults, check_number
 

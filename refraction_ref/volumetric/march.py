@@ -112,7 +112,29 @@ def _lerp_axis(u, na):
 
 @nb.njit(cache=True)  # a call, not inlined: its callers would compile its body at every call site
 def sample_field(field, lo, ih, x, y, z):
-    """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume)."""
+    """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume).
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient at voxel centres
+        (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    lo : (3,) float64
+        Lower corner of the volume, world units.
+    ih : (3,) float64
+        Inverse voxel size per axis.
+    x, y, z : float
+        World point.
+
+    Returns
+    -------
+    n, dndx, dndy, dndz : float
+        Interpolated index and gradient (per world unit).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (n and its gradient at the photon, eqs. 4-5).
+    """
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     i, fx = _lerp_axis((x - lo[0]) * ih[0] - 0.5, nx)
     j, fy = _lerp_axis((y - lo[1]) * ih[1] - 0.5, ny)
@@ -141,6 +163,30 @@ def advance(field, lo, ih, integ, p, v, g, ds):
     ``p = (x, y, z)``, ``v = (vx, vy, vz)``; ``g = (n, dn/dx, dn/dy, dn/dz)``
     is the field at p, already sampled by the caller. Returns
     ``(x, y, z, vx, vy, vz)`` after the step ``ds``.
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient (RK4 samples it at the inner stages).
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    integ : int
+        ``INTEG_EULER`` (0) or ``INTEG_RK4`` (1).
+    p, v : 3-tuples of float
+        Position and velocity ``n dx/ds``.
+    g : 4-tuple of float
+        ``(n, dn/dx, dn/dy, dn/dz)`` at ``p``.
+    ds : float
+        Step length, world units.
+
+    Returns
+    -------
+    tuple of 6 floats
+        New position and velocity.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5; §3, eqs. 2-3.
     """
     x, y, z = p
     vx, vy, vz = v
@@ -175,7 +221,24 @@ def advance(field, lo, ih, integ, p, v, g, ds):
 
 @nb.njit(cache=True, inline="always")
 def cell(u, na):
-    """``min(max(floor(u), 0), na - 1)`` (truncation is floor for u >= 0; NaN -> 0)."""
+    """``min(max(floor(u), 0), na - 1)`` (truncation is floor for u >= 0; NaN -> 0).
+
+    Parameters
+    ----------
+    u : float
+        Coordinate in voxel units along one axis.
+    na : int
+        Voxels along that axis.
+
+    Returns
+    -------
+    int
+        Voxel index in ``0 .. na - 1``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (voxel of the photon).
+    """
     if not u > 0.0:
         return 0
     c = int(u)
@@ -184,6 +247,26 @@ def cell(u, na):
 
 @nb.njit(cache=True, inline="always")
 def voxel_of(lo, ih, nx, ny, nz, x, y, z):
+    """Voxel ``(i, j, k)`` holding a world point, clamped to the grid.
+
+    Parameters
+    ----------
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    nx, ny, nz : int
+        Voxels per axis.
+    x, y, z : float
+        World point.
+
+    Returns
+    -------
+    i, j, k : int
+        Voxel indices (:func:`cell` per axis).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (octree node of the photon's voxel).
+    """
     return cell((x - lo[0]) * ih[0], nx), cell((y - lo[1]) * ih[1], ny), cell((z - lo[2]) * ih[2], nz)
 
 
@@ -201,7 +284,31 @@ def _axis_distance(xa, da, lo, h, ih, na, lev):
 
 @nb.njit(cache=True, inline="always")
 def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
-    """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5)."""
+    """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5).
+
+    Parameters
+    ----------
+    lo, h, ih : (3,) float64
+        Lower corner, voxel size and its inverse.
+    shape_n : (3,) int64
+        Voxels per axis.
+    lev : int
+        Octree level of the node (a level-``lev`` node spans ``2**lev`` voxels).
+    x, y, z : float
+        World point inside the node.
+    dx, dy, dz : float
+        Unit direction.
+
+    Returns
+    -------
+    float
+        Distance (world units, >= 0) to the node's boundary; ``inf`` when the
+        direction is zero.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 and Fig. 5 (step to the leaf node's boundary).
+    """
     t = min(_axis_distance(x, dx, lo[0], h[0], ih[0], shape_n[0], lev),
             min(_axis_distance(y, dy, lo[1], h[1], ih[1], shape_n[1], lev),
                 _axis_distance(z, dz, lo[2], h[2], ih[2], shape_n[2], lev)))
@@ -210,7 +317,26 @@ def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
 
 @nb.njit(cache=True, inline="always")
 def segment_exit(lo, hi, x, y, z, x1, y1, z1):
-    """Fraction s in [0, 1] of the segment x -> x1 still inside the box (1 when x1 is inside)."""
+    """Fraction s in [0, 1] of the segment x -> x1 still inside the box (1 when x1 is inside).
+
+    Parameters
+    ----------
+    lo, hi : (3,) float64
+        Corners of the box.
+    x, y, z : float
+        Segment start (inside the box).
+    x1, y1, z1 : float
+        Segment end.
+
+    Returns
+    -------
+    float
+        Fraction of the segment inside, in ``[0, 1]``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (a photon leaving the volume).
+    """
     s = 1.0
     for a in range(3):
         p0 = x if a == 0 else (y if a == 1 else z)
@@ -289,6 +415,17 @@ def receiver_tuple(tris=None, owner=None):
     tris : (T, 3, 3) float64, optional
     owner : (T,) int, optional
         Receiver index of each triangle (0 .. R - 1).
+
+    Returns
+    -------
+    _Recv
+        Triangles grouped by receiver with each receiver's bounding box and the
+        start of its triangles; empty arrays when there are no receivers.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (photons stop on diffuse surfaces), §6 (caustics on
+    receivers).
     """
     if tris is None or len(tris) == 0:
         z = np.zeros((0, 3))
@@ -394,6 +531,31 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
     the length of the segment inside each voxel (in voxels); values are
     converted to fixed point with scale ``dep.sr`` (radiance) and ``dep.sd``
     (direction) by truncation, and added with sign ``dep.sign``.
+
+    Parameters
+    ----------
+    dep : _Deposits
+        Deposit buffers and their fixed-point scales.
+    g : int
+        Buffer index.
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    a, b : 3-tuples of float
+        Segment end points, world units.
+    l0, l1 : 3-tuples of float
+        RGB radiance at ``a`` and ``b``.
+    d : 3-tuple of float
+        Unit direction of the segment.
+
+    Returns
+    -------
+    None
+        ``dep.rows`` is added to in place.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (radiance stored in the voxels the photon crosses)
+    and §5.1 (radiance storage); Amanatides and Woo (1987).
     """
     accr, nx, ny, nz, py, pz = dep.rows, dep.nx, dep.ny, dep.nz, dep.py, dep.pz
     sr, sd, sgn = dep.sr, dep.sd, dep.sign
@@ -738,6 +900,27 @@ def half_contrast(field_or_ior, outside_ior):
 
     A point with ``side * (n - n_half) > 0`` is inside refractive material
     (the viewing pass's ``hit``; the march's "met the object" flag).
+
+    Parameters
+    ----------
+    field_or_ior : ndarray
+        ``(nx, ny, nz, 4)`` gradient field (its channel 0) or ``(nx, ny, nz)``
+        index of refraction.
+    outside_ior : float
+        Index of refraction outside the objects.
+
+    Returns
+    -------
+    n_half : float
+        ``outside_ior`` plus half the largest contrast; ``inf`` for a volume
+        without contrast.
+    side : float
+        ``+1`` when the material's index is above the outside's, else ``-1``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (rays meeting the refractive object in the viewing
+    pass).
     """
     a = np.asarray(field_or_ior)
     n = a[..., 0] if a.ndim == 4 else a
@@ -789,6 +972,24 @@ def locality_order(pos, bounds, shape):
     Photons that start close together cross the same voxels, so processing
     them together keeps the deposit buffers in cache. The order does not
     change any result (integer deposits), only the speed.
+
+    Parameters
+    ----------
+    pos : (P, 3) float64
+        Photon start points, world units.
+    bounds : (2, 3) array_like
+        World-space corners of the volume.
+    shape : tuple of int
+        Voxels per axis.
+
+    Returns
+    -------
+    (P,) int64
+        Permutation of the photons.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 and §5.1 (photon tracing and radiance storage).
     """
     lo, hi, h, ih, shape_n, hmin = _geometry(bounds, shape)
     keys = np.empty(len(pos), np.int64)
@@ -830,7 +1031,12 @@ def _give_workspace(a):
 
 
 def release_workspace():
-    """Free the deposit buffers kept between marches."""
+    """Free the deposit buffers kept between marches.
+
+    References
+    ----------
+    Sun et al. (2008), §5.1 (radiance storage).
+    """
     with _WORKSPACE_LOCK:
         _WORKSPACE.clear()
 
@@ -1025,10 +1231,31 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
                 integrator="euler", max_steps=0, max_points=100000, stepping="robust"):
     """The polylines followed by a few photons (for tests and figures); no deposition.
 
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    extinction : (nx, ny, nz, 3) float32
+        kappa per voxel (per scene unit).
+    level, smax : ndarray
+        From :func:`~refraction_ref.volumetric.octree.build_octree`.
+    bounds : (2, 3) array_like
+        World-space corners of the volume.
+    pos, dirs : (P, 3) float64
+        Photon start points and directions.
+    ds_min, stiff, integrator, max_steps, stepping
+        As in :func:`march_photons`.
+    max_points : int
+        Most points kept per path (the start point included).
+
     Returns
     -------
     list of (k, 3) float64
         Start point and the end point of every step (clipped at the volume).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5 and Fig. 5.
     """
     grid = _grid(field, extinction, level, smax, bounds)
     nx, ny, nz = (int(s) for s in field.shape[:3])
@@ -1059,11 +1286,21 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
 def smooth_radiance(sums):
     """3x3x3 approximate Gaussian ([1, 2, 1] / 4 per axis) of the deposits, then unit directions (§4.4).
 
+    Parameters
+    ----------
+    sums : (nx, ny, nz, 6) float64
+        Deposited radiance (RGB) and radiance-weighted direction
+        (:func:`march_photons`).
+
     Returns
     -------
     radiance : (nx, ny, nz, 3) float32
     direction : (nx, ny, nz, 3) float32
         Unit mean photon direction (zero where no photon passed).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (smoothing of the stored radiance) and §5.1.
     """
     # voxelize.separable_correlate (x, then y, then z passes; bit-identical to scipy) and the split, fused one
     # x slab at a time: every value is formed by the same operations, but no intermediate volume is written

@@ -53,7 +53,25 @@ __all__ = ["view_volume", "hg_phase", "source_volume"]
 
 @nb.njit(cache=True, inline="always")
 def hg_phase(cos_t, g):
-    """Henyey-Greenstein phase function, normalised over the sphere."""
+    """Henyey-Greenstein phase function, normalised over the sphere.
+
+    Parameters
+    ----------
+    cos_t : float
+        Cosine of the angle between the photon direction and the direction
+        towards the camera.
+    g : float
+        Asymmetry, in (-1, 1); 0 is isotropic.
+
+    Returns
+    -------
+    float
+        Phase function value per steradian.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (in-scattering towards the viewer).
+    """
     d = 1.0 + g * g - 2.0 * g * cos_t
     return (1.0 - g * g) / (4.0 * math.pi * d * math.sqrt(d))
 
@@ -63,6 +81,26 @@ def source_volume(radiance, direction, scattering, extinction):
 
     The float32 product ``radiance * scattering`` as NumPy forms it, packed in parallel over x slabs
     (``scattering`` and ``extinction`` may be broadcast views).
+
+    Parameters
+    ----------
+    radiance : (nx, ny, nz, 3) float32
+        Smoothed radiance (:func:`~refraction_ref.volumetric.march.smooth_radiance`).
+    direction : (nx, ny, nz, 3) float32
+        Unit mean photon direction per voxel.
+    scattering : array_like, broadcastable to (nx, ny, nz, 3)
+        Scattering coefficient sigma (per scene unit).
+    extinction : array_like, broadcastable to (nx, ny, nz, 3)
+        Extinction coefficient kappa (per scene unit).
+
+    Returns
+    -------
+    (nx, ny, nz, 9) float32
+        ``sigma L``, direction and ``kappa`` per voxel.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 and §5.1 (radiance storage read by the viewing pass).
     """
     shape = radiance.shape[:3] + (3,)
     out = np.empty(radiance.shape[:3] + (9,), np.float32)
@@ -109,7 +147,26 @@ def _slab(o, d, lo, hi):
 
 @nb.njit(cache=True, inline="always")
 def box_entry_one(lo, hi, ox, oy, oz, dx, dy, dz):
-    """Entry parameter of one ray into the box (clamped at 0), ``inf`` when it misses."""
+    """Entry parameter of one ray into the box (clamped at 0), ``inf`` when it misses.
+
+    Parameters
+    ----------
+    lo, hi : (3,) float64
+        Corners of the box.
+    ox, oy, oz : float
+        Ray origin.
+    dx, dy, dz : float
+        Ray direction.
+
+    Returns
+    -------
+    float
+        Ray parameter of the entry point.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (viewing rays entering the volume).
+    """
     a0, b0 = _slab(ox, dx, lo[0], hi[0])
     a1, b1 = _slab(oy, dy, lo[1], hi[1])
     a2, b2 = _slab(oz, dz, lo[2], hi[2])
@@ -348,6 +405,10 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
         ``exit_dir`` (R, 3; exit_dir = ray direction and exit_pos NaN where
         the ray missed the box), ``hit``, ``interfaces``, ``path_length``,
         ``status``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5, eqs. 4-6.
     """
     box = _geometry(bounds, field.shape)
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)

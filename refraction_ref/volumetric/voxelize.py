@@ -49,10 +49,23 @@ __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_cover
 def auto_bounds(vertices, resolution, padding):
     """A cube around ``vertices`` leaving ``padding`` empty voxels on every side.
 
+    Parameters
+    ----------
+    vertices : (V, 3) ndarray
+        World-space vertices of every object.
+    resolution : int
+        Voxels per axis.
+    padding : int
+        Empty voxels left on every side.
+
     Returns
     -------
     (2, 3) float64
         Lower and upper corners; the voxel size is ``(hi - lo) / resolution``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (the voxel grid around the objects).
     """
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     ext = float(np.max(hi - lo))
@@ -128,6 +141,10 @@ def column_crossings(tri, axis, lo, h, shape):
     cum : (K,) int32
         Winding number just past each crossing, counted from -infinity
         (+1 entering through a face whose normal points against the ray).
+
+    References
+    ----------
+    Sun et al. (2008), §4.1; Crane et al. (2007), §30.2.4.
     """
     p, q = (axis + 1) % 3, (axis + 2) % 3
     ncol, nrow = int(shape[0]), int(shape[1])
@@ -210,11 +227,27 @@ def _inside_coverage(votes, need, inside, cov):
 def winding_at_centres(tri, axis, lo, h, n):
     """Winding numbers along +axis and -axis at every voxel centre.
 
+    Parameters
+    ----------
+    tri : (T, 3, 3) float64
+        World-space triangles.
+    axis : {0, 1, 2}
+        Viewing axis.
+    lo, h : (3,) float64
+        Grid origin and voxel size.
+    n : (3,) int
+        Voxels per axis.
+
     Returns
     -------
     w_minus, w_plus : (nx, ny, nz) int32
         Counted from -infinity and from +infinity along ``axis`` (equal for a
         closed mesh).
+
+    References
+    ----------
+    Sun et al. (2008), §4.1; Crane et al. (2007), §30.2.4 (winding number by
+    slice rendering).
     """
     p, q = (axis + 1) % 3, (axis + 2) % 3
     off, depth, cum = column_crossings(tri, axis, lo, h, (n[p], n[q]))
@@ -405,11 +438,23 @@ def repair_mesh(vertices, faces):
     objects again (a resolution, padding or blur change, a sweep, the next
     render) skips it.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like
+        Mesh vertices.
+    faces : (F, 3) array_like of int
+        Triangle vertex indices.
+
     Returns
     -------
     vertices, faces, ok
         The repaired mesh and True when it is now watertight; the input and
         False otherwise.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (voxelization needs a closed mesh); Nooruddin and
+    Turk (2003).
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
@@ -550,6 +595,10 @@ def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, 
     bounds : (2, 3) float64
     notes : list of str
         What was done to each object (closed, or open and voted), for the plan.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1.
     """
     N = int(resolution)
     b = auto_bounds(geom.vertices, N, padding) if bounds is None else np.asarray(bounds, dtype=np.float64)
