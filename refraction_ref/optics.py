@@ -60,6 +60,13 @@ def refract3(dx, dy, dz, nx, ny, nz, eta):
         Unit transmitted direction; the mirror direction when ``tir``.
     tir : bool
         True when ``sin(theta_t) > 1`` (total internal reflection).
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.3 (specular transmission: Snell's law in vector form).
+    .. [2] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.6 (Snell's law at each interface).
     """
     c = -(dx * nx + dy * ny + dz * nz)
     if c < 0.0:  # make the normal face the incident ray
@@ -119,6 +126,11 @@ def fresnel_dielectric(cos_i, eta):
     -------
     float
         Reflectance in [0, 1]; 1 under total internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.1 (Fresnel reflectance of dielectrics).
     """
     cos_i = min(abs(cos_i), 1.0)
     sin2_t = eta * eta * (1.0 - cos_i * cos_i)
@@ -170,6 +182,11 @@ def refract(d, n, eta):
         Unit transmitted directions (mirror directions where ``tir``).
     tir : (...) ndarray of bool
         Total internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.3 (specular transmission: Snell's law in vector form).
     """
     d = np.asarray(d, dtype=np.float64)
     shape = d.shape[:-1]
@@ -256,6 +273,12 @@ def beer_lambert(absorption, length, ior=1.0):
     -------
     ndarray
         Transmittance with shape ``length.shape + (3,)``.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.8 (absorption
+       :math:`I = I_0 e^{-\\alpha l \\eta}`).
     """
     a = np.asarray(absorption, dtype=np.float64)
     length = np.asarray(length, dtype=np.float64)
