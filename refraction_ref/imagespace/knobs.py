@@ -8,9 +8,12 @@ support logical OR blending, we employ additive blending"; the search ends
 at its last probe's texel, §3.6: "Surface normal of the point R3 is then
 calculated using the texture coordinate t_P3 of the point P3"; depth images
 sampled with hardware (bilinear) filtering, §3.4.2: "hardware filtering can
-be easily applied while sampling these textures"). The caustic knobs (``photons``, ``gather``, ``receiver_hit``,
-``caustic_map``) are read by the caustic stages (§4.1) that the image-space
-method adds when a scene has lights and receivers.
+be easily applied while sampling these textures"). The caustic knobs (``photons``, ``receiver_hit``)
+are read by the caustic stages (§4.1) that the image-space method adds when
+a scene has lights and receivers; the caustic maps' size and gathering window
+are the ``caustics`` block's (:mod:`refraction_ref.caustics.knobs`), and the
+old names ``imagespace.caustic_map`` and ``imagespace.gather`` are aliases of
+``caustics.map_size`` and ``caustics.gather``.
 
 Importing this module is cheap (no kernels): scene loading reads it.
 """
@@ -44,9 +47,7 @@ IMAGESPACE_DEFAULTS = {
     "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
     # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
     "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
-    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
     "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
-    "caustic_map": 512,       # texels per side of each receiver's caustic map (exact reference too)
 }
 
 CHOICES = {
@@ -86,11 +87,6 @@ def validate_imagespace(data, base_dir="."):
         if not isinstance(im[key], bool):
             raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
     check_number(im["photons"], "imagespace.photons", 1, 8192, integer=True)
-    check_number(im["gather"], "imagespace.gather", 1, 63, integer=True)
-    if im["gather"] % 2 == 0:
-        raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
-                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
-    check_number(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
     return data
 
 
@@ -112,4 +108,8 @@ def check_memory(scene):
                          "or imagespace.layers")
 
 
-BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace"))
+#: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)
+ALIASES = {"caustic_map": "caustics.map_size", "gather": "caustics.gather"}
+
+BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace",
+                                 aliases=ALIASES))
