@@ -108,7 +108,7 @@ def compare_arrays(a, b, mask=None):
     caustics = {}
     for k in sorted(a):
         if k.startswith("caustic_map_") and k in b:
-            from .levelmap.metrics import relative_l1
+            from .metrics import relative_l1
 
             caustics[k] = relative_l1(a[k], b[k], blur=1.0)
     if "status" not in a or "status" not in b:  # e.g. water caustics: no per-pixel refraction keys

@@ -763,7 +763,7 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     ``golden build``), Mitsuba's with seeds ``1000 + k`` and
     ``oversample`` times our photon density (its per-photon flux at most
     ours / oversample). Per receiver: relative L1 of the K-batch means
-    (blurred one texel, :func:`~refraction_ref.levelmap.metrics.relative_l1`)
+    (blurred one texel, :func:`~refraction_ref.metrics.relative_l1`)
     beside each side's own noise (the same measure between its two halves of
     batches), and the golden suite's Z-test
     (:data:`~refraction_ref.golden.tolerances.ZTEST`, ``quantum`` as
@@ -773,7 +773,7 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
 
     from .golden.build import _seed_key, case_scene, photon_quantum
     from .golden.tolerances import ZTEST, judge
-    from .levelmap.metrics import relative_l1
+    from .metrics import relative_l1
 
     K = int(batches or case.get("batches") or CAUSTIC_BATCHES)
     scene = case_scene(case, os.path.join(folder, "scene"))

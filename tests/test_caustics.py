@@ -16,7 +16,7 @@ from refraction_ref.analytic import sphere_refraction
 from refraction_ref.camera import Camera
 from refraction_ref.caustics.receivers import march_eyespace
 from refraction_ref.caustics.splat import gather_gaussian, splat_bilinear
-from refraction_ref.levelmap.metrics import relative_l1
+from refraction_ref.metrics import relative_l1
 
 R = 0.5  # the sphere's radius (fit 1.0)
 FLOOR_Y = -0.6

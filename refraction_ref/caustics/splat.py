@@ -42,6 +42,8 @@ import math
 import numba as nb
 import numpy as np
 
+from ..filters import gather_gaussian
+from ..filters import gather_taps as gaussian_weights
 from ..raster import BAND, bin_bands
 
 __all__ = ["splat_bilinear", "splat_bilinear_groups", "receiver_photons", "gather_gaussian", "gaussian_weights", "accumulate_light", "channel_mean", "finite_maps"]
@@ -278,67 +280,6 @@ def receiver_photons(P, face, idx, normals, box, flux):
     return col, row, val
 
 
-def gaussian_weights(window):
-    """Normalised 1-D Gaussian taps of a ``window``-texel gathering kernel, ``sigma = (window - 1) / 6``."""
-    r = int(window) // 2
-    if r == 0:
-        return np.ones(1)
-    x = np.arange(-r, r + 1, dtype=np.float64)
-    sigma = (int(window) - 1) / 6.0
-    w = np.exp(-0.5 * (x / sigma) ** 2)
-    return w / w.sum()
-
-
-@nb.njit(cache=True, parallel=True)
-def _fold_rows(a, w, out):
-    """out[i, j] = sum_k w[k] a[i, j - k + r] with mirror folding at the ends of each row."""
-    H, N, C = a.shape
-    r = (w.shape[0] - 1) // 2
-    for i0 in nb.prange(H):
-        i = np.int64(i0)
-        for j in range(N):
-            for c in range(C):
-                s = 0.0
-                for t in range(-r, r + 1):
-                    wt = w[t + r]
-                    src = j - t
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = -1 - j - t  # mass that left through the first edge, mirrored back
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = 2 * N - 1 - j - t  # ... through the last edge
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                out[i, j, c] = s
-
-
-@nb.njit(cache=True, parallel=True)
-def _fold_cols(a, w, out):
-    """out[i, j] = sum_k w[k] a[i - k + r, j] with mirror folding at the ends of each column.
-
-    :func:`_fold_rows` applied to ``a.transpose(1, 0, 2)`` and transposed back, term for
-    term in the same order (the same bits), without the two transposed copies: each
-    thread owns rows of ``out`` and reads along rows of ``a``.
-    """
-    N, Wc, C = a.shape
-    r = (w.shape[0] - 1) // 2
-    for i0 in nb.prange(N):
-        i = np.int64(i0)
-        # each texel's sum starts at 0 and takes the terms in _fold_rows's order (t, then the two
-        # mirrors); whole rows at a time, so the inner loop runs along memory
-        for j in range(Wc):
-            for c in range(C):
-                out[i, j, c] = 0.0
-        for t in range(-r, r + 1):
-            wt = w[t + r]
-            for src in (i - t, -1 - i - t, 2 * N - 1 - i - t):
-                if 0 <= src < N:
-                    for j in range(Wc):
-                        for c in range(C):
-                            out[i, j, c] += wt * a[src, j, c]
-
-
 @nb.njit(cache=True, parallel=True)
 def _accumulate_kernel(m, radiance, unit, rgb):
     # unit += m.mean(axis=2) (NumPy sums the three channels in order, then divides), rgb += m * L
@@ -419,40 +360,3 @@ def accumulate_light(m, radiance, unit, rgb):
     """
     _accumulate_kernel(np.ascontiguousarray(m, dtype=np.float64), np.asarray(radiance, dtype=np.float64),
                        unit, rgb)
-
-
-def gather_gaussian(E, window=7):
-    """Image-space photon gathering: a separable, flux-conserving Gaussian (Wyman & Davis 2006).
-
-    Parameters
-    ----------
-    E : (Hc, Wc) or (Hc, Wc, C) array_like
-        Splatted map.
-    window : int
-        Odd window size in texels; 1 returns the map unchanged.
-
-    Returns
-    -------
-    ndarray
-        Same shape, float64. The sum over the map is kept (mirror folding
-        at the border).
-    """
-    a = np.asarray(E, dtype=np.float64)
-    squeeze = a.ndim == 2
-    if squeeze:
-        a = a[..., None]
-    w = gaussian_weights(window)
-    r = (len(w) - 1) // 2
-    if r == 0:
-        return a[..., 0].copy() if squeeze else a.copy()
-    r = min(r, min(a.shape[0], a.shape[1]) - 1)
-    if r <= 0:
-        return a[..., 0].copy() if squeeze else a.copy()
-    if r < (len(w) - 1) // 2:
-        w = w[(len(w) - 1) // 2 - r: (len(w) - 1) // 2 + r + 1]
-        w = w / w.sum()
-    tmp = np.empty(a.shape)
-    _fold_rows(np.ascontiguousarray(a), w, tmp)
-    out = np.empty(a.shape)
-    _fold_cols(tmp, w, out)
-    return out[..., 0] if squeeze else out

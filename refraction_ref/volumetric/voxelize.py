@@ -38,8 +38,8 @@ import threading
 
 import numba as nb
 import numpy as np
-from scipy import ndimage
 
+from ..filters import gaussian_blur, separable_correlate, sym_tap  # noqa: F401 (re-exported)
 from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
@@ -483,93 +483,6 @@ def repair_mesh(vertices, faces):
     if hit is None:
         return vertices, faces, False
     return hit[0], hit[1], True
-
-
-@nb.njit(cache=True, inline="always")
-def sym_tap(line, x, c, w, r):
-    """``line[x] w[r] + sum_{j=-r..-1} (line[x + j] + line[x - j]) w[r + j]``, indices clamped.
-
-    ``line`` is (n, C): one line of a volume along the filtered axis. The
-    terms are added in scipy's symmetric-filter order, so a whole pass is
-    ``scipy.ndimage.correlate1d(..., mode="nearest")`` bit for bit.
-    """
-    n = line.shape[0]
-    acc = line[x, c] * w[r]
-    for jj in range(-r, 0):
-        acc += (line[max(x + jj, 0), c] + line[min(x - jj, n - 1), c]) * w[r + jj]
-    return acc
-
-
-@nb.njit(cache=True, parallel=True)
-def _sym_correlate_axis(a, w, axis, out):
-    """``scipy.ndimage.correlate1d(a, w, axis, mode="nearest")`` for a symmetric ``w``, bit for bit.
-
-    ``a`` and ``out`` are (nx, ny, nz, C) float64 (every value by :func:`sym_tap`);
-    each parallel slab writes only its own outputs, so the result does not
-    depend on the thread count.
-    """
-    nx, ny, nz, nc = a.shape
-    r = w.shape[0] // 2
-    if axis == 0:
-        for j in nb.prange(ny):
-            for i in range(nx):
-                for k in range(nz):
-                    line = a[:, j, k, :]
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, i, c, w, r)
-    elif axis == 1:
-        for i in nb.prange(nx):
-            for j in range(ny):
-                for k in range(nz):
-                    line = a[i, :, k, :]
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, j, c, w, r)
-    else:
-        for i in nb.prange(nx):
-            for j in range(ny):
-                line = a[i, j]
-                for k in range(nz):
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, k, c, w, r)
-
-
-def separable_correlate(a, w):
-    """Correlate a (nx, ny, nz[, C]) volume with the symmetric taps ``w`` along x, then y, then z.
-
-    Edges clamped. Equal bit for bit to three ``scipy.ndimage.correlate1d``
-    passes (mode ``nearest``), but parallel over slabs.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    w = np.ascontiguousarray(w, dtype=np.float64)
-    if a.ndim not in (3, 4) or w.ndim != 1 or len(w) % 2 != 1 or not np.array_equal(w, w[::-1]):
-        out = a
-        for ax in range(3):
-            out = ndimage.correlate1d(out, w, axis=ax, mode="nearest")
-        return out
-    src = np.ascontiguousarray(a.reshape(a.shape[:3] + (-1,)))
-    x = np.empty_like(src)
-    y = np.empty_like(src)
-    _sym_correlate_axis(src, w, 0, x)  # never writes into the caller's array
-    _sym_correlate_axis(x, w, 1, y)
-    _sym_correlate_axis(y, w, 2, x)
-    return x.reshape(a.shape)
-
-
-def gaussian_blur(a, window):
-    """Separable Gaussian of ``window`` taps per axis, sigma = window / 6, edges clamped (§4.1).
-
-    ``a`` may carry trailing channels (blurred independently). ``window`` <= 1
-    returns a copy.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    if window <= 1:
-        return a.copy()
-    r = window // 2
-    sigma = window / 6.0
-    x = np.arange(-r, r + 1, dtype=np.float64)
-    w = np.exp(-0.5 * (x / sigma) ** 2)
-    w /= w.sum()
-    return separable_correlate(a, w)
 
 
 def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, bounds=None):
