@@ -60,7 +60,20 @@ _SUBDIV = {1280: 3, 5120: 4, 20480: 5, 81920: 6}
 
 
 def luneburg(N, R=0.8):
-    """A Luneburg lens of radius R in the cube [-1, 1]^3: n = sqrt(2 - (r/R)^2) inside, 1 outside."""
+    """A Luneburg lens of radius R in the cube [-1, 1]^3: n = sqrt(2 - (r/R)^2) inside, 1 outside.
+
+    Parameters
+    ----------
+    N : int
+        Voxels per axis.
+    R : float
+        Lens radius, in units of the cube's half side.
+
+    Returns
+    -------
+    (N, N, N) float64
+        Index of refraction at the voxel centres.
+    """
     c = (np.arange(N) + 0.5) / N * 2.0 - 1.0
     X, Y, Z = np.meshgrid(c, c, c, indexing="ij")
     r2 = (X ** 2 + Y ** 2 + Z ** 2) / R ** 2
@@ -334,7 +347,22 @@ QUOTE_RES = ("The amount of video memory on current graphics hardware limits our
 
 def quality_scene(N, M, cmap):
     """A glass sphere (IOR 1.5, radius 0.8) over a floor in the cube [-1, 1]^3, no medium (the exact reference has
-    none), a slanted directional light; ``N``^3 voxels, ``M``^2 photons, ``cmap``^2 caustic map."""
+    none), a slanted directional light; ``N``^3 voxels, ``M``^2 photons, ``cmap``^2 caustic map.
+
+    Parameters
+    ----------
+    N : int
+        ``volumetric.resolution``.
+    M : int
+        ``volumetric.photons`` (texture side per light).
+    cmap : int
+        Caustic map side in texels.
+
+    Returns
+    -------
+    dict
+        The scene dict.
+    """
     return {"camera": {"width": 8, "height": 8},
             "objects": [{"mesh": "sphere", "fit": 0.8, "material": {"ior": 1.5}}],
             "lights": [{"type": "directional", "direction": [0.2, -1.0, -0.1]}],
@@ -351,6 +379,19 @@ def quality_study(quick, log=print):
     time: the relative L1 of the receiver's caustic map, both blurred by one
     texel. Quick: 32^3 and 64^3, 128^2 photons, a 64^2 map; full: 128^3 and
     256^3, 512^2 photons, a 128^2 map. Not timed: rendered on every Numba thread.
+
+    Parameters
+    ----------
+    quick : bool
+        Quick (CI smoke) sizes.
+    log : callable or None
+        Receives progress lines.
+
+    Returns
+    -------
+    table : Table
+        Relative L1 of each run's caustic map against the exact reference.
+    claims : list of Claim
 
     References
     ----------
