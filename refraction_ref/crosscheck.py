@@ -59,14 +59,38 @@ TIR_CHAOS = ("is_diamond_2_4", "is_tir_followed")
 
 def crosscheck_cases(only=None):
     """The golden catalogue's cases (or ``only`` those): every one gets a row, cases without a
-    cross-check a reason (:func:`run_case`)."""
+    cross-check a reason (:func:`run_case`).
+
+    Parameters
+    ----------
+    only : str or sequence of str, optional
+        Case names (comma-separated or a list); None for every case.
+
+    Returns
+    -------
+    list of dict
+        The cases (:func:`refraction_ref.golden.build.catalogue`).
+    """
     from .golden.build import catalogue
 
     return catalogue(only)
 
 
 def relative_rmse(a, b):
-    """``sqrt(mean((a - b)^2)) / mean(|b|)`` over all pixels and channels (b: the reference)."""
+    """``sqrt(mean((a - b)^2)) / mean(|b|)`` over all pixels and channels (b: the reference).
+
+    Parameters
+    ----------
+    a : array_like
+        The image to judge, e.g. (H, W, 3) or (P, 3).
+    b : array_like
+        The reference, same shape.
+
+    Returns
+    -------
+    float
+        Relative RMSE (the denominator floored at 1e-30).
+    """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     return float(np.sqrt(np.mean((a - b) ** 2)) / max(float(np.mean(np.abs(b))), 1e-30))
@@ -282,7 +306,27 @@ def _paths_only_scene(case, folder):
 
 
 def paths_case(case, folder, variant="llvm_ad_rgb"):
-    """The paths cross-check of one case: (numbers, arrays for the figures)."""
+    """The paths cross-check of one case: (numbers, arrays for the figures).
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with an exact per-pixel reference.
+    folder : str
+        Scratch folder for the scene and Mitsuba's files.
+    variant : str
+        Mitsuba variant for the path tracing (:func:`mitsuba_paths`).
+
+    Returns
+    -------
+    num : dict
+        Angles between the exit directions where both exit (median, p99, max,
+        by count of TIR events), exit-position differences relative to the
+        scene diagonal, status and interface agreement, timings.
+    figs : dict
+        ``angle`` (H, W) float64 (NaN where not both exit), ``status_ours``
+        and ``status_mitsuba`` (H, W).
+    """
     from .camera import Camera
 
     scene = _paths_only_scene(case, os.path.join(folder, "scene"))
@@ -380,7 +424,21 @@ def render_pixel_centres(mscene, spp, seed=0, pixels=None):
 
 
 def envmap_eval(mscene, dirs):
-    """Mitsuba's environment emitter along world directions (N, 3): (N, 3) float64 (NaN rows: 0)."""
+    """Mitsuba's environment emitter along world directions (N, 3): (N, 3) float64 (NaN rows: 0).
+
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        A loaded scene with an environment emitter (scalar variant).
+    dirs : (..., 3) array_like
+        World-space directions the light travels (reshaped to (N, 3)); zero or
+        NaN rows give 0.
+
+    Returns
+    -------
+    (N, 3) float64 ndarray
+        Radiance.
+    """
     import mitsuba as mi
 
     env = mscene.environment()
@@ -411,11 +469,29 @@ def loop_radiance(mscene, pixels, max_depth, spawn="line", eps=1e-5):
     :func:`images_case`), ``'line'`` from the hit point ``eps`` along the new
     direction (the exact tracer's offset, as :func:`mitsuba_paths`).
 
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        The scene loaded with the Fresnel-free BSDF (scalar variant).
+    pixels : (P,) array_like of int
+        Flat pixel indices ``row * W + col``.
+    max_depth : int
+        The integrator's ``max_depth`` (ray segments traced at most).
+    spawn : {'line', 'mitsuba'}
+        How a ray leaves a surface (see above).
+    eps : float
+        Offset along the new direction for ``'line'`` (world units).
+
     Returns
     -------
     radiance, exit_dir : (P, 3) float64
         Per pixel (flat indices ``pixels``); ``exit_dir`` NaN where the path
         ended at the limit.
+
+    References
+    ----------
+    .. [1] W. Jakob et al., "Mitsuba 3 renderer", 2022,
+       https://mitsuba-renderer.org (the ``path`` integrator).
     """
     import mitsuba as mi
 
@@ -471,6 +547,19 @@ def edge_margin_mask(mscene, dirs, env_width):
     bilinear blend across a checker edge reaches at most one texel from it,
     so these pixels' colours do not depend on the blend nor on a path
     difference smaller than a texel. ``dirs`` (N, 3), NaN rows fail.
+
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        A loaded scene with the ``envmap`` emitter.
+    dirs : (..., 3) array_like
+        Exit directions (reshaped to (N, 3)).
+    env_width : int
+        Width ``W`` of the envmap bitmap (height ``W // 2 + 1``).
+
+    Returns
+    -------
+    (N,) bool ndarray
     """
     W = int(env_width)
     H = W // 2 + 1
@@ -501,6 +590,31 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
     exit direction more than a texel from a change of the envmap bitmap
     (:func:`edge_margin_mask`), and Mitsuba's exit direction within
     :data:`PATH_AGREE_DEG` of ours.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with an exact per-pixel reference.
+    folder : str
+        Scratch folder for the scenes and Mitsuba's files.
+    variant : str
+        Mitsuba variant (a scalar one: the loop calls Mitsuba per ray).
+    spp_fresnel : int
+        Samples per pixel centre of the ``dielectric`` image.
+    spp_absorb : int
+        Samples per pixel centre of the ``volpath`` image when an object
+        absorbs (1 otherwise: a delta BSDF is deterministic).
+    env_width : int, optional
+        Envmap bitmap width (default :data:`~refraction_ref.interop.mitsuba.ENV_WIDTH`).
+
+    Returns
+    -------
+    num : dict
+        Relative RMSEs (judged, all, away from bitmap edges; the integrator,
+        the Fresnel image), pixel counts, noise, timings.
+    figs : dict
+        ``ours``, ``mitsuba`` (the ``line`` loop), ``path``, ``fresnel``
+        (H, W, 3) float64 images and ``judged`` (H, W) bool.
     """
     from .interop import mitsuba as M
 
@@ -768,12 +882,31 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     batches), and the golden suite's Z-test
     (:data:`~refraction_ref.golden.tolerances.ZTEST`, ``quantum`` as
     ``golden build``): every Mitsuba batch against our K batches.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with lights and receivers.
+    folder : str
+        Scratch folder for the scene and Mitsuba's files.
+    batches : int, optional
+        ``K``; default the case's ``batches`` or :data:`CAUSTIC_BATCHES`.
+    oversample : float
+        Mitsuba's photon density over ours.
+
+    Returns
+    -------
+    num : dict
+        Photon counts and fluxes, and per receiver (``receivers``) the
+        relative L1, the halves' noise, the power ratio and the Z-test counts.
+    figs : list of dict
+        Per receiver the K-batch means ``ours`` and ``mitsuba`` (map shape).
     """
     import refraction_ref as rr
 
     from .golden.build import _seed_key, case_scene, photon_quantum
     from .golden.tolerances import ZTEST, judge
-    from .metrics import relative_l1
+    from .levelmap.metrics import relative_l1
 
     K = int(batches or case.get("batches") or CAUSTIC_BATCHES)
     scene = case_scene(case, os.path.join(folder, "scene"))
@@ -899,7 +1032,25 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
 
     Paths and images run on the cases with an exact per-pixel reference
     (``reference: exact``), caustics on every case with lights and receivers
-    whose method or reference is exact."""
+    whose method or reference is exact.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case.
+    folder : str
+        The case's output folder (figures).
+    parts : sequence of {'paths', 'images', 'caustics'}
+        The cross-checks to run.
+    figures : bool
+        Write the PNG figures.
+
+    Returns
+    -------
+    dict
+        ``name``, ``purpose``, ``method``, and ``skipped`` (a reason) or the
+        parts' numbers and ``seconds``.
+    """
     t0 = time.perf_counter()
     entry = {"name": case["name"], "purpose": case["purpose"], "method": case["method"]}
     why = _skip_reason(case)
@@ -977,7 +1128,33 @@ def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, sch
         client=None, report=None):
     """Cross-check the catalogue (or ``only`` those cases) into ``out``: ``crosscheck.json``,
     ``crosscheck.md`` (or the Markdown file ``report``, its figure links relative to it) and ``<case>/*.png``. Cases run as Dask tasks with ``workers``
-    (a LocalCluster) or ``scheduler`` (as ``golden build``), else here one by one."""
+    (a LocalCluster) or ``scheduler`` (as ``golden build``), else here one by one.
+
+    Parameters
+    ----------
+    out : str
+        Output folder (created when missing).
+    only : str or sequence of str, optional
+        Case names; None for the whole catalogue.
+    parts : sequence of {'paths', 'images', 'caustics'}
+        The cross-checks to run.
+    workers : int, optional
+        Processes of a local Dask cluster.
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    log : callable
+        ``log(str)`` for one line per finished case.
+    client : distributed.Client, optional
+        An open Dask client to use.
+    report : str, optional
+        Path of the Markdown report (default ``out/crosscheck.md``).
+
+    Returns
+    -------
+    dict
+        ``targets``, ``tir_chaos``, ``versions`` and ``cases`` (per case its
+        :func:`run_case` entry), as written to ``crosscheck.json``.
+    """
     from .files import atomic_open
 
     cases = crosscheck_cases(only)
@@ -1041,7 +1218,19 @@ def _mark(ok):
 
 
 def verdicts(name, e):
-    """Each target's verdict for one case entry: {target: bool or None (reported, not judged)}."""
+    """Each target's verdict for one case entry: {target: bool or None (reported, not judged)}.
+
+    Parameters
+    ----------
+    name : str
+        The case name (the :data:`TIR_CHAOS` cases' angles are not judged).
+    e : dict
+        The case's entry (:func:`run_case`).
+
+    Returns
+    -------
+    dict of str to bool or None
+    """
     v = {}
     p = e.get("paths")
     if p:
@@ -1107,7 +1296,20 @@ def _summary(result):
 def report_markdown(result, link=""):
     """The cross-check report: findings, a summary table, then a table and figures per case.
 
-    ``link`` prefixes the figure paths (the case folders relative to the Markdown file)."""
+    ``link`` prefixes the figure paths (the case folders relative to the Markdown file).
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`run` returns.
+    link : str
+        Prefix of the figure paths (``""`` or ending in ``/``).
+
+    Returns
+    -------
+    str
+        The Markdown report.
+    """
     T = result["targets"]
     lines = ["# Cross-check of the exact references against Mitsuba 3", "",
              "Written by `refraction-ref crosscheck` (refraction_ref/crosscheck.py); conventions in "

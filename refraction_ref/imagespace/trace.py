@@ -357,6 +357,27 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
     A ray closer than this to the pixel's backmost depth stops there
     (§3.7). One slice spans ``(zhi - zlo) / (S - 1)`` (§3.3); the threshold
     is 0 where the pixel has no fragment.
+
+    Parameters
+    ----------
+    zlo, zhi : (H, W) array_like of float
+        Frontmost and backmost depth per pixel (the min/max pass; ``inf``
+        where the pixel has no fragment).
+    slices : int
+        Slices ``S`` of each pixel's depth grid (>= 2).
+    exit_threshold : float
+        Threshold in slices.
+
+    Returns
+    -------
+    (H, W) float64 ndarray
+        Threshold in depth units, 0 where it is not finite.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.3 (the depth slices) and §3.7
+       (early termination near the backmost surface).
     """
     zlo = np.ascontiguousarray(zlo, dtype=np.float64)
     zhi = np.ascontiguousarray(zhi, dtype=np.float64)
