@@ -906,7 +906,7 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
 
     from .golden.build import _seed_key, case_scene, photon_quantum
     from .golden.tolerances import ZTEST, judge
-    from .levelmap.metrics import relative_l1
+    from .metrics import relative_l1
 
     K = int(batches or case.get("batches") or CAUSTIC_BATCHES)
     scene = case_scene(case, os.path.join(folder, "scene"))
