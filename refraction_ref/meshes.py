@@ -211,7 +211,7 @@ def vertex_normals(v, f):
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
-_CREASE_MARGIN = 1e-12  # in cosine: an edge at the crease angle is sharp, whatever the rounding
+CREASE_MARGIN = 1e-12  # in cosine: an edge at the crease angle is sharp, whatever the rounding
 
 
 @nb.njit(cache=True, inline="always")
@@ -352,7 +352,7 @@ def corner_normals(vertices, faces, crease_deg):
     incident = np.ascontiguousarray(order // 3)
     start = np.zeros(len(v) + 1, dtype=np.int64)
     np.cumsum(np.bincount(corner_v, minlength=len(v)), out=start[1:])
-    cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + _CREASE_MARGIN
+    cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + CREASE_MARGIN
     _corner_normals_kernel(np.ascontiguousarray(f), fn, un, start, incident, cos_t, out)
     return out
 

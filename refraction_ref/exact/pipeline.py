@@ -61,15 +61,28 @@ def _object_label(k, o):
 def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
     """The shading normals of the merged objects for ``exact.normals = mode``.
 
-    ``mesh``: the :class:`~refraction_ref.exact.MeshNormals` of ``geom`` with corner
-    normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
-    computed here (on every thread, bit-identical to the serial functions of
-    :mod:`refraction_ref.meshes`).
+    Parameters
+    ----------
+    scene : Scene
+        The scene (its ``objects``, for ``mode == "file"``: their mesh files and rotations).
+    geom : Geometry
+        The merged objects (:func:`refraction_ref.meshes.scene_geometry`).
+    mode : {"crease", "file", "smooth", "face"}
+        ``exact.normals``.
+    crease_deg : float
+        ``exact.crease_deg``, in ``(0, 180]``.
+    vn : (V, 3) ndarray, optional
+        The area-weighted vertex normals when already computed.
+    mesh : MeshNormals, optional
+        The :class:`~refraction_ref.exact.trace.MeshNormals` of ``geom`` with corner
+        normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
+        computed here (on every thread, bit-identical to the serial functions of
+        :mod:`refraction_ref.meshes`).
 
     Returns
     -------
     normals : (V, 3) or (F, 3, 3) ndarray or None
-        What :func:`~refraction_ref.exact.trace_exact` takes as ``normals``:
+        What :func:`~refraction_ref.exact.trace.trace_exact` takes as ``normals``:
         the area-weighted vertex normals (``smooth``; ``vn`` when given), per-corner normals
         (``crease``, ``file``) or None (``face``).
     smooth : bool
@@ -272,7 +285,18 @@ def _assemble(scene, bufs, stats):
 
 
 def check_memory(scene):
-    """The exact reference keeps about 60 float64 words per pixel (rays, hits, outputs): refuse what cannot fit."""
+    """Refuse a camera the exact trace cannot hold (about 60 float64 words per pixel: rays, hits, outputs).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene (``camera.width``, ``camera.height``, ``exact.record``).
+
+    Raises
+    ------
+    SceneError
+        When the trace would need more than 16 GiB.
+    """
     c = scene.data["camera"]
     W, H = c["width"], c["height"]
     K = int(scene.data["exact"]["record"])
@@ -290,6 +314,17 @@ METHOD = register_method(Method(
 
 def render_exact(scene, progress=False, cache=None, keep=None):
     """Trace every pixel's primary ray exactly (Embree) and shade like the image-space method.
+
+    Parameters
+    ----------
+    scene : Scene
+        A mesh scene, or a scene with ``water`` (the exact water reference).
+    progress : bool, default False
+        Show progress bars.
+    cache : dict, optional
+        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
+    keep : str or sequence of str, optional
+        Stage buffers to return as ``stage.<stage>.<buffer>``.
 
     Returns
     -------
