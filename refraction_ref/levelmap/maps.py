@@ -29,7 +29,7 @@ import numba as nb
 import numpy as np
 
 from ..raster import ortho_setup, rasterize_ortho
-from ..receivers import Receivers  # the receivers' triangle soup, shared with the caustics
+from ..caustics.receivers import Receivers  # the receivers' triangle soup, shared with the caustics
 
 __all__ = ["Receivers", "LevelMap", "level_map", "receiver_selection", "map_setup"]
 
