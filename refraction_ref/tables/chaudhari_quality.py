@@ -197,7 +197,7 @@ def run_passes(prep):
 
     Returns
     -------
-    mm, vox, pl : dict
+    mm, vox, pl
         The outputs of :func:`~refraction_ref.imagespace.pipeline.pass_minmax`,
         ``pass_voxelize`` and ``pass_peel``.
     """
