@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values, oriented_triangle, pixel_span
+from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, pixel_span, row_span
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane", "splat_planes", "GROUP_SECTIONS"]
 
@@ -332,23 +332,23 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
             j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rects[g, 2], rects[g, 3])
             if j0 > j1 or i0 > i1:
                 continue
-            a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
+            e = edge_setup(x0, y0, x1, y1, x2, y2)
+            a0, a1, a2 = e[0], e[1], e[2]
+            v = (x0, y0, x1, y1, x2, y2)
             inv_area = 1.0 / area
             tx = tbar[t, 0]
             ty = tbar[t, 1]
             tz = tbar[t, 2]
             kk = K / tdz[t] if K > 0.0 else 0.0
             base = B[s]
-            px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
-                w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
-                for j in range(j0, j1 + 1):
-                    if j > j0:
+                # the rasterizer's scanline step: the row's covered run, edge functions stepped along it
+                ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
+                for j in range(ja, jb + 1):
+                    if j > ja:
                         w0 -= 256 * a0
                         w1 -= 256 * a1
                         w2 -= 256 * a2
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                        continue
                     if accept[i, j] != key:  # depth test against the position map (eq. 4-15)
                         continue
                     g_ = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
