@@ -31,8 +31,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import refraction_ref as rr  # noqa: E402
 from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.levelmap import default_scene  # noqa: E402
-from refraction_ref.metrics import luv_difference, relative_l1  # noqa: E402
 from refraction_ref.levelmap.pipeline import prepare, render_levelmap  # noqa: E402
+from refraction_ref.metrics import luv_difference, relative_l1  # noqa: E402
 from refraction_ref.scene import load_scene  # noqa: E402
 from refraction_ref.warm import warm  # noqa: E402
 

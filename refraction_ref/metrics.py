@@ -29,10 +29,19 @@ _WHITE = _RGB2XYZ.sum(axis=1)  # D65, Y = 1
 def rgb_to_luv(rgb):
     """CIE L*u*v* of linear RGB (sRGB primaries, D65), clamped to [0, 1] first.
 
+    Parameters
+    ----------
+    rgb : (..., 3) array_like
+        Linear RGB; NaN counts as 0.
+
     Returns
     -------
     (..., 3) float64
         ``L`` in [0, 100]; black has ``u = v = 0``.
+
+    References
+    ----------
+    CIE 15:2004 (CIE 1976 L*u*v*); Tipprasert (2006), §2.7 (eq. 2-9).
     """
     c = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64)), 0.0, 1.0)
     xyz = affine(c, _RGB2XYZ.T)
@@ -63,6 +72,10 @@ def luv_difference(img1, img2, mask=None):
     float
         Mean Euclidean distance in CIE L*u*v*, 0 for identical images; 0
         when the mask is empty.
+
+    References
+    ----------
+    Tipprasert (2006), §2.7 (eq. 2-9), Table 5-5.
     """
     d = np.linalg.norm(rgb_to_luv(img1) - rgb_to_luv(img2), axis=-1)
     if mask is not None:
@@ -83,9 +96,18 @@ def relative_l1(test, ref, mask=None, blur=1.0):
     blur : float
         Standard deviation of the Gaussian blur in texels (0: none).
 
-    The blur is SciPy's ``gaussian_filter(.., mode="constant")``, computed by a
-    parallel kernel with SciPy's operations in SciPy's order (the same bits
-    whatever the thread count); the sums are NumPy's.
+    Returns
+    -------
+    float
+        The relative L1 error; when ``ref`` is zero everywhere, 0 if ``test``
+        is too and 1 otherwise.
+
+    Notes
+    -----
+    The blur is SciPy's ``gaussian_filter(.., mode="constant")``, computed by
+    :func:`refraction_ref.filters.gaussian_filter_zero` (a parallel kernel with
+    SciPy's operations in SciPy's order: the same bits whatever the thread
+    count); the sums are NumPy's.
     """
     a = np.nan_to_num(np.asarray(test, dtype=np.float64))
     b = np.nan_to_num(np.asarray(ref, dtype=np.float64))

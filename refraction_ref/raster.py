@@ -839,6 +839,18 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
     faces : (T, 3) int ndarray, optional
         Indexed triangles: vertices are then projected once each (the
         common case, when no triangle crosses the near plane).
+
+    Returns
+    -------
+    RasterSetup
+        Snapped vertices (1/256 pixel), per-vertex depth attribute (1/depth,
+        or depth for an orthographic camera), row ranges and band lists,
+        reusable by several :func:`rasterize` calls; ``dropped`` counts the
+        triangles beyond the guard band.
+
+    References
+    ----------
+    Chaudhari (2008), §4.2 (transformed vertices kept for several passes).
     """
     W, H, sx, sy = camera.kernel_args()
     if faces is not None:

@@ -15,7 +15,8 @@ from scipy import ndimage
 from refraction_ref import filters
 from refraction_ref.caustics.splat import gather_gaussian as splat_gather, gaussian_weights
 from refraction_ref.metrics import relative_l1
-from refraction_ref.volumetric.voxelize import gaussian_blur as voxel_blur, separable_correlate, sym_tap
+from refraction_ref.volumetric.march import sym_tap
+from refraction_ref.volumetric.voxelize import gaussian_blur as voxel_blur, separable_correlate
 
 
 def test_old_names_are_the_filters():

@@ -12,9 +12,9 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.camera import Camera
-from refraction_ref.metrics import luv_difference
 from refraction_ref.levelmap.pipeline import prepare, render_levelmap
 from refraction_ref.levelmap.planes import plane_lattice, reference_box
+from refraction_ref.metrics import luv_difference
 from refraction_ref.scene import load_scene
 
 FLOOR_Y = -0.5

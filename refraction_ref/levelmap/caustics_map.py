@@ -171,7 +171,26 @@ def _to_map(org, dirs, tbar, frame, O, D, tdz, inv_tv):
 
 
 def beams_in_map(vols, box):
-    """Express illumination volumes in the map coordinates of ``box``."""
+    """Express illumination volumes in the map coordinates of ``box``.
+
+    Parameters
+    ----------
+    vols : IlluminationVolumes
+        The beams under the water surface (:func:`~.illumination.illumination_volumes`).
+    box : Box
+        A receiver's level-map box (:class:`~.planes.Box`).
+
+    Returns
+    -------
+    BeamSet
+        Edge-ray origins and rates in ``(col, row, zeta)``, each beam's flux,
+        axis, ``T . T0`` and ``1 / |T . V|``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5 (the illumination volumes intersected with the
+    reference planes, Fig. 4-15).
+    """
     return BeamSet(vols, box)
 
 
@@ -182,10 +201,23 @@ def cull_beams(beams, box, zmin, zmax):
     rectangle over ``[zmin, zmax]`` is that of the two end sections (the
     bounding-volume test of §6.1). Changes no texel.
 
+    Parameters
+    ----------
+    beams : BeamSet
+        Beams in the map coordinates of ``box`` (:func:`beams_in_map`).
+    box : Box
+        The receiver's box; its map is ``box.size`` texels.
+    zmin, zmax : float
+        Depth range of the planes to draw (map depth ``zeta``).
+
     Returns
     -------
     (M,) int64
         Indices of the candidate beams, increasing.
+
+    References
+    ----------
+    Tipprasert (2006), §6.1 (culling by bounding volumes, further work).
     """
     Hc, Wc = box.size
     O = beams.O
@@ -429,6 +461,36 @@ def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, ou
 
 
 def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
-    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``."""
+    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``.
+
+    Parameters
+    ----------
+    beams : BeamSet
+    cand : (M,) int64
+        Candidate beams.
+    box : Box
+    zp : float
+        Plane depth.
+    K : float
+        Absorption coefficient of the water.
+    rect : (4,) int64
+        Scissor rectangle (row0, row1, col0, col1).
+    accept : (Hc, Wc) int32
+        Depth-test map: a fragment is kept where ``accept == key``.
+    key : int
+    zeta, normal : (Hc, Wc), (Hc, Wc, 3)
+        Depth and unit normal of the receiver at each texel.
+    out : (Hc, Wc) float64
+        Accumulated irradiance (additive blending).
+
+    Returns
+    -------
+    int
+        Number of intersection triangles drawn.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eqs. 4-15 to 4-18, Fig. 4-15.
+    """
     return splat_planes(beams, cand, box, [zp], K, np.asarray(rect, np.int64).reshape(1, 4), accept, [key], zeta,
                         normal, out)

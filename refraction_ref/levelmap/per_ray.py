@@ -235,10 +235,29 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
 def search_hits(beams, cand, lm, box):
     """Depth at which each edge ray of each candidate beam hits this receiver (step 1).
 
+    Each ray is marched in depth with steps that move it at most half a
+    texel sideways, and stops at the first texel whose position-map depth
+    it has reached.
+
+    Parameters
+    ----------
+    beams : BeamSet
+        Beams in the map coordinates of ``box``.
+    cand : (M,) int64
+        Candidate beams.
+    lm : LevelMap
+        The receiver's maps (``depth``, ``own``).
+    box : Box
+        Its box; the march spans depths ``[-h/2, h/2]``.
+
     Returns
     -------
     (M, 3) float64
         ``NaN`` where the ray misses the receiver or another receiver blocks it.
+
+    References
+    ----------
+    Tipprasert (2006), §6.3 ("placing the intersection triangle on actual hit").
     """
     hit = np.empty((len(cand), 3))
     _search(beams.O, beams.D, cand, lm.depth, lm.own, -box.h / 2.0, box.h / 2.0 * (1 + 1e-9), hit)
@@ -251,16 +270,28 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
     Parameters
     ----------
     beams : BeamSet
+        Beams in the map coordinates of ``box``.
     cand : (M,) int64
+        Candidate beams.
     lm : LevelMap
+        The receiver's maps (``depth``, ``own``, ``normal``).
     box : Box
     K : float
+        Absorption coefficient of the water.
     out : (Hc, Wc) float64
+        Accumulated irradiance; each texel tests every beam's cross-section
+        at its own depth (the rasterizer's coverage rule, :func:`~refraction_ref.raster.row_span`
+        over one pixel) and adds eq. 4-18's intensity.
 
     Returns
     -------
     dict
         ``rays_hit`` and ``beams_drawn`` counts.
+
+    References
+    ----------
+    Tipprasert (2006), §6.3 (intersection triangles at the actual hits), §4.5
+    (eq. 4-18).
     """
     Hc, Wc = box.size
     if len(cand) == 0:

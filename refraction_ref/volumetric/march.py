@@ -76,8 +76,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ..filters import sym_tap
 from ..status import EXITED, LIMIT, LOST
-from .voxelize import sym_tap
 
 __all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS",
            "PHOTON_ACTIVE", "PHOTON_ABSORBED", "PHOTON_RECEIVED", "receiver_tuple"]

@@ -39,7 +39,7 @@ import threading
 import numba as nb
 import numpy as np
 
-from ..filters import gaussian_blur, separable_correlate, sym_tap  # noqa: F401 (re-exported)
+from ..filters import gaussian_blur, separable_correlate  # re-exported (__all__): they lived here
 from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
