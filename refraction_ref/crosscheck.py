@@ -709,6 +709,67 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
 
 
 # --------------------------------------------------------------------------- caustics
+def _receiver_soup(v, f):
+    """A receiver as a triangle soup with its face normals at every corner (flat shading in Mitsuba).
+
+    Parameters
+    ----------
+    v : (V, 3) array_like
+    f : (F, 3) array_like
+
+    Returns
+    -------
+    dict
+        ``vertices`` (3F, 3), ``faces`` (F, 3), ``normals`` (3F, 3).
+    """
+    tri = np.asarray(v, dtype=np.float64)[np.asarray(f)]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return {"vertices": tri.reshape(-1, 3), "faces": np.arange(3 * len(tri)).reshape(-1, 3),
+            "normals": np.repeat(nrm, 3, axis=0)}
+
+
+def _light_photons(light, ov, n, rng, diag):
+    """``n`` x ``n`` jittered photons of a directional light over the objects' outline plus 2 %.
+
+    Parameters
+    ----------
+    light : dict
+        A directional light of the scene.
+    ov : (V, 3) float64
+        The objects' vertices.
+    n : int
+        Photons per side.
+    rng : numpy.random.Generator
+        Two draws of ``n^2`` each (columns, then rows).
+    diag : float
+        The scene's diagonal: the photons start ``2 diag`` before the objects' centre.
+
+    Returns
+    -------
+    o, dirn : (n^2, 3) float64
+        Start points and directions.
+    flux : (n^2,) float64
+        Each photon's share of the rectangle's area (unit irradiance perpendicular to the light).
+    """
+    L = np.asarray(light["direction"], np.float64)
+    L /= np.linalg.norm(L)
+    a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(L, a)
+    pa, pb = ov @ a, ov @ b
+    ca, cb = (pa.max() + pa.min()) / 2, (pb.max() + pb.min()) / 2
+    wa, wb = 1.02 * (pa.max() - pa.min()), 1.02 * (pb.max() - pb.min())
+    N = int(n) * int(n)
+    gi, gj = np.divmod(np.arange(N), int(n))
+    ua = (gj + rng.random(N)) / n - 0.5
+    ub = (gi + rng.random(N)) / n - 0.5
+    centre = ov.mean(axis=0)
+    base = centre - (centre @ a) * a - (centre @ b) * b - 2.0 * diag * L
+    o = base + (ca + ua * wa)[:, None] * a + (cb + ub * wb)[:, None] * b
+    return o, np.tile(L, (N, 1)), np.full(N, wa * wb / N)
+
+
 def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb", max_bounces=None):
     """Caustic maps from photons traced through Mitsuba's intersector, in our map frames.
 
@@ -730,9 +791,21 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
 
     Parameters
     ----------
+    scene : Scene
+        Directional lights only.
+    folder : str
+        Where the merged PLY of the objects and receivers is written.
     frames : list of (4, 3) arrays
         Our ``caustic_frame_r`` (the only thing read from our side).
     shapes : list of (Hc, Wc)
+    n : int
+        Photons per side, per light.
+    seed : int
+        Seed of the jitter.
+    variant : str
+        Mitsuba variant.
+    max_bounces : int, optional
+        Interfaces a photon may cross (default ``exact.max_bounces``).
 
     Returns
     -------
@@ -751,14 +824,7 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
         raise ValueError("mitsuba_photons: directional lights only (a point light's photons are not built)")
     objs = M.object_meshes(scene)
     K = len(objs)
-    recv = []
-    for rc in d["receivers"]:
-        v, f = object_mesh(rc, scene.base_dir)
-        tri = np.asarray(v, dtype=np.float64)[np.asarray(f)]
-        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        recv.append({"vertices": tri.reshape(-1, 3), "faces": np.arange(3 * len(tri)).reshape(-1, 3),
-                     "normals": np.repeat(nrm, 3, axis=0)})
+    recv = [_receiver_soup(*object_mesh(rc, scene.base_dir)) for rc in d["receivers"]]
     face_norm = any(m["normals"] is None for m in objs)
     parts = objs + [dict(r, normals=None if face_norm else r["normals"]) for r in recv]
     v, f, nrm, owner = _merged_mesh(parts)  # owner < K: object, else receiver owner - K
@@ -782,24 +848,9 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
     stats = {"photons": 0, "deposited": 0, "limit": 0}
     rng = np.random.default_rng(int(seed))
     for lt in lights:
-        L = np.asarray(lt["direction"], np.float64)
-        L /= np.linalg.norm(L)
-        a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
-        a /= np.linalg.norm(a)
-        b = np.cross(L, a)
-        pa, pb = ov @ a, ov @ b
-        ca, cb = (pa.max() + pa.min()) / 2, (pb.max() + pb.min()) / 2
-        wa, wb = 1.02 * (pa.max() - pa.min()), 1.02 * (pb.max() - pb.min())
-        N = int(n) * int(n)
-        gi, gj = np.divmod(np.arange(N), int(n))
-        ua = (gj + rng.random(N)) / n - 0.5
-        ub = (gi + rng.random(N)) / n - 0.5
-        centre = ov.mean(axis=0)
-        base = centre - (centre @ a) * a - (centre @ b) * b - 2.0 * diag * L
-        o = base + (ca + ua * wa)[:, None] * a + (cb + ub * wb)[:, None] * b
-        flux = np.full(N, wa * wb / N)
+        o, dirn, flux = _light_photons(lt, ov, n, rng, diag)
+        N = len(flux)
         rad = np.asarray(lt.get("radiance", [1.0, 1.0, 1.0]), np.float64)
-        dirn = np.tile(L, (N, 1))
         medium = np.full(N, outside)
         inter = np.zeros(N, np.int32)
         trans = np.ones((N, 3))

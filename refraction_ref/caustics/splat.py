@@ -38,6 +38,7 @@ References
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -182,12 +183,26 @@ def _group_fill_kernel(counts, items, grp, goff, gitems):
                 pos[g] += 1
 
 
+class _GroupBins(NamedTuple):
+    """The points binned by band (``counts``, ``items``) and, within a band, by group (``goff``, ``gitems``)."""
+
+    counts: np.ndarray  # (bands + 1,) int64: band b's points are items[counts[b]:counts[b + 1]]
+    items: np.ndarray  # (N',) int64 point indices
+    goff: np.ndarray  # (bands * ng + 1,) int64: band b's points of group g at gitems[goff[b ng + g]:...]
+    gitems: np.ndarray  # int64 point indices
+
+
 @nb.njit(cache=True, parallel=True)
-def _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, band, out):
+def _splat_groups_kernel(i0s, j0s, fx, fy, val, bins, Hc, Wc, band, out):
     # out[0]: every photon; out[1 + g]: the photons of group g. Work item q is (band q // M,
     # map q % M): each owned by one thread, which adds the band's photons (of its group) in
     # index order, so every map is the one _splat_kernel makes of its photons alone, and a
     # crowded band's maps go to different threads
+    # the named tuple unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
+    counts = bins.counts
+    items = bins.items
+    goff = bins.goff
+    gitems = bins.gitems
     M = out.shape[0]
     ng = M - 1
     nb_bands = counts.shape[0] - 1
@@ -238,7 +253,7 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     if ng:
         _group_fill_kernel(counts, items, grp, goff, gitems)
     with nb.parallel_chunksize(1):
-        _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, BAND, out)
+        _splat_groups_kernel(i0s, j0s, fx, fy, val, _GroupBins(counts, items, goff, gitems), Hc, Wc, BAND, out)
     return out
 
 

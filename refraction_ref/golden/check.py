@@ -263,7 +263,7 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
         return out
     from ..scene import load_scene
     from ..imagespace.depth_bounds import global_bounds
-    from ..imagespace.pipeline import pass_peel, pass_reduce
+    from ..imagespace.pipeline import Layers, MinMax, Voxels, pass_peel, pass_reduce
 
     p = load_scene(os.path.join(golden, name, "scene.json")).data["imagespace"]
     if p.get("peeling", "separate") != "separate":
@@ -273,31 +273,32 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
         return cand[k] if (k in cand and passed.get(k)) else gold[k]
 
     def peel(bits):
-        vox = {"bits": bits, "zlo": pick("stage.voxelize.zlo"), "zhi": pick("stage.voxelize.zhi")}
+        vox = Voxels(bits=bits, zlo=pick("stage.voxelize.zlo"), zhi=pick("stage.voxelize.zhi"), ldi=None, total=None)
         return pass_peel(vox, bits.shape[:2], p)
 
     def reduce(ldi):
         gmin, gmax = global_bounds(pick("stage.minmax.zmin"), pick("stage.minmax.zmax"))
-        return pass_reduce({"gmin": gmin, "gmax": gmax}, {"ldi": ldi, "lut": None}, p)
+        mm = MinMax(tri_view=None, zmin=None, zmax=None, frags=None, gmin=gmin, gmax=gmax)
+        return pass_reduce(mm, Layers(ldi=ldi, total=None, lut=None, ran=False, why=""), p)
 
     try:
         ldi = None
         if bits_ok:
             gp = peel(gold["stage.voxelize.bits"])
-            if np.array_equal(gp["ldi"], gold["stage.peel.ldi"]):
+            if np.array_equal(gp.ldi, gold["stage.peel.ldi"]):
                 cp = peel(cand["stage.voxelize.bits"])
-                ldi = cp["ldi"]
+                ldi = cp.ldi
                 if ldi.shape == gold["stage.peel.ldi"].shape:
                     out["stage.peel.ldi"] = ldi
-                dc = cp["total"].astype(np.int16)
+                dc = cp.total.astype(np.int16)
                 out["stage.peel.depth_complexity"] = out["depth_complexity"] = dc
         if ldi_ok:
             ldi = cand["stage.peel.ldi"]
         if ldi is not None and ldi.shape == gold["stage.peel.ldi"].shape:
             gr = reduce(gold["stage.peel.ldi"])
-            if all(np.array_equal(gr[b], gold[f"stage.reduce.{b}"]) for b in ("bounds_hi", "bounds_lo")):
+            if all(np.array_equal(getattr(gr, b), gold[f"stage.reduce.{b}"]) for b in ("bounds_hi", "bounds_lo")):
                 cr = reduce(ldi)
-                out.update({f"stage.reduce.{b}": cr[b] for b in ("bounds_hi", "bounds_lo")})
+                out.update({f"stage.reduce.{b}": getattr(cr, b) for b in ("bounds_hi", "bounds_lo")})
     except (KeyError, ValueError, TypeError):  # a golden without these buffers: judge against the golden alone
         return out
     return out

@@ -38,6 +38,7 @@ blends those four texels' normals with the same weights.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -45,8 +46,8 @@ import numpy as np
 from ..camera import unproject_pixel
 from .peel import layer_depth_lut
 
-__all__ = ["NORMAL_METHODS", "FILTERS", "normal_at", "normal_filtered", "sample_depth", "layer_normals",
-           "layer_depth", "no_lut"]
+__all__ = ["NORMAL_METHODS", "FILTERS", "ViewGrid", "normal_at", "normal_filtered", "sample_depth",
+           "layer_normals", "layer_depth", "no_lut"]
 
 NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3}
 
@@ -304,8 +305,29 @@ def sample_depth(ldi, n, r, c, lut, filt):
     return out
 
 
+class ViewGrid(NamedTuple):
+    """The image a set of layers was rendered in: its size, half extents and projection.
+
+    Attributes
+    ----------
+    W, H : int
+        Width and height in pixels.
+    sx, sy : float
+        Half extents of the image plane at unit distance (perspective) or
+        of the window (orthographic), as :meth:`Camera.kernel_args` gives them.
+    ortho : bool
+        Orthographic projection (a directional light's view).
+    """
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+
+
 @nb.njit(cache=True, inline="always")
-def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt):
+def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
     """Unit view-space normal of layer ``n`` at screen position (row ``r``, column ``c``).
 
     ``filt`` 0: the normal of the texel under the position (:func:`normal_at`
@@ -316,7 +338,36 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt)
     so this is what a shader computing them from filtered depth reads at the
     probe's texture coordinate gets (§3.4.2, §3.6), up to the perspective
     scaling of the denominators; four equal normals give that normal exactly.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layer depths (``+inf`` where absent).
+    n : int64
+        The layer.
+    r, c : float
+        Screen position, pixel units (row, column).
+    lut : tuple
+        On-the-fly peeling inputs (:func:`no_lut` when unused).
+    method : int
+        :data:`NORMAL_METHODS` code.
+    delta : int
+        Texel offset of the differences.
+    grid : ViewGrid
+        The image the layers were rendered in.
+    filt : int
+        :data:`FILTERS` code.
+
+    Returns
+    -------
+    nx, ny, nz : float
+        The unit normal; ``(0, 0, 1)`` where the position lacks the layer.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (filtered reads), §3.5 (eq. 3.2), §3.6.
     """
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
     if k == 0:
         return 0.0, 0.0, 1.0

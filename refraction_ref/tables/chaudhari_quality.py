@@ -243,8 +243,8 @@ def layered(prep, bound="tight", iterations=5, timings=None):
     t["passes"] = (tic() - t0) * 1e3
     t0 = tic()
     if bound == "loose":
-        L = pl["ldi"].shape[0]
-        red = {"bounds_hi": np.full(L, mm["gmax"]), "bounds_lo": np.full(L, mm["gmin"])}
+        L = pl.ldi.shape[0]
+        red = P.Bounds(np.full(L, mm.gmax), np.full(L, mm.gmin), "the object's largest depth bounds every layer")
     else:
         red = P.pass_reduce(mm, pl, dict(p, bounds="global" if bound == "global" else "mip"))
     t["reduce"] = (tic() - t0) * 1e3

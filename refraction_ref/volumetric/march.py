@@ -636,6 +636,70 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
         t = tn
 
 
+@nb.njit(cache=True, inline="always")
+def _robust_step(field, lo, ih, integ, state, ds, stiff, hmin):
+    """One 'robust' step from ``state = (x, y, z, vx, vy, vz, n, gx, gy, gz)`` (module docstring).
+
+    The step is capped by the stiffness bound and halved (up to 8 times)
+    while it crosses an index jump the local gradient does not predict.
+    Returns ``(ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz)``: the step
+    taken, the state after it, and the field sampled at its end (carried
+    into the next step).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5.
+    """
+    x, y, z, vx, vy, vz, n, gx, gy, gz = state
+    gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+    if gn * ds > stiff * n:
+        ds = stiff * n / gn
+    # stiffness: a step across an index jump that the local gradient does not predict is halved
+    for _ in range(8):
+        x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz),
+                                            (n, gx, gy, gz), ds)
+        cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
+        dn = cn - n
+        if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
+            break
+        pred = gx * (x1 - x) + gy * (y1 - y) + gz * (z1 - z)
+        if abs(dn - pred) <= 0.5 * abs(dn):
+            break
+        ds *= 0.5
+    return ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz
+
+
+@nb.njit(cache=True, inline="always")
+def _attenuate(ext, i, j, k, seg, lrad, trans):
+    """Radiance ``lrad`` and transmittance ``trans`` (RGB 3-tuples) after ``seg`` world units in voxel (i, j, k).
+
+    Beer-Lambert with the voxel's extinction (Sun et al. 2008, eq. 6);
+    returns ``(nr, ng, nb, tr_r, tr_g, tr_b)``.
+    """
+    lr, lg, lb = lrad
+    tr_r, tr_g, tr_b = trans
+    kr, kg, kb = ext[i, j, k, 0], ext[i, j, k, 1], ext[i, j, k, 2]
+    if kr == kg and kg == kb:  # grey extinction (the common case): one exp
+        a = math.exp(-kr * seg) if kr != 0.0 else 1.0
+        nr, ng, nb_ = lr * a, lg * a, lb * a
+        tr_r, tr_g, tr_b = tr_r * a, tr_g * a, tr_b * a
+    else:
+        a_r = math.exp(-kr * seg)
+        a_g = math.exp(-kg * seg)
+        a_b = math.exp(-kb * seg)
+        nr, ng, nb_ = lr * a_r, lg * a_g, lb * a_b
+        tr_r, tr_g, tr_b = tr_r * a_r, tr_g * a_g, tr_b * a_b
+    return nr, ng, nb_, tr_r, tr_g, tr_b
+
+
+@nb.njit(cache=True, inline="always")
+def _put3(a, p, v):
+    """``a[p, :] = v`` for a 3-tuple ``v``, one component per statement."""
+    a[p, 0] = v[0]
+    a[p, 1] = v[1]
+    a[p, 2] = v[2]
+
+
 @nb.njit(cache=True)
 def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
     """Trace photon p to its end; returns (steps, status, max relative |v|-n drift).
@@ -717,21 +781,8 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
             x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
         else:
             ds = min(ds, cap * hmin)
-            gn = math.sqrt(gx * gx + gy * gy + gz * gz)
-            if gn * ds > stiff * n:
-                ds = stiff * n / gn
-            # stiffness: a step across an index jump that the local gradient does not predict is halved
-            for _ in range(8):
-                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz),
-                                                    (n, gx, gy, gz), ds)
-                cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
-                dn = cn - n
-                if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
-                    break
-                pred = gx * (x1 - x) + gy * (y1 - y) + gz * (z1 - z)
-                if abs(dn - pred) <= 0.5 * abs(dn):
-                    break
-                ds *= 0.5
+            ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz = _robust_step(
+                field, lo, ih, integ, (x, y, z, vx, vy, vz, n, gx, gy, gz), ds, stiff, hmin)
             carried = True
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                 and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
@@ -747,17 +798,7 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
         ex, ey, ez = x + s * (x1 - x), y + s * (y1 - y), z + s * (z1 - z)
         sx, sy, sz = ex - x, ey - y, ez - z
         seg = math.sqrt(sx * sx + sy * sy + sz * sz)
-        kr, kg, kb = ext[i, j, k, 0], ext[i, j, k, 1], ext[i, j, k, 2]
-        if kr == kg and kg == kb:  # grey extinction (the common case): one exp
-            a = math.exp(-kr * seg) if kr != 0.0 else 1.0
-            nr, ng, nb_ = lr * a, lg * a, lb * a
-            tr_r, tr_g, tr_b = tr_r * a, tr_g * a, tr_b * a
-        else:
-            a_r = math.exp(-kr * seg)
-            a_g = math.exp(-kg * seg)
-            a_b = math.exp(-kb * seg)
-            nr, ng, nb_ = lr * a_r, lg * a_g, lb * a_b
-            tr_r, tr_g, tr_b = tr_r * a_r, tr_g * a_g, tr_b * a_b
+        nr, ng, nb_, tr_r, tr_g, tr_b = _attenuate(ext, i, j, k, seg, (lr, lg, lb), (tr_r, tr_g, tr_b))
         if steps >= dep_from and seg > 0.0:
             deposit_segment(dep, g, lo, ih, (x, y, z), (ex, ey, ez), (lr, lg, lb), (nr, ng, nb_),
                             (sx / seg, sy / seg, sz / seg))
@@ -768,28 +809,18 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
             path[steps, 2] = ez
         if hitr >= 0:
             status = PHOTON_RECEIVED
-            hit_pos[p, 0] = ex
-            hit_pos[p, 1] = ey
-            hit_pos[p, 2] = ez
+            _put3(hit_pos, p, (ex, ey, ez))
             hit_recv[p] = hitr
-            hit_trans[p, 0] = tr_r
-            hit_trans[p, 1] = tr_g
-            hit_trans[p, 2] = tr_b
+            _put3(hit_trans, p, (tr_r, tr_g, tr_b))
             break
         if s < 1.0:
             status = EXITED
             if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
                 vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), s * ds)[3:]
             v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
-            exit_pos[p, 0] = ex
-            exit_pos[p, 1] = ey
-            exit_pos[p, 2] = ez
-            exit_dir[p, 0] = vx1 / v1
-            exit_dir[p, 1] = vy1 / v1
-            exit_dir[p, 2] = vz1 / v1
-            hit_trans[p, 0] = tr_r
-            hit_trans[p, 1] = tr_g
-            hit_trans[p, 2] = tr_b
+            _put3(exit_pos, p, (ex, ey, ez))
+            _put3(exit_dir, p, (vx1 / v1, vy1 / v1, vz1 / v1))
+            _put3(hit_trans, p, (tr_r, tr_g, tr_b))
             break
         x, y, z, vx, vy, vz = x1, y1, z1, vx1, vy1, vz1
         lr, lg, lb = nr, ng, nb_
@@ -1058,6 +1089,79 @@ def _grid(field, extinction, level, smax, bounds):
                  np.ascontiguousarray(level), np.ascontiguousarray(smax), *_geometry(bounds, field.shape))
 
 
+def _new_outputs(P, paths):
+    """Fresh per-photon outputs of a march (:class:`_Outputs`): nothing hit, nothing exited yet."""
+    return _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
+                    np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths, np.zeros(P, np.int8),
+                    np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
+
+
+def _stopping_rule(grid, photons, knobs, dep, out, recv, stop_fraction):
+    """The paper's stopping rule (§4.4): cut the march when fewer than ``stop_fraction * P`` photons are active.
+
+    The photons that ran past the cut are traced again with their deposits
+    from the cut on removed (``dep`` with ``start`` = the cut, ``sign`` -1),
+    and their outputs in ``out`` truncated there.
+
+    Parameters
+    ----------
+    grid, photons, knobs, dep, out, recv : named tuples
+        The march's (:func:`march_photons`); ``dep`` is its deposit buffer.
+    stop_fraction : float or None
+        None or 0: no stopping rule.
+
+    Returns
+    -------
+    int
+        Photons cut by the rule.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4.
+    """
+    steps, P = out.steps, len(out.steps)
+    if not (P and stop_fraction is not None and stop_fraction > 0):  # 0: no stopping rule
+        return 0
+    k = int(math.ceil(stop_fraction * P)) - 1
+    if k >= P:
+        return 0
+    cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
+    late = np.flatnonzero(steps > cut)
+    if not len(late):
+        return 0
+    # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
+    _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
+                  dep._replace(start=cut, sign=-1), _new_outputs(P, np.zeros((1, 1, 3))), recv)
+    steps[late] = cut
+    out.status[late] = LIMIT
+    out.exit_pos[late] = np.nan
+    out.exit_dir[late] = np.nan
+    out.hit_pos[late] = np.nan
+    out.hit_recv[late] = -1
+    if knobs.record:
+        out.paths[late, cut + 1:] = np.nan
+    return int(len(late))
+
+
+def _photon_info(out, recv, truncated, max_steps, buffers):
+    """The per-photon results of a march as :func:`march_photons` returns them (its ``photons``)."""
+    P = len(out.steps)
+    steps, drift = out.steps, out.drift
+    hit_tri = out.hit_recv.astype(np.int64)
+    hit_receiver = np.where(hit_tri >= 0, np.searchsorted(recv.start, hit_tri, side="right") - 1, -1)
+    return {
+        "touched": out.touched.astype(bool), "hit_pos": out.hit_pos, "hit_receiver": hit_receiver.astype(np.int32),
+        "hit_tri": hit_tri,
+        "hit_trans": out.hit_trans, "propagated": int(np.count_nonzero(steps > 0)),
+        "exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "status": out.status, "steps": steps,
+        "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
+        "drift_max": float(drift.max()) if P else 0.0,
+        "drift_median": float(np.median(drift)) if P else 0.0,
+        "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
+        "max_steps": int(max_steps), "buffers": int(buffers),
+    }
+
+
 def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_min=1.0, stiff=0.25,
                   integrator="euler", max_steps=0, min_radiance=1e-3, stop_fraction=1e-3, buffers=None,
                   record=0, stepping="robust", receivers=None, outside_ior=1.0, entry=None):
@@ -1155,10 +1259,7 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     if stepping not in ("paper", "robust"):
         raise ValueError(f"stepping must be 'paper' or 'robust', got {stepping!r}")
     recv = receiver_tuple() if receivers is None else receivers
-    out = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
-                   np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths, np.zeros(P, np.int8),
-                   np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
-    steps, status, drift, exit_pos, exit_dir = out.steps, out.status, out.drift, out.exit_pos, out.exit_dir
+    out = _new_outputs(P, paths)
     rad = np.ascontiguousarray(rad, dtype=np.float64)
     pre_trans = None
     if entry is not None and P:
@@ -1171,57 +1272,21 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     n_half, side = half_contrast(field, float(outside_ior))
     knobs = _Knobs(float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
                    float(min_radiance), record, 1 if stepping == "paper" else 0, n_half, side)
-    rows = acc.reshape(-1, 6)
-    py, pz = acc.shape[2], acc.shape[3]
+    dep = _Deposits(acc.reshape(-1, 6), int(buffers), nx, ny, nz, acc.shape[2], acc.shape[3], sr, sd, 0, 1)
     if P:
-        _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs,
-                      _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, 0, 1), out, recv)
+        _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs, dep, out, recv)
     # the paper's stopping rule: iterate until fewer than stop_fraction * P photons are active
-    truncated = 0
-    if P and stop_fraction is not None and stop_fraction > 0:  # 0: no stopping rule (every photon to its end)
-        k = int(math.ceil(stop_fraction * P)) - 1
-        if k < P:
-            cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
-            late = np.flatnonzero(steps > cut)
-            if len(late):
-                # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
-                redo = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P),
-                                np.full((P, 3), np.nan), np.full((P, 3), np.nan), np.zeros((1, 1, 3)),
-                                np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32),
-                                np.full((P, 3), np.nan))
-                _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
-                              _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, cut, -1), redo, recv)
-                steps[late] = cut
-                status[late] = LIMIT
-                exit_pos[late] = np.nan
-                exit_dir[late] = np.nan
-                out.hit_pos[late] = np.nan
-                out.hit_recv[late] = -1
-                if record:
-                    paths[late, cut + 1:] = np.nan
-                truncated = int(len(late))
+    truncated = _stopping_rule(grid, photons, knobs, dep, out, recv, stop_fraction)
     if P and recv.tris.shape[0]:
-        ex = np.flatnonzero(status == EXITED).astype(np.int64)
+        ex = np.flatnonzero(out.status == EXITED).astype(np.int64)
         reach = 1e6 * (1.0 + float(np.abs(grid.lo).max() + np.abs(grid.hi).max()))
-        _exit_receivers(ex, exit_pos, exit_dir, recv, reach, out.hit_pos, out.hit_recv)
+        _exit_receivers(ex, out.exit_pos, out.exit_dir, recv, reach, out.hit_pos, out.hit_recv)
     if pre_trans is not None:
         out.hit_trans[:] *= pre_trans
-    hit_tri = out.hit_recv.astype(np.int64)
-    hit_receiver = np.where(hit_tri >= 0, np.searchsorted(recv.start, hit_tri, side="right") - 1, -1)
     sums = np.empty((nx, ny, nz, 6))
     _merge_buffers(acc, sr, sd, sums)
     _give_workspace(acc)
-    info = {
-        "touched": out.touched.astype(bool), "hit_pos": out.hit_pos, "hit_receiver": hit_receiver.astype(np.int32),
-        "hit_tri": hit_tri,
-        "hit_trans": out.hit_trans, "propagated": int(np.count_nonzero(steps > 0)),
-        "exit_pos": exit_pos, "exit_dir": exit_dir, "status": status, "steps": steps,
-        "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
-        "drift_max": float(drift.max()) if P else 0.0,
-        "drift_median": float(np.median(drift)) if P else 0.0,
-        "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
-        "max_steps": int(max_steps), "buffers": int(buffers),
-    }
+    info = _photon_info(out, recv, truncated, max_steps, buffers)
     if record:
         info["paths"] = paths
     return sums, info
@@ -1271,9 +1336,7 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
                    1 if stepping == "paper" else 0, float("inf"), 1.0)
     dep = _Deposits(np.zeros((1, 6), np.int64), 1, nx, ny, nz, 1, 1, 1.0, 1.0, 1 << 62, 0)  # never deposits
     P = len(pos)
-    out = _Outputs(np.zeros(P, np.int32), np.zeros(P, np.int8), np.zeros(P),
-                   np.full(pos.shape, np.nan), np.full(pos.shape, np.nan), np.zeros((1, 1, 3)),
-                   np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
+    out = _new_outputs(P, np.zeros((1, 1, 3)))
     recv = receiver_tuple()
     paths = []
     for p in range(len(pos)):

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -185,11 +186,24 @@ def _read_centres(off, depth, cum, ncol, nrow, z0, dz, nz, w_minus, w_total):
                 w_minus[j, i, k] = cum[m - 1] if m > a else 0
 
 
+class _Columns(NamedTuple):
+    """A grid of parallel rays' surface crossings (:func:`column_crossings`), column by column."""
+
+    off: np.ndarray  # (columns + 1,) int64: column c's crossings are depth[off[c]:off[c + 1]]
+    depth: np.ndarray  # crossing depths along the axis, sorted within a column
+    cum: np.ndarray  # running winding number after each crossing
+
+
 @nb.njit(cache=True, parallel=True)
-def _vote_centres(off, depth, cum, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
+def _vote_centres(cols, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
     """``votes += (w_minus != 0)`` (+ ``(w_plus != 0)`` with ``both``) at every voxel centre, in (x, y, z)
     order: :func:`_read_centres` and :func:`winding_at_centres`' difference and transpose in one pass.
-    Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds)."""
+    Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds).
+    ``cols`` is a :class:`_Columns`."""
+    # the named tuple unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
+    off = cols.off
+    depth = cols.depth
+    cum = cols.cum
     for i0 in nb.prange(nrow):
         i = np.int64(i0)
         for j in range(ncol):
@@ -261,8 +275,11 @@ def winding_at_centres(tri, axis, lo, h, n):
 
 
 @nb.njit(cache=True, parallel=True)
-def _read_subsamples(off, depth, cum, ncol, S, vox, p, q, r, z0, dz, both, votes):
-    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis."""
+def _read_subsamples(cols, ncol, S, vox, p, q, r, z0, dz, both, votes):
+    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis (``cols``: :class:`_Columns`)."""
+    off = cols.off
+    depth = cols.depth
+    cum = cols.cum
     for m in nb.prange(vox.shape[0]):
         vp = vox[m, p]
         vq = vox[m, q]
@@ -386,8 +403,8 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     votes_c = np.zeros(n, np.int32)
     for ax in axes:  # winding_at_centres' w_minus (and w_plus) != 0, added up in parallel
         p, q = (ax + 1) % 3, (ax + 2) % 3
-        off, depth, cum = column_crossings(tri, ax, lo, h, (n[p], n[q]))
-        _vote_centres(off, depth, cum, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
+        cols = _Columns(*column_crossings(tri, ax, lo, h, (n[p], n[q])))
+        _vote_centres(cols, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
     need = 1 if closed else 4
     inside = np.empty(n, np.bool_)
     cov = np.empty(n)
@@ -400,8 +417,8 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
         hs = h / S
         for ax in axes:
             p, q = (ax + 1) % 3, (ax + 2) % 3
-            off, depth, cum = column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S))
-            _read_subsamples(off, depth, cum, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
+            cols = _Columns(*column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S)))
+            _read_subsamples(cols, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
         _subsample_coverage(votes, need, vox, cov)  # argwhere order = boolean-mask order
     return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
 
