@@ -85,7 +85,6 @@ def check_materials(geom):
 
 
 # --------------------------------------------------------------------- passes (any view)
-def pass_minmax(geom, cam, p):
 class MinMax(NamedTuple):
     """What the min/max pass makes (:func:`pass_minmax`).
 
@@ -188,9 +187,9 @@ def from_buffers(cls, buf):
     return cls(**{k: buf[k] for k in cls._fields})
 
 
+def pass_minmax(geom, cam, p):
     """Per-pixel Zmin/Zmax of the objects in a view, and their global range (§3.3).
 
-    Returns
     Parameters
     ----------
     geom : Geometry
@@ -200,6 +199,7 @@ def from_buffers(cls, buf):
     p : dict
         The ``imagespace`` knobs (reads :data:`MINMAX_KNOBS`).
 
+    Returns
     -------
     MinMax
 
@@ -217,7 +217,6 @@ def from_buffers(cls, buf):
 def pass_voxelize(mm, cam, p):
     """Bitmask voxelization (§3.3), or, for ``depth='float'``, the A-buffer of exact depths.
 
-    Returns
     Parameters
     ----------
     mm : MinMax
@@ -227,6 +226,7 @@ def pass_voxelize(mm, cam, p):
     p : dict
         The ``imagespace`` knobs (reads :data:`VOXELIZE_KNOBS`).
 
+    Returns
     -------
     Voxels
         ``bits`` and the depth range ``zlo``, ``zhi`` the slices span; for
@@ -251,7 +251,6 @@ def pass_voxelize(mm, cam, p):
 def pass_peel(vox, shape, p):
     """Layered depth images from the bitmask (§3.4.2), or the on-the-fly tables of §3.4.1.
 
-    Returns
     Parameters
     ----------
     vox : Voxels
@@ -262,6 +261,7 @@ def pass_peel(vox, shape, p):
     p : dict
         The ``imagespace`` knobs (reads :data:`PEEL_KNOBS`).
 
+    Returns
     -------
     Layers
 
