@@ -972,7 +972,7 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     from .caustics.receivers import receiver_set
 
     texel_min = min(b.texel_area for b in receiver_set(scene, scene.data["lights"][0],
-                                                       int(scene.data["imagespace"]["caustic_map"])).boxes)
+                                                       int(scene.data["caustics"]["map_size"])).boxes)
     flux_ours = q * texel_min / max([float(np.max(lt.get("radiance", [1.0]))) for lt in scene.data["lights"]]
                                    + [1.0])
     # photons per side for Mitsuba's window at `oversample` times our density

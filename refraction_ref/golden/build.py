@@ -294,7 +294,7 @@ def photon_quantum(scene):
 
     geom = scene_geometry(scene)
     n = int(d["exact"]["photons"])
-    rs = receiver_set(scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    rs = receiver_set(scene, d["lights"][0], int(d["caustics"]["map_size"]))
     flux = max(float(window_samples(light_camera(lt, geom.vertices, n), n, 0)[2].max()) for lt in d["lights"])
     return rad * flux / min(b.texel_area for b in rs.boxes)
 

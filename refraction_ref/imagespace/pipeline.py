@@ -16,7 +16,7 @@ stage (``timings_ms``)  pass                                          section
 ======================  ===========================================  =========
 
 With lights and receivers the caustic stages of §4.1 follow
-(:func:`refraction_ref.caustics.pipeline.imagespace_caustic_stages`).
+(:func:`refraction_ref.imagespace.caustics.imagespace_caustic_stages`).
 The same passes in a light's view make the photon pass (:func:`layered_trace`).
 """
 
@@ -567,10 +567,12 @@ def eye_stages():
 
 
 def _stages(scene):
-    from ..caustics.pipeline import has_caustics, imagespace_caustic_stages
+    from ..caustics.pipeline import has_caustics
+    from .caustics import imagespace_caustic_stages
 
     st = eye_stages()
-    return st + (imagespace_caustic_stages(scene) if has_caustics(scene) else ())
+    knobs = MINMAX_KNOBS + VOXELIZE_KNOBS + PEEL_KNOBS + REDUCE_KNOBS + TRACE_KNOBS
+    return st + (imagespace_caustic_stages(scene, layered_trace, knobs) if has_caustics(scene) else ())
 
 
 def _skipped(scene):

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..graph import Method, Stage, register_method, run_graph
-from ..receivers import receiver_soup
+from ..caustics.receivers import receiver_soup
 from ..validation import SceneError
 from ..scene import load_scene
 from ..warm import warmer
@@ -66,7 +66,7 @@ def default_scene(overrides=None):
 
 
 def receivers_of(scene):
-    """All receiver triangles of a scene (:class:`~refraction_ref.receivers.Receivers`)."""
+    """All receiver triangles of a scene (:class:`~refraction_ref.caustics.receivers.Receivers`)."""
     return receiver_soup(scene, "levelmap")
 
 
@@ -240,8 +240,7 @@ def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=
 
 def _tiny(scene):
     """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a coarse water mesh, small maps, few pixels."""
-    over = {"camera.width": 8, "camera.height": 8, "levelmap.map_size": 8, "levelmap.exact_samples": 16,
-            "imagespace.caustic_map": 8}
+    over = {"camera.width": 8, "camera.height": 8, "caustics.map_size": 8, "exact.water_samples": 16}
     if scene.data.get("water") is not None:  # else the render refuses the scene, naming what is missing
         over["water.resolution"] = 4
     return over

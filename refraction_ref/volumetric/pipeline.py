@@ -14,7 +14,7 @@ stage             inputs                                               section
 ``octree``        voxelize; eps, eps2, ds_max, stepping                §4.2, §5.3
 ``photons``       voxelize (bounds, meshes); lights; photons, proxy,   §4.3
                   proxy_inflate, outside_ior
-``receivers``     receivers, lights, imagespace.caustic_map (only      §6.2.2, Fig. 9
+``receivers``     receivers, lights, caustics.map_size (only           §6.2.2, Fig. 9
                   with lights and receivers)
 ``march``         gradient, octree, photons, (receivers); ds_min,      §4.4, eqs. 4-6
                   stiff, integrator, max_steps, min_radiance,
@@ -297,10 +297,10 @@ def _st_receivers(ctx):
     from ..caustics.receivers import receiver_set
 
     d = ctx.scene.data
-    rs = receiver_set(ctx.scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    rs = receiver_set(ctx.scene, d["lights"][0], int(d["caustics"]["map_size"]))
     recv = receiver_tuple(rs.tris, rs.owner)
     ctx.note(f"{len(rs.boxes)} diffuse receiver(s), {len(rs.tris)} triangles: photons stop on them (inside the "
-             f"volume, or straight on after leaving it); {d['imagespace']['caustic_map']}^2 caustic maps")
+             f"volume, or straight on after leaving it); {d['caustics']['map_size']}^2 caustic maps")
     return {"rs": rs, "recv": recv, **{f"frame_{r}": rs.frame(r).astype(np.float64) for r in range(len(rs.boxes))}}
 
 
@@ -402,7 +402,7 @@ def _st_caustics(ctx):
     (docs/oracle.md, "Caustics on receivers"). Photons that never crossed
     the half-contrast level of the index (direct light) are left out.
     """
-    from ..caustics.pipeline import _collect, splat_maps
+    from ..caustics.pipeline import collect_maps, splat_maps
 
     d = ctx.scene.data
     rs = ctx.buf["receivers"]["rs"]
@@ -412,7 +412,7 @@ def _st_caustics(ctx):
     b = np.asarray(vox["bounds"], dtype=np.float64)
     h = (b[1] - b[0]) / np.asarray(vox["ior"].shape, dtype=np.float64)
     h2 = float(np.prod(h)) ** (2.0 / 3.0)
-    size = int(d["imagespace"]["caustic_map"])
+    size = int(d["caustics"]["map_size"])
     light = ph[3]
     per_light = []
     landed = 0
@@ -427,7 +427,7 @@ def _st_caustics(ctx):
         per_light.append(splat_maps(rs, minfo["hit_pos"][sel], minfo["hit_tri"][sel], flux, size))
         landed += len(sel)
     arrays = {}
-    _collect(d["lights"], rs, per_light, arrays, 1)
+    collect_maps(d["lights"], rs, per_light, arrays, 1)
     ctx.note(f"{landed} photons that met refractive material landed on the receivers; bilinear splat, no gathering")
     ctx.stats["caustics"] = {"photons_on_receivers": int(landed), "caustic_map": size,
                              "receivers": len(rs.boxes)}
@@ -484,10 +484,10 @@ def _skipped(scene):
 def _stages(scene):
     rc = _has_receivers(scene)
     nr = len(scene.data["receivers"] or []) if rc else 0
-    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
+    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "caustics.map_size"),
                         makes=tuple(f"frame_{r}" for r in range(nr)),
                         doc="diffuse receivers the photons stop on, and their caustic-map frames (Fig. 9)"),) if rc else ()
-    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "imagespace.caustic_map"), after=("voxelize", "photons", "march", "receivers"),
+    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "caustics.map_size"), after=("voxelize", "photons", "march", "receivers"),
                         makes=tuple(f"{k}_{r}" for k in ("caustic_map", "caustic_frame", "caustic_rgb")
                                     for r in range(nr)),
                         doc="irradiance of the refracted photons on each receiver (Fig. 9)"),) if rc else ()
