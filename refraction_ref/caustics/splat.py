@@ -138,6 +138,13 @@ def splat_bilinear(col, row, values, shape, out=None):
         The sum over points of the value times the bilinear weight; weights
         off the map are folded onto the border texels, so
         ``out.sum(axis=(0, 1)) == values.sum(axis=0)`` up to round-off.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     Hc, Wc = int(shape[0]), int(shape[1])
     val = np.ascontiguousarray(values, dtype=np.float64)
@@ -225,11 +232,30 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     """:func:`splat_bilinear` of every point, and of the points of each group ``0 .. ng - 1`` alone,
     from one footprint and one binning (the same bits as separate calls on each subset).
 
+    Parameters
+    ----------
+    col, row : (N,) array_like
+        Continuous map positions.
+    values : (N, C) array_like
+        What each point deposits.
+    shape : (Hc, Wc)
+    groups : (N,) array_like of int
+        Each point's group (negative: in none but the whole map).
+    ng : int
+        Number of groups.
+
     Returns
     -------
     (1 + ng, Hc, Wc, C) float64
         Row 0 the map of every point, row ``1 + g`` that of group ``g`` (points of other
         groups, e.g. negative, in none).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     Hc, Wc = int(shape[0]), int(shape[1])
     ng = int(ng)
@@ -284,7 +310,37 @@ def _receiver_photons_kernel(P, face, idx, normals, frame, texel_area, Hc, Wc, f
 
 
 def receiver_photons(P, face, idx, normals, box, flux):
-    """Map positions (col, row) and splat values (N, C) of the photons ``idx`` on receiver ``box``."""
+    """Map positions (col, row) and splat values (N, C) of the photons ``idx`` on receiver ``box``.
+
+    Parameters
+    ----------
+    P : (M, 3) float64
+        Photon hit points.
+    face : (M,) int64
+        Receiver triangle hit by each photon.
+    idx : (N,) int64
+        The photons on this receiver.
+    normals : (T, 3) float64
+        The receivers' face normals.
+    box : Box
+        The receiver's caustic-map box.
+    flux : (M, C) float64
+        Each photon's flux.
+
+    Returns
+    -------
+    col, row : (N,) float64
+        Map positions.
+    val : (N, C) float64
+        Irradiance deposits (flux over the texel area, times the cosine).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
+    """
     Hc, Wc = box.size
     frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
     n = len(idx)
@@ -323,7 +379,21 @@ def _channel_mean_kernel(m, out):
 
 def channel_mean(m):
     """``m.mean(axis=2)`` of an (Hc, Wc, C) map on every thread, bit for bit NumPy's
-    (the channels summed in order, then divided by ``C``)."""
+    (the channels summed in order, then divided by ``C``).
+
+    Parameters
+    ----------
+    m : (Hc, Wc, C) float64
+
+    Returns
+    -------
+    (Hc, Wc) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
     m = np.ascontiguousarray(m, dtype=np.float64)
     out = np.empty(m.shape[:2])
     _channel_mean_kernel(m, out)
@@ -354,6 +424,11 @@ def finite_maps(a):
     -------
     a, a32
         The same array, and its float32 copy.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     flat = a.reshape(a.shape[0], -1)
     out = np.empty(flat.shape, np.float32)
@@ -372,6 +447,13 @@ def accumulate_light(m, radiance, unit, rgb):
         The light's RGB radiance.
     unit : (Hc, Wc) float64
     rgb : (Hc, Wc, 3) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     _accumulate_kernel(np.ascontiguousarray(m, dtype=np.float64), np.asarray(radiance, dtype=np.float64),
                        unit, rgb)
