@@ -296,7 +296,7 @@ def _water_scene():
     return rr.load_scene(sc)
 
 
-_WATER = {"camera.width": 32, "camera.height": 32, "levelmap.map_size": 96, "levelmap.exact_samples": 160}
+_WATER = {"camera.width": 32, "camera.height": 32, "caustics.map_size": 96, "exact.water_samples": 160}
 
 
 def _water_maps(scene):

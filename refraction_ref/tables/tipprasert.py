@@ -511,7 +511,7 @@ def placement_study(quick=False, log=print):
     from ..scene import load_scene
 
     ms, es = (256, 1024) if quick else (512, 2048)
-    size = {"levelmap.map_size": ms, "levelmap.exact_samples": es, "camera.width": 32, "camera.height": 32}
+    size = {"caustics.map_size": ms, "exact.water_samples": es, "camera.width": 32, "camera.height": 32}
     rows = []
     for name, data in placement_scenes(quick):
         base = load_scene(data, size)
@@ -829,12 +829,12 @@ def run(quick=False, out=".", log=print):
     -------
     Report
     """
-    from ..levelmap.pipeline import warm_up
+    from ..warm import warm
 
     t0 = time.perf_counter()
     out = os.fspath(out)
     os.makedirs(out, exist_ok=True)
-    warm_up()
+    warm("levelmap")
     if quick:
         meshes = [("teapot", "teapot"), ("sphere", "sphere")]
         planes = [3, 17, 31]
