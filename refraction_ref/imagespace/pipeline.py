@@ -34,6 +34,7 @@ from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
 from ..validation import SceneError
+from ..warm import warmer
 from .depth_bounds import depth_bounds, global_bounds
 from .knobs import check_memory
 from .normals import layer_normals
@@ -606,34 +607,35 @@ def _assemble(scene, bufs, stats):
     return arrays, info
 
 
-def _warm(scene=None):
-    """Compile (or load) the kernels this scene's plan needs, on a tiny copy of it (``_warmup.warm``)."""
-    from .. import _warmup
-
-    _warmup.warm("imagespace", scene)
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a few pixels and photons, same kernels."""
+    return {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "caustics.map_size": 8}
 
 
 METHOD = register_method(Method(
-    "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
+    "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped,
+    warm=warmer("imagespace"), tiny=_tiny, label="Chaudhari 2008",
     results=("rays", "trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
     check=check_memory,
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 
-def render_imagespace(scene, warm=True, cache=None, keep=None):
+def render_imagespace(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Render a scene with the image-space method (runs :data:`METHOD`'s stage graph).
 
     Parameters
     ----------
     scene : Scene
         A validated scene (:func:`~refraction_ref.scene.load_scene`).
-    warm : bool
-        Compile (or load from the cache) every kernel on a tiny scene first,
-        so that ``timings_ms`` measure run time, not JIT time.
     cache : dict, optional
         Stage cache (:class:`~refraction_ref.session.Session` keeps one).
     keep : str or list, optional
         Stages whose buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool
+        Compile (or load from the cache) every kernel on a tiny scene first,
+        so that ``timings_ms`` measure run time, not JIT time.
+    progress : bool
+        Show a progress bar on long work.
 
     Returns
     -------
@@ -646,4 +648,4 @@ def render_imagespace(scene, warm=True, cache=None, keep=None):
     ----------
     Chaudhari (2008), chapter 3.
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)

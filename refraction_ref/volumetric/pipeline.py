@@ -54,6 +54,7 @@ from ..camera import Camera
 from ..environment import environment_lookup
 from ..graph import Method, Stage, describe, register_method, run_graph
 from ..validation import SceneError
+from ..warm import warmer
 from .gradient import gradient_field
 from .march import march_photons, receiver_tuple, smooth_radiance
 from .octree import build_octree
@@ -197,14 +198,10 @@ def _run_voxelize(scene):
             "mesh": (geom.vertices, geom.faces)}
 
 
-def _warm(scene=None):
-    """Compile (or load from numba's cache) the kernels this scene's plan needs, on a tiny copy of it.
-
-    ``scene`` None warms the default scene; see ``refraction_ref._warmup.warm``.
-    """
-    from .. import _warmup
-
-    _warmup.warm("volumetric", scene)
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a 16^3 volume, a few photons and pixels."""
+    return {"camera.width": 4, "camera.height": 4, "volumetric.photons": 4, "volumetric.resolution": 16,
+            "volumetric.padding": 2, "imagespace.photons": 8, "caustics.map_size": 8}
 
 
 # --------------------------------------------------------------------- the stage graph
@@ -545,14 +542,15 @@ def _assemble(scene, bufs, stats):
 
 
 METHOD = register_method(Method(
-    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=_warm,
+    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble,
+    warm=warmer("volumetric"), tiny=_tiny, label="Sun et al. 2008",
     skipped=_skipped,
     results=("voxelize.ior", "voxelize.bounds", "voxelize.triangles", "march.minfo", "smooth.radiance",
              "smooth.direction", "view", "caustics"),
     doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
 
 
-def render_volumetric(scene, cache=None, warm=True, keep=None):
+def render_volumetric(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Render a scene with the volumetric method of Sun et al. (2008) (runs :data:`METHOD`'s graph).
 
     Parameters
@@ -563,10 +561,12 @@ def render_volumetric(scene, cache=None, warm=True, keep=None):
         Stage outputs of an earlier render (filled in by this call). Stages
         whose inputs did not change are reused from it
         (:class:`refraction_ref.session.Session` keeps one).
-    warm : bool
-        Compile every kernel first so that ``timings_ms`` exclude JIT time.
     keep : str or list, optional
         Stages whose buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool
+        Compile every kernel first so that ``timings_ms`` exclude JIT time.
+    progress : bool
+        Show a progress bar on long work.
 
     Returns
     -------
@@ -585,7 +585,7 @@ def render_volumetric(scene, cache=None, warm=True, keep=None):
     ----------
     Sun et al. (2008), §3-§5.
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
 
 
 def _summary(d):
