@@ -46,6 +46,7 @@ from ..meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix
 from ..status import MISSED
 from ..validation import SceneError
 from ..vec3 import affine
+from ..warm import warmer
 from . import water
 from .caustics import exact_caustic_stages
 from .trace import mesh_normals, trace_exact
@@ -306,25 +307,42 @@ def check_memory(scene):
                          "camera.width and camera.height" + (" or exact.record" if K else ""))
 
 
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a few pixels and photons, same kernels."""
+    over = {"camera.width": 16, "camera.height": 16, "exact.photons": 8, "caustics.map_size": 8}
+    if scene.data.get("water") is not None:
+        over.update({"water.resolution": 4, "exact.water_samples": 16})
+    return over
+
+
+def _params(scene):
+    """The blocks of ``meta["params"]``: the exact block, and the water's on a water scene."""
+    return ("exact", "water") if scene.data.get("water") is not None else ("exact",)
+
+
 METHOD = register_method(Method(
     "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped, check=check_memory,
+    warm=warmer("exact"), tiny=_tiny, params=_params, label="Embree reference",
     results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final"),
     doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface"))
 
 
-def render_exact(scene, progress=False, cache=None, keep=None):
+def render_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Trace every pixel's primary ray exactly (Embree) and shade like the image-space method.
 
     Parameters
     ----------
     scene : Scene
         A mesh scene, or a scene with ``water`` (the exact water reference).
-    progress : bool, default False
-        Show progress bars.
     cache : dict, optional
         Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
     keep : str or sequence of str, optional
         Stage buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool, default True
+        Compile (or load) the kernels on a tiny copy of the scene first, so
+        that ``timings_ms`` exclude JIT time.
+    progress : bool, default False
+        Show progress bars.
 
     Returns
     -------
@@ -332,10 +350,10 @@ def render_exact(scene, progress=False, cache=None, keep=None):
         Same keys as :func:`~refraction_ref.imagespace.pipeline.render_imagespace`
         (for a water scene: as the level map).
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
 
 
-def render_water_exact(scene, progress=False, cache=None, keep=None):
+def render_water_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Exact reference caustics maps for a water scene (same keys as the level map).
 
     The exact method's graph for water scenes: the level map's ``water``,
@@ -346,12 +364,15 @@ def render_water_exact(scene, progress=False, cache=None, keep=None):
     ----------
     scene : Scene
         A scene with a ``water`` block and at least one light.
-    progress : bool, default False
-        Show progress bars.
     cache : dict, optional
         Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
     keep : str or sequence of str, optional
         Stage buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool, default True
+        Compile (or load) the kernels on a tiny copy of the scene first, so
+        that ``timings_ms`` exclude JIT time.
+    progress : bool, default False
+        Show progress bars.
 
     Returns
     -------
@@ -359,4 +380,4 @@ def render_water_exact(scene, progress=False, cache=None, keep=None):
         ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
         ``timings_ms``, ``plan``, ``stats``.
     """
-    return render_exact(scene, progress=progress, cache=cache, keep=keep)
+    return render_exact(scene, cache=cache, keep=keep, warm=warm, progress=progress)
