@@ -142,9 +142,11 @@ class Method:
         ``skipped(scene) -> list of {stage, ran: False, why}`` for stages the
         scene does not need (said in ``meta.plan``).
     warm : callable or None
-        ``warm(scene)``: compile the kernels this scene's plan needs on a tiny
-        copy of it (once per process and plan), so that ``timings_ms``
-        measure run time, not JIT time.
+        ``warm(scene=None)``: compile the kernels this scene's plan needs on
+        a tiny copy of it (once per process and plan), so that ``timings_ms``
+        measure run time, not JIT time. Every built-in method registers
+        ``warm=refraction_ref.warm.warmer(name)``, the one warm-up, which
+        shrinks the scene by :attr:`tiny`.
     check : callable or None
         ``check(scene)``: the method's preconditions on a loaded scene
         (e.g. the memory its buffers need), raising
