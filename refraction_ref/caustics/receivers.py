@@ -60,7 +60,7 @@ import numpy as np
 
 from ..camera import project_point
 from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
-from ..levelmap.planes import frame_of, reference_box, to_map
+from .boxes import frame_of, reference_box, to_map
 from ..meshes import object_mesh
 from ..raster import clip_near, rasterize
 from ..validation import SceneError

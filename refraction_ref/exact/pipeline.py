@@ -41,7 +41,7 @@ from ..caustics.pipeline import caustic_arrays, has_caustics, merge_caustics, sk
 from ..environment import environment_lookup
 from ..graph import Method, Stage, register_method, run_graph
 from ..levelmap.pipeline import IMAGE_BUFFERS, check_water_scene, shade_stage, shared_stages, water_arrays
-from ..levelmap.planes import frame_of
+from ..caustics.boxes import frame_of
 from ..meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
 from ..status import MISSED
 from ..validation import SceneError

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..embree import nearest_hits, run_chunks, soup_scene
 from ..optics import refract3
-from ..levelmap.planes import to_map
+from ..caustics.boxes import to_map
 from ..levelmap.water import incident_directions, surface_normals, wave_gradient, wave_height
 from ..vec3 import dot
 
