@@ -153,7 +153,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
         A scene with ``water`` and ``lights``.
     ctx : dict
         The light side shared with the level map: ``receivers``
-        (:class:`~refraction_ref.receivers.Receivers`), ``pairs[r][l]`` (box and
+        (:class:`~refraction_ref.caustics.receivers.Receivers`), ``pairs[r][l]`` (box and
         level map per receiver and light: the maps' frame and what they see),
         ``eta`` (outside over water index) and ``K`` (the water's absorption).
     light_index : int

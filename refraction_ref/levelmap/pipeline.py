@@ -104,7 +104,7 @@ def prepare(scene, timings=None):
     -------
     dict
         ``mesh``, ``vols`` (per light), ``receivers``, ``pairs[r][l]``,
-        ``eta``, ``K``.
+        ``eta``, ``K``, ``placement`` (``caustics.placement``).
     """
     check_water_scene(scene)
     timings = {} if timings is None else timings
@@ -118,7 +118,7 @@ def prepare(scene, timings=None):
     pairs = level_map_pass(pl["receivers"], pl["boxes"], bool(scene.data["caustics"]["shadows"]))
     timings["level_map"] = timings.get("level_map", 0.0) + (time.perf_counter() - tic) * 1e3
     return {"mesh": w["mesh"], "vols": w["vols"], "receivers": pl["receivers"], "pairs": pairs,
-            "eta": w["eta"], "K": w["K"]}
+            "eta": w["eta"], "K": w["K"], "placement": scene.data["caustics"]["placement"]}
 
 
 def water_pass(scene):
