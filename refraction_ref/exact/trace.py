@@ -615,41 +615,24 @@ def _query_rows(lo, hi, active, pos, dirn, side, eps, first, org32, dir32):
             dir32[m, c] = np.float32(dc)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _leave(i, bounce, st, out):
-    """Ray ``i`` met no further triangle: missed (first bounce) or exited."""
-    if bounce == 0:
-        st.status[i] = MISSED
-        for c in range(3):
-            out.exit_dir[i, c] = st.dir0[i, c]
-    else:
-        st.status[i] = EXITED
-        for c in range(3):
-            out.exit_pos[i, c] = st.pos[i, c]
-            out.exit_dir[i, c] = st.dirn[i, c]
-        out.leaked[i] = st.medium[i] != _OUTSIDE
-    for c in range(3):
-        out.last_dir[i, c] = st.dirn[i, c]
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _hit_distance(mesh, hits, m, fi, p, d, s, eps, bounce):
-    """float64 Möller-Trumbore on the triangle ``fi`` Embree found for row ``m``: the distance
-    ``t`` from ``p`` along ``d`` and the barycentrics ``u``, ``w2``. Parallel or degenerate
-    (``t`` not finite or not positive): Embree's distance from the pushed-off origin
-    (``p + eps (d + s)`` after the first bounce) and its barycentrics."""
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _hit_distance(v0, e1, e2, embree_hit, fi, p, d, s, eps, bounce):
+    """float64 Möller-Trumbore on the triangle ``fi`` Embree found (``embree_hit``: its float32
+    ``tfar``, ``u``, ``v``): the distance ``t`` from ``p`` along ``d`` and the barycentrics ``u``,
+    ``w2``. Parallel or degenerate (``t`` not finite or not positive): Embree's distance from the
+    pushed-off origin (``p + eps (d + s)`` after the first bounce) and its barycentrics."""
     px, py, pz = p
     dx, dy, dz = d
-    e1x, e1y, e1z = mesh.e1[fi, 0], mesh.e1[fi, 1], mesh.e1[fi, 2]
-    e2x, e2y, e2z = mesh.e2[fi, 0], mesh.e2[fi, 1], mesh.e2[fi, 2]
+    e1x, e1y, e1z = e1[fi, 0], e1[fi, 1], e1[fi, 2]
+    e2x, e2y, e2z = e2[fi, 0], e2[fi, 1], e2[fi, 2]
     pvx = dy * e2z - dz * e2y
     pvy = dz * e2x - dx * e2z
     pvz = dx * e2y - dy * e2x
     det = _dot3(e1x, e1y, e1z, pvx, pvy, pvz)
     inv = 1.0 / det
-    tx = px - mesh.v0[fi, 0]
-    ty = py - mesh.v0[fi, 1]
-    tz = pz - mesh.v0[fi, 2]
+    tx = px - v0[fi, 0]
+    ty = py - v0[fi, 1]
+    tz = pz - v0[fi, 2]
     u = _dot3(tx, ty, tz, pvx, pvy, pvz) * inv
     qx = ty * e1z - tz * e1y
     qy = tz * e1x - tx * e1z
@@ -657,7 +640,7 @@ def _hit_distance(mesh, hits, m, fi, p, d, s, eps, bounce):
     w2 = _dot3(dx, dy, dz, qx, qy, qz) * inv
     t = _dot3(e2x, e2y, e2z, qx, qy, qz) * inv
     if not math.isfinite(t) or t <= 0.0:  # parallel / degenerate: trust Embree's distance
-        tf = np.float64(hits.tfar[m])
+        tf = np.float64(embree_hit[0])
         if bounce:
             hx = (px + eps * (dx + s[0])) + tf * dx
             hy = (py + eps * (dy + s[1])) + tf * dy
@@ -667,13 +650,13 @@ def _hit_distance(mesh, hits, m, fi, p, d, s, eps, bounce):
             hy = py + tf * dy
             hz = pz + tf * dz
         t = _dot3(hx - px, hy - py, hz - pz, dx, dy, dz)
-        u = np.float64(hits.bu[m])  # barycentrics of the Embree point
-        w2 = np.float64(hits.bv[m])
+        u = np.float64(embree_hit[1])  # barycentrics of the Embree point
+        w2 = np.float64(embree_hit[2])
     return t, u, w2
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _shading_normal(mesh, fi, u, w2, ng, per_corner):
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _shading_normal(vn_c, vn_v, faces, fi, u, w2, ng, per_corner):
     """The unit shading normal at barycentrics ``(u, w2)`` of face ``fi``, interpolated from its
     corner (``per_corner``) or vertex normals, on the side of the geometric normal ``ng``; ``ng``
     itself where the interpolation is zero or not finite."""
@@ -685,13 +668,11 @@ def _shading_normal(mesh, fi, u, w2, ng, per_corner):
     if not (s > 0):
         s = 1.0
     if per_corner:  # the same sum, the corner normals of face fi
-        vn_c = mesh.vn_c
         nsx = (b0 * vn_c[fi, 0, 0] + b1 * vn_c[fi, 1, 0] + b2 * vn_c[fi, 2, 0]) / s
         nsy = (b0 * vn_c[fi, 0, 1] + b1 * vn_c[fi, 1, 1] + b2 * vn_c[fi, 2, 1]) / s
         nsz = (b0 * vn_c[fi, 0, 2] + b1 * vn_c[fi, 1, 2] + b2 * vn_c[fi, 2, 2]) / s
     else:
-        vn_v = mesh.vn_v
-        a0, a1, a2 = mesh.faces[fi, 0], mesh.faces[fi, 1], mesh.faces[fi, 2]
+        a0, a1, a2 = faces[fi, 0], faces[fi, 1], faces[fi, 2]
         nsx = (b0 * vn_v[a0, 0] + b1 * vn_v[a1, 0] + b2 * vn_v[a2, 0]) / s
         nsy = (b0 * vn_v[a0, 1] + b1 * vn_v[a1, 1] + b2 * vn_v[a2, 1]) / s
         nsz = (b0 * vn_v[a0, 2] + b1 * vn_v[a1, 2] + b2 * vn_v[a2, 2]) / s
@@ -706,7 +687,7 @@ def _shading_normal(mesh, fi, u, w2, ng, per_corner):
     return nsx, nsy, nsz
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _refract_event(d, ns, ng, cos_g, eta, smooth):
     """Snell / TIR (:func:`refraction_ref.optics.refract3`) of ``d`` at the shading normal ``ns``.
 
@@ -732,15 +713,6 @@ def _refract_event(d, ns, ng, cos_g, eta, smooth):
     return ndx, ndy, ndz, tir, lost, nsx, nsy, nsz
 
 
-@nb.njit(cache=True, nogil=True)
-def _record_event(out, i, k, x, nd, lost):
-    """Row ``k`` of ray ``i``'s recorded path: the event's point ``x`` and new direction ``nd``
-    (NaN when lost)."""
-    for c in range(3):
-        out.path_pos[i, k, c] = x[c]
-        out.path_dir[i, k, c] = np.nan if lost else nd[c]
-
-
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
     """One bounce of the rays ``hits.active[m]``, rows ``m`` in ``[lo, hi)``, given Embree's hits
@@ -759,11 +731,15 @@ def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
     max_bounces, record, eps = cfg.max_bounces, cfg.record, cfg.eps
     smooth, per_corner, outside_ior = cfg.smooth, cfg.per_corner, cfg.outside_ior
     ng_all, fo, ior, med_ior = mesh.ng, mesh.face_object, mesh.ior, mesh.med_ior
+    v0_all, e1_all, e2_all, faces, vn_v, vn_c = mesh.v0, mesh.e1, mesh.e2, mesh.faces, mesh.vn_v, mesh.vn_c
     active, prim, seg, seg_obj = hits.active, hits.prim, hits.seg, hits.seg_obj
+    tfar, bu, bv = hits.tfar, hits.bu, hits.bv
     pos, dirn, side, medium, status = st.pos, st.dirn, st.side, st.medium, st.status
     last_tir, interfaces, bounces, path_length = st.last_tir, st.interfaces, st.bounces, st.path_length
     last_dir, hit_pos, first_face = out.last_dir, out.hit_pos, out.first_face
     first_normal, first_dir = out.first_normal, out.first_dir
+    exit_pos, exit_dir, leaked, dir0 = out.exit_pos, out.exit_dir, out.leaked, st.dir0
+    path_pos, path_dir = out.path_pos, out.path_dir
     n_out = med_ior.shape[0] - 1  # med_ior's entry of the outside medium
     for m in range(lo, hi):
         i = active[m]
@@ -773,10 +749,21 @@ def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
         dx, dy, dz = dirn[i, 0], dirn[i, 1], dirn[i, 2]
         fi = np.int64(prim[m])
         if fi < 0:  # no further hit
-            _leave(i, bounce, st, out)
+            if bounce == 0:  # missed
+                status[i] = MISSED
+                for c in range(3):
+                    exit_dir[i, c] = dir0[i, c]
+            else:  # exited
+                status[i] = EXITED
+                for c in range(3):
+                    exit_pos[i, c] = pos[i, c]
+                    exit_dir[i, c] = dirn[i, c]
+                leaked[i] = medium[i] != _OUTSIDE
+            for c in range(3):
+                last_dir[i, c] = dirn[i, c]
             continue
-        t, u, w2 = _hit_distance(mesh, hits, m, fi, (px, py, pz), (dx, dy, dz),
-                                 (side[i, 0], side[i, 1], side[i, 2]), eps, bounce)
+        t, u, w2 = _hit_distance(v0_all, e1_all, e2_all, (tfar[m], bu[m], bv[m]), fi, (px, py, pz),
+                                 (dx, dy, dz), (side[i, 0], side[i, 1], side[i, 2]), eps, bounce)
         xx = px + t * dx
         xy = py + t * dy
         xz = pz + t * dz
@@ -803,7 +790,7 @@ def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
         cos_g = _dot3(dx, dy, dz, ngx, ngy, ngz)
         entering = cos_g < 0.0
         if smooth:
-            nsx, nsy, nsz = _shading_normal(mesh, fi, u, w2, (ngx, ngy, ngz), per_corner)
+            nsx, nsy, nsz = _shading_normal(vn_c, vn_v, faces, fi, u, w2, (ngx, ngy, ngz), per_corner)
         else:
             nsx, nsy, nsz = ngx, ngy, ngz
         obj = fo[fi]
@@ -813,7 +800,12 @@ def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
         ndx, ndy, ndz, tir, lost, nsx, nsy, nsz = _refract_event((dx, dy, dz), (nsx, nsy, nsz), (ngx, ngy, ngz),
                                                                  cos_g, eta, smooth)
         if bounce < record:  # every active ray has had `bounce` events: this is row `bounce`
-            _record_event(out, i, bounce, (xx, xy, xz), (ndx, ndy, ndz), lost)
+            path_pos[i, bounce, 0] = xx
+            path_pos[i, bounce, 1] = xy
+            path_pos[i, bounce, 2] = xz
+            path_dir[i, bounce, 0] = np.nan if lost else ndx
+            path_dir[i, bounce, 1] = np.nan if lost else ndy
+            path_dir[i, bounce, 2] = np.nan if lost else ndz
 
         # --- bookkeeping ----------------------------------------------------
         if bounce == 0:
