@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 import refraction_ref as rr  # noqa: E402
 from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.caustics.splat import gather_gaussian  # noqa: E402
-from refraction_ref.levelmap.metrics import relative_l1  # noqa: E402
+from refraction_ref.metrics import relative_l1  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 PHOTON_STAGES = ("light_minmax", "light_voxelize", "light_peel", "light_reduce", "photon_trace",

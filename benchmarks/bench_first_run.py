@@ -144,6 +144,20 @@ def run(target, keep=None):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _is_kernel(qualname):
+    """Whether ``module.name`` is a Numba kernel of the package now (a cold run's list may name one
+    since renamed, moved or folded into its caller)."""
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    module, _, name = qualname.rpartition(".")
+    try:
+        return isinstance(getattr(importlib.import_module(module), name, None), CPUDispatcher)
+    except ImportError:
+        return False
+
+
 def write_manifest():
     """``refraction_ref/data/kernels.json``: the kernels each method's default render calls.
 
@@ -168,7 +182,8 @@ def write_manifest():
         p = subprocess.run([sys.executable, "-c", _LIST, method, src], capture_output=True, text=True, cwd=REPO)
         if p.returncode != 0:
             raise SystemExit(f"listing the {method} kernels failed:\n{p.stderr[-3000:]}")
-        out[method] = sorted(set(json.loads(p.stdout.strip().splitlines()[-1])) | set(cold.get(method, [])))
+        out[method] = sorted(set(json.loads(p.stdout.strip().splitlines()[-1]))
+                             | {q for q in cold.get(method, []) if _is_kernel(q)})
         print(f"{method}: {len(out[method])} kernels", flush=True)
     path = os.path.join(REPO, "refraction_ref", "data", "kernels.json")
     with open(path, "w") as f:

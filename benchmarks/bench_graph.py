@@ -39,21 +39,29 @@ _WORKER = r"""
 import sys, time, json
 sys.path.insert(0, sys.argv[1])
 import refraction_ref as rr
-scene = rr.load_scene(None)
+method, path = sys.argv[2], sys.argv[3]
+scene = rr.load_scene(path or None)
 for _ in range(4):
-    rr.render(scene)
+    rr.render(scene, method=method)
 print("ready", flush=True)
 for line in sys.stdin:
     if line.strip() != "go":
         break
     t0 = time.perf_counter()
-    last = rr.render(scene)  # held until the next render replaces it, as a user's variable is
+    last = rr.render(scene, method=method)  # held until the next render replaces it, as a user's variable is
     print(json.dumps([(time.perf_counter() - t0) * 1e3, last.meta["timings_ms"]]), flush=True)
 """
 
 
-def _worker(tree):
-    p = subprocess.Popen([sys.executable, "-c", _WORKER, tree], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+#: each method's scene for the no-slow-down comparison (a path inside the package's data, or "" for the
+#: bundled default scene): the papers' default set-ups
+SCENES = {"imagespace": "", "exact": "", "levelmap": "levelmap_default.json", "volumetric": ""}
+
+
+def _worker(tree, method="imagespace"):
+    name = SCENES[method]
+    path = os.path.join(tree, "refraction_ref", "data", name) if name else ""
+    p = subprocess.Popen([sys.executable, "-c", _WORKER, tree, method, path], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          text=True, cwd=tree, env=dict(os.environ, PYTHONPATH=tree))
     line = p.stdout.readline()
     if line.strip() != "ready":
@@ -67,20 +75,20 @@ def _ask(p):
     return json.loads(p.stdout.readline())
 
 
-def no_slowdown(parent, repeats, rounds=3):
+def no_slowdown(parent, repeats, rounds=3, method="imagespace"):
     tmp = tempfile.mkdtemp(prefix="rr_parent_")
     subprocess.run(["git", "worktree", "add", "--detach", tmp, parent], cwd=C.REPO, check=True,
                    capture_output=True)
     try:
         print(f"  parent {parent} in {tmp}; its first start compiles its kernels", flush=True)
-        w = _worker(tmp)  # compile (or load) the parent's kernels before timing
+        w = _worker(tmp, method)  # compile (or load) the parent's kernels before timing
         w.stdin.close()
         w.wait()
         a, b = [], []
         per_round = max(5, repeats // rounds)
         for _ in range(rounds):  # whole processes alternate: A B A B ...
             for tree, acc in ((tmp, a), (C.REPO, b)):
-                p = _worker(tree)
+                p = _worker(tree, method)
                 acc += [_ask(p) for _ in range(per_round)]
                 p.stdin.close()
                 p.wait()
@@ -91,7 +99,7 @@ def no_slowdown(parent, repeats, rounds=3):
     def stages(r):
         return {k: statistics.median(x[1].get(k, 0.0) for x in r) for k in r[-1][1]}
 
-    return {"parent": parent, "parent_ms": fa, "head_ms": fb, "ratio": fb / fa, "rounds": rounds,
+    return {"method": method, "parent": parent, "parent_ms": fa, "head_ms": fb, "ratio": fb / fa, "rounds": rounds,
             "parent_stages_ms": stages(a), "head_stages_ms": stages(b),
             "parent_samples": [x[0] for x in a], "head_samples": [x[0] for x in b], "target": 1.05,
             "pass": fb / fa <= 1.05}
@@ -128,14 +136,21 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=33)
     ap.add_argument("--skip-parent", action="store_true", help="only the re-render ratios")
     ap.add_argument("--only-parent", action="store_true", help="only the comparison with the parent")
+    ap.add_argument("--methods", default="imagespace",
+                    help="comma list of methods compared with the parent, each on its default scene "
+                         "(imagespace, exact, levelmap, volumetric)")
+    ap.add_argument("--out", default=None, help="file name under results/ (default graph.json, graph_parent.json "
+                                                "with --only-parent)")
     a = ap.parse_args(argv)
     out = {"machine": C.machine_line(), "rev": C.git_rev()}
     if not a.skip_parent:
-        out["no_slowdown"] = r = no_slowdown(a.parent, a.repeats)
-        print(f"bunny 512^2, image-space render: parent {r['parent_ms']:.1f} ms, HEAD {r['head_ms']:.1f} ms, "
-              f"ratio {r['ratio']:.3f} (target <= 1.05) {'PASS' if r['pass'] else 'MISS'}", flush=True)
+        for method in a.methods.split(","):
+            key = "no_slowdown" if method == "imagespace" else f"no_slowdown_{method}"
+            out[key] = r = no_slowdown(a.parent, a.repeats, method=method)
+            print(f"{method} default scene: parent {r['parent_ms']:.1f} ms, HEAD {r['head_ms']:.1f} ms, "
+                  f"ratio {r['ratio']:.3f} (target <= 1.05) {'PASS' if r['pass'] else 'MISS'}", flush=True)
     if a.only_parent:
-        print("wrote " + C.write_json("graph_parent.json", out))
+        print("wrote " + C.write_json(a.out or "graph_parent.json", out))
         return
     r = rerender(rr.load_scene(None), "imagespace", ("imagespace.iterations", [5, 6]), a.repeats)
     r.update(target=0.6, **{"pass": r["ratio"] <= 0.6})
@@ -143,9 +158,7 @@ def main(argv=None):
     print(f"bunny, imagespace.iterations changed: full {r['full_ms']:.1f} ms, re-render {r['rerender_ms']:.1f} ms, "
           f"ratio {r['ratio']:.3f} (target <= 0.6) {'PASS' if r['pass'] else 'MISS'}; re-ran {r['stages_rerun']}",
           flush=True)
-    from refraction_ref.levelmap.pipeline import DEFAULT_SCENE_PATH
-
-    sc = rr.load_scene(DEFAULT_SCENE_PATH)
+    sc = rr.load_scene(os.path.join(C.REPO, "refraction_ref", "data", SCENES["levelmap"]))
     eye = list(sc.data["camera"]["eye"])
     r = rerender(sc, "levelmap", ("camera.eye", [eye, [eye[0] + 0.2, eye[1], eye[2]]]), a.repeats)
     r.update(target=1 / 3, **{"pass": r["ratio"] <= 1 / 3})
@@ -153,7 +166,7 @@ def main(argv=None):
     print(f"pool, camera-only change: full {r['full_ms']:.1f} ms, re-render {r['rerender_ms']:.1f} ms, "
           f"ratio {r['ratio']:.3f} (target <= 0.333) {'PASS' if r['pass'] else 'MISS'}; re-ran {r['stages_rerun']}",
           flush=True)
-    print("wrote " + C.write_json("graph.json", out))
+    print("wrote " + C.write_json(a.out or "graph.json", out))
 
 
 if __name__ == "__main__":

@@ -31,9 +31,10 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import refraction_ref as rr  # noqa: E402
 from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.levelmap import default_scene  # noqa: E402
-from refraction_ref.levelmap.metrics import luv_difference, relative_l1  # noqa: E402
-from refraction_ref.levelmap.pipeline import prepare, render_levelmap, warm_up  # noqa: E402
+from refraction_ref.levelmap.pipeline import prepare, render_levelmap  # noqa: E402
+from refraction_ref.metrics import luv_difference, relative_l1  # noqa: E402
 from refraction_ref.scene import load_scene  # noqa: E402
+from refraction_ref.warm import warm  # noqa: E402
 
 from refraction_ref.tables.tipprasert import SUN_TOP, model_scene as _model_scene, uv_sphere  # noqa: E402,F401
 
@@ -74,7 +75,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results"))
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
-    warm_up()
+    warm("levelmap")
     print(f"numba threads: {numba.get_num_threads()}; medians of {a.repeats} runs after warm-up")
     res = {"numba_threads": numba.get_num_threads(), "repeats": a.repeats}
     ok_all = True

@@ -37,7 +37,7 @@ if REPO not in sys.path:  # run as `python benchmarks/bench_normals.py` without 
 
 import refraction_ref as rr  # noqa: E402
 from refraction_ref.contract import CONTRACT_VERSION, software_versions  # noqa: E402
-from refraction_ref.exact_knobs import EXACT_DEFAULTS  # noqa: E402
+from refraction_ref.exact.knobs import EXACT_DEFAULTS  # noqa: E402
 from refraction_ref.meshes import corner_normals, crease_edge_angles, load_mesh  # noqa: E402
 
 RESULTS = os.path.join(HERE, "results")
@@ -138,7 +138,7 @@ def _markdown(out, angles):
                          f"{100 * a['frac_changed_gt_1deg']:.1f} % | {b['median_deg']:.3f} / {b['p90_deg']:.2f} | "
                          f"{100 * b['frac_changed_gt_1deg']:.1f} % |")
     lines += ["", f"Default chosen: `exact.crease_deg = {EXACT_DEFAULTS['crease_deg']:g}` "
-              "(see `refraction_ref/exact_knobs.py`).", ""]
+              "(see `refraction_ref/exact/knobs.py`).", ""]
     return "\n".join(lines)
 
 

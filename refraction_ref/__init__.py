@@ -14,7 +14,8 @@ from .camera import Camera
 from .golden.check import check
 from .render import METHODS, render
 from .result import Result, load_result
-from .scene import Scene, SceneError, default_scene, load_scene
+from .validation import SceneError
+from .scene import Scene, default_scene, load_scene
 from .session import Session
 
 __all__ = ["Camera", "METHODS", "Result", "Scene", "SceneError", "check", "default_scene", "load_result",

@@ -63,6 +63,11 @@ def sphere_refraction(origins, dirs, center, radius, ior, outside_ior=1.0):
         ``hit`` (N,) bool; ``entry_pos``, ``exit_pos``, ``exit_dir`` (N, 3)
         and ``path_length`` (N,) (chord length inside the sphere), NaN for
         misses; ``tir`` (N,) bool (entry TIR, only if ``ior < outside_ior``).
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §3.2.2 (ray-sphere intersection) and §8.2 (Snell's law).
     """
     o = np.atleast_2d(np.asarray(origins, dtype=np.float64))
     d = np.atleast_2d(np.asarray(dirs, dtype=np.float64))
@@ -127,6 +132,11 @@ def icosphere_mesh(subdivisions=5, radius=0.5):
     vertices : (V, 3) ndarray of float64
     faces : (F, 3) ndarray of int64
         Outward (counter-clockwise) winding.
+
+    References
+    ----------
+    .. [1] trimesh, ``trimesh.creation.icosphere`` (subdivided icosahedron,
+       vertices projected onto the sphere).
     """
     import trimesh
 

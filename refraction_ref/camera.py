@@ -87,6 +87,20 @@ class Camera:
 
     @classmethod
     def from_dict(cls, c):
+        """Build a camera from the scene's ``camera`` block.
+
+        Parameters
+        ----------
+        c : dict
+            Keys ``eye``, ``target``, ``up`` (3 numbers each), ``fov_y``
+            (degrees), ``width``, ``height`` (pixels), ``near``, ``far``, and
+            optionally ``projection`` (default ``'perspective'``) and
+            ``ortho_height`` (default 0).
+
+        Returns
+        -------
+        Camera
+        """
         return cls(
             eye=tuple(float(v) for v in c["eye"]),
             target=tuple(float(v) for v in c["target"]),
@@ -128,20 +142,64 @@ class Camera:
         return (self.height, self.width)
 
     def world_to_view(self, p):
-        """Transform world points (..., 3) into view space."""
+        """Transform world points (..., 3) into view space.
+
+        Parameters
+        ----------
+        p : (..., 3) array_like
+            World-space points.
+
+        Returns
+        -------
+        (..., 3) float64 ndarray
+            View-space points (right-handed, looking down -z).
+        """
         b = self.basis
         return _affine(p, b.T, -np.asarray(self.eye, dtype=np.float64) @ b.T)
 
     def view_to_world(self, p):
-        """Transform view-space points (..., 3) into world space (NaN stays NaN)."""
+        """Transform view-space points (..., 3) into world space (NaN stays NaN).
+
+        Parameters
+        ----------
+        p : (..., 3) array_like
+            View-space points.
+
+        Returns
+        -------
+        (..., 3) float64 ndarray
+            World-space points.
+        """
         return _affine(p, self.basis, np.asarray(self.eye, dtype=np.float64))
 
     def dir_view_to_world(self, v):
-        """Rotate view-space directions (..., 3) into world space."""
+        """Rotate view-space directions (..., 3) into world space.
+
+        Parameters
+        ----------
+        v : (..., 3) array_like
+            View-space directions (no translation applied).
+
+        Returns
+        -------
+        (..., 3) float64 ndarray
+            World-space directions.
+        """
         return _affine(v, self.basis, np.zeros(3))
 
     def dir_world_to_view(self, v):
-        """Rotate world-space directions (..., 3) into view space."""
+        """Rotate world-space directions (..., 3) into view space.
+
+        Parameters
+        ----------
+        v : (..., 3) array_like
+            World-space directions (no translation applied).
+
+        Returns
+        -------
+        (..., 3) float64 ndarray
+            View-space directions.
+        """
         return _affine(v, self.basis.T, np.zeros(3))
 
     def projection_matrix(self):
@@ -182,7 +240,26 @@ class Camera:
         return o, d
 
     def to_screen(self, p_view):
-        """Project view-space points (..., 3) to (col, row, depth) in pixel units."""
+        """Project view-space points (..., 3) to (col, row, depth) in pixel units.
+
+        Parameters
+        ----------
+        p_view : (..., 3) array_like
+            View-space points.
+
+        Returns
+        -------
+        col, row : (...) float64 ndarray
+            Continuous screen position in pixels (pixel centres at ``j + 0.5``,
+            ``i + 0.5``; row 0 at the top); inf/NaN at depth 0 (perspective).
+        depth : (...) float64 ndarray
+            View-space depth ``-z``.
+
+        References
+        ----------
+        .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+           Objects", M.S. thesis, UMBC, 2008, §3.6 (texture coordinates of a point).
+        """
         p = np.asarray(p_view, dtype=np.float64)
         d = -p[..., 2]
         s = np.ones_like(d) if self.ortho else d
@@ -209,7 +286,29 @@ def _pixel_xy(i, j, W, H, sx, sy):
 
 @nb.njit(cache=True, inline="always")
 def primary_dir(i, j, W, H, sx, sy, ortho=False):
-    """Unit view-space direction of the primary ray through pixel (row i, col j)'s centre."""
+    """Unit view-space direction of the primary ray through pixel (row i, col j)'s centre.
+
+    Parameters
+    ----------
+    i, j : int
+        Pixel row (0 at the top) and column.
+    W, H : int
+        Image width and height in pixels.
+    sx, sy : float
+        Half extents of the image plane at unit depth (``Camera.sx``, ``Camera.sy``).
+    ortho : bool
+        Orthographic camera: every ray is ``(0, 0, -1)``.
+
+    Returns
+    -------
+    x, y, z : float
+        Unit direction in view space (z < 0).
+
+    References
+    ----------
+    .. [1] P. Shirley, S. Marschner, *Fundamentals of Computer Graphics*, 3rd
+       ed., §4.3 (perspective viewing rays of a pinhole camera).
+    """
     if ortho:
         return 0.0, 0.0, -1.0
     x, y = _pixel_xy(i, j, W, H, sx, sy)
@@ -243,6 +342,29 @@ def project_point(x, y, z, W, H, sx, sy, ortho=False):
     """Project a view-space point to (col, row, depth); Chaudhari (2008) §3.6.
 
     With ``ortho`` the division by the depth is dropped (orthographic view).
+
+    Parameters
+    ----------
+    x, y, z : float
+        View-space point (``z < 0`` in front of the camera).
+    W, H : int
+        Image width and height in pixels.
+    sx, sy : float
+        Half extents of the image plane at unit depth, or of the orthographic window.
+    ortho : bool
+        Orthographic camera.
+
+    Returns
+    -------
+    col, row : float
+        Continuous screen position in pixels (row 0 at the top).
+    d : float
+        View-space depth ``-z``.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.6 (texture coordinates of a point).
     """
     # written with the factors W / (2 sx) etc. apart, so that a loop over
     # pixels computes them once: one division per point, not two
@@ -262,6 +384,30 @@ def unproject_pixel(col, row, d, W, H, sx, sy, ortho=False):
     """View-space point at depth ``d`` seen at screen position (col, row); §3.5.
 
     With ``ortho`` the lateral position does not scale with the depth.
+
+    Parameters
+    ----------
+    col, row : float
+        Continuous screen position in pixels (pixel centres at ``j + 0.5``, ``i + 0.5``).
+    d : float
+        View-space depth (distance along the view axis, > 0).
+    W, H : int
+        Image width and height in pixels.
+    sx, sy : float
+        Half extents of the image plane at unit depth, or of the orthographic window.
+    ortho : bool
+        Orthographic camera.
+
+    Returns
+    -------
+    x, y, z : float
+        View-space point, ``z = -d``.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.5 (unprojection of a pixel with a
+       known view-space depth).
     """
     if ortho:
         return (col * (2.0 / W) - 1.0) * sx, (1.0 - row * (2.0 / H)) * sy, -d

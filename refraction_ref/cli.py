@@ -48,7 +48,7 @@ def _cmd_render(a):
 
     scene = load_scene(a.scene, _parse_sets(a.set))
     check_writable(output_paths(a.out), overwrite=a.force)  # before any work, not after it
-    from ._warmup import compile_report
+    from .warm import compile_report
 
     with compile_report(a.method):  # kernels done of total on a terminal, one line each way in logs
         res = render(scene, method=a.method, progress=not a.quiet and sys.stderr.isatty(), keep=a.keep)
@@ -57,6 +57,8 @@ def _cmd_render(a):
         print("wrote " + ", ".join(paths))
         return 0
     import numpy as np
+
+    from .status import LABELS
 
     t = res.meta["timings_ms"]
     print(f"{a.method}: {scene.data['camera']['width']}x{scene.data['camera']['height']}, "
@@ -68,8 +70,8 @@ def _cmd_render(a):
     if kept:
         print(f"kept {len(kept)} stage buffers: " + ", ".join(kept[:8]) + (" ..." if len(kept) > 8 else ""))
     if "status" in res.arrays:
-        hist = np.bincount(res.arrays["status"].ravel().astype(np.int64), minlength=5)
-        print("status 0 missed / 1 exited / 2 limit / 3 TIR / 4 lost: " + " / ".join(str(int(x)) for x in hist))
+        hist = np.bincount(res.arrays["status"].ravel().astype(np.int64), minlength=len(LABELS))
+        print("status " + " / ".join(LABELS[k] for k in sorted(LABELS)) + ": " + " / ".join(str(int(x)) for x in hist))
     if "planes_used" in res.meta:
         print(f"planes: {res.meta['planes_requested']} requested, {res.meta['planes_used']} used")
     for p in res.meta.get("plan", []):
@@ -113,7 +115,7 @@ def _cmd_scene(a):
     if getattr(a, "to", None):
         fmt, path = a.to
         if fmt != "mitsuba":
-            from .scene import SceneError
+            from .validation import SceneError
 
             raise SceneError(f"scene --to: unknown format {fmt!r}; the one known is 'mitsuba'")
         from .interop.mitsuba import write_xml
@@ -207,9 +209,10 @@ def _cmd_tables(a):
 
 
 def _cmd_warmup(a):
-    from ._warmup import compile_report, kernels_cached, warm
+    from .graph import method_names
+    from .warm import compile_report, kernels_cached, warm
 
-    for m in a.method or ["imagespace", "exact", "levelmap", "volumetric"]:
+    for m in a.method or method_names():
         t0, before = time.perf_counter(), kernels_cached(m)
         with compile_report(m):  # a bar of kernels on terminals, a line each way in logs
             warm(m)
@@ -218,7 +221,34 @@ def _cmd_warmup(a):
     return 0
 
 
+def _method_help(argv):
+    """``--method``'s help: each method with its :attr:`~refraction_ref.graph.Method.label`.
+
+    The labels need the methods' modules (a second or more to import), so
+    they are listed only when help is asked for; otherwise the names.
+    """
+    from .graph import load_builtin_methods, method_names
+
+    args = sys.argv[1:] if argv is None else argv
+    if not any(x in ("-h", "--help") for x in args):
+        return "one of " + ", ".join(method_names())
+    return ", ".join(f"{m.name} ({m.label or m.doc})" for m in load_builtin_methods().values())
+
+
 def main(argv=None):
+    """The ``refraction-ref`` command line.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit status: 0 success, 1 a check or sweep that failed, 2 a
+        usage error or an input that cannot be used (the message names it).
+    """
     p = _Parser(prog="refraction-ref",
                 description="CPU reference renderer for refraction through transparent objects.")
     from . import __version__
@@ -229,9 +259,7 @@ def main(argv=None):
     r.add_argument("scene", nargs="?", default=None, help="scene JSON (docs/oracle.md); omit for the default scene")
     from .graph import method_names
 
-    r.add_argument("--method", default="imagespace", choices=list(method_names()),
-                   help="imagespace (Chaudhari 2008), exact (Embree reference), levelmap (Tipprasert 2006), "
-                        "volumetric (Sun et al. 2008)")
+    r.add_argument("--method", default="imagespace", choices=list(method_names()), help=_method_help(argv))
     r.add_argument("--out", default="out/render", help="output prefix: PREFIX.npz and PREFIX.png")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set imagespace.iterations=10 (repeatable)")
@@ -314,13 +342,13 @@ def main(argv=None):
     u = sub.add_parser("warmup", help="compile every method's kernels for its default scene now (first run only; "
                                       "later runs load them from Numba's cache)")
     u.add_argument("--method", action="append", choices=list(method_names()),
-                   help="only this method (repeatable; default: all four)")
+                   help="only this method (repeatable; default: every method)")
     u.set_defaults(fn=_cmd_warmup)
     a = p.parse_args(argv)
     from .compare import CompareError
     from .files import NotNpzError, OutputError
     from .golden.check import CheckError
-    from .scene import SceneError
+    from .validation import SceneError
     from .sweep import SweepError
     from .tables.report import TablesError
 

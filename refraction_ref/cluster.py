@@ -23,7 +23,19 @@ NOISY = ("distributed", "tornado", "asyncio")
 @contextlib.contextmanager
 def quiet_loggers(names=NOISY, level=logging.CRITICAL + 1):
     """Raise these loggers' levels, and their children's (Dask sets some children's own), for the ``with``
-    block; restore them."""
+    block; restore them.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Logger names; every existing logger below one of them (``name.*``) is included.
+    level : int
+        Level set for the block (default: above ``CRITICAL``, i.e. silent).
+
+    Yields
+    ------
+    None
+    """
     known = [n for n in list(logging.root.manager.loggerDict) if any(n.startswith(p + ".") for p in names)]
     loggers = [logging.getLogger(n) for n in (*names, *known)]
     before = [lg.level for lg in loggers]
@@ -42,6 +54,21 @@ def dask_client(scheduler=None, workers=2, threads_per_worker=1, client=None):
     ``scheduler``, else of a new ``LocalCluster`` of ``workers`` processes x ``threads_per_worker`` threads.
 
     The client (and the cluster) made here are closed at the end of the ``with`` block, quietly.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``); None makes a local cluster.
+    workers : int
+        Worker processes of the local cluster (>= 1).
+    threads_per_worker : int
+        Threads per worker process of the local cluster.
+    client : distributed.Client, optional
+        An open client to use as is.
+
+    Yields
+    ------
+    distributed.Client
 
     Raises
     ------

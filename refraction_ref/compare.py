@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["angular_error_deg", "compare_arrays", "format_comparison", "plot_comparison", "check_comparable",
-           "CompareError", "METHOD_BLOCKS"]
+from .graph import method_blocks
+from .status import LABELS
 
-#: the knob blocks of the methods: what may differ between two runs that are compared
-METHOD_BLOCKS = ("imagespace", "exact", "volumetric", "levelmap")
+__all__ = ["angular_error_deg", "compare_arrays", "format_comparison", "plot_comparison", "check_comparable",
+           "CompareError"]
 
 
 class CompareError(ValueError):
@@ -40,11 +40,18 @@ def check_comparable(meta_a, meta_b, force=False):
     """Refuse to compare runs of different scenes: the method-independent inputs must agree.
 
     Everything in the resolved scenes (``meta.scene``) but the methods' knob
-    blocks (:data:`METHOD_BLOCKS`) must be equal: the camera, objects,
-    materials, environment, lights, receivers, water and volume. The first
-    key that differs is named. With ``force`` a difference is returned
-    instead of raised (the caller warns); different image sizes are refused
-    even then, since pixels could not be paired.
+    blocks (:func:`refraction_ref.graph.method_blocks`) must be equal: the
+    camera, objects, materials, environment, lights, receivers, water and
+    volume. The first key that differs is named. With ``force`` a difference
+    is returned instead of raised (the caller warns); different image sizes
+    are refused even then, since pixels could not be paired.
+
+    Parameters
+    ----------
+    meta_a, meta_b : dict
+        The two runs' ``meta`` (:attr:`refraction_ref.result.Result.meta`).
+    force : bool
+        Return the first difference instead of raising it.
 
     Returns
     -------
@@ -67,7 +74,7 @@ def check_comparable(meta_a, meta_b, force=False):
             raise CompareError(f"compare: the runs have different resolutions ({ca.get('width')}x{ca.get('height')} "
                                f"and {cb.get('width')}x{cb.get('height')}); render both with the same camera.width "
                                "and camera.height")
-    keep = sorted((set(sa) | set(sb)) - set(METHOD_BLOCKS))
+    keep = sorted((set(sa) | set(sb)) - set(method_blocks()))
     diff = _first_difference({k: sa.get(k) for k in keep}, {k: sb.get(k) for k in keep})
     if diff and not force:
         raise CompareError(f"compare: the runs are of different scenes: '{diff}' differs; compare runs of one scene "
@@ -76,7 +83,20 @@ def check_comparable(meta_a, meta_b, force=False):
 
 
 def angular_error_deg(a, b):
-    """Angle in degrees between unit direction fields (..., 3); NaN where either is NaN."""
+    """Angle in degrees between unit direction fields; NaN where either is NaN.
+
+    ``atan2(|a x b|, a . b)``: accurate at small angles, where ``acos`` of the dot product is not.
+
+    Parameters
+    ----------
+    a, b : (..., 3) array_like
+        Unit directions.
+
+    Returns
+    -------
+    (...,) float64 ndarray
+        Degrees.
+    """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     c = np.sum(a * b, axis=-1)
@@ -108,7 +128,7 @@ def compare_arrays(a, b, mask=None):
     caustics = {}
     for k in sorted(a):
         if k.startswith("caustic_map_") and k in b:
-            from .levelmap.metrics import relative_l1
+            from .metrics import relative_l1
 
             caustics[k] = relative_l1(a[k], b[k], blur=1.0)
     if "status" not in a or "status" not in b:  # e.g. water caustics: no per-pixel refraction keys
@@ -150,6 +170,19 @@ def compare_arrays(a, b, mask=None):
 
 
 def format_comparison(c, name_a="A", name_b="B"):
+    """The statistics of :func:`compare_arrays` as lines of text (``refraction-ref compare``).
+
+    Parameters
+    ----------
+    c : dict
+        :func:`compare_arrays`'s output.
+    name_a, name_b : str
+        The runs' names in the text.
+
+    Returns
+    -------
+    str
+    """
     extra = [f"{k}: relative L1 (both blurred one texel) {v:.4f}" for k, v in c.get("caustic_rel_l1", {}).items()]
     if "exit_dir_deg" not in c:
         if "image_rmse" in c:
@@ -162,7 +195,7 @@ def format_comparison(c, name_a="A", name_b="B"):
         f"max {e['max']:.3f}",
         f"interfaces agree: {100 * c['interfaces_agree']:.1f}%   status agree: {100 * c['status_agree']:.1f}%   "
         f"hit agree: {100 * c['hit_agree']:.2f}%",
-        f"status histogram 0..4: {name_a} {c['status_a']}  {name_b} {c['status_b']}",
+        f"status histogram {min(LABELS)}..{max(LABELS)}: {name_a} {c['status_a']}  {name_b} {c['status_b']}",
     ]
     if "image_rmse" in c:
         lines.append(f"image RMSE: {c['image_rmse']:.4f}")
@@ -184,8 +217,26 @@ def plot_comparison(a, b, path, name_a="A", name_b="B"):
 
     Runs without per-pixel keys (water caustics: the level map, the exact
     water reference) get their images, each shared caustic map of both runs
-    and their difference instead. Returns the path, or raises
-    :class:`CompareError` when the runs share nothing to plot.
+    and their difference instead.
+
+    Parameters
+    ----------
+    a, b : dict
+        ``docs/oracle.md`` arrays of the run to test and the reference run.
+    path : str
+        The PNG to write.
+    name_a, name_b : str
+        The runs' names in the titles.
+
+    Returns
+    -------
+    str
+        ``path``.
+
+    Raises
+    ------
+    CompareError
+        When the runs share nothing to plot.
     """
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Rectangle
@@ -212,7 +263,7 @@ def plot_comparison(a, b, path, name_a="A", name_b="B"):
         ax[3 + k].imshow(r["status"], cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")
         ax[3 + k].set_title(f"{nm}: status")
     handles = [Rectangle((0, 0), 1, 1, color=cmap(i)) for i in range(5)]
-    fig.legend(handles, ["0 missed", "1 exited", "2 limit", "3 TIR", "4 lost"], loc="lower center", ncol=5)
+    fig.legend(handles, [LABELS[k] for k in sorted(LABELS)], loc="lower center", ncol=5)
     for x in ax:
         x.set_xticks([])
         x.set_yticks([])

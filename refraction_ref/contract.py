@@ -41,10 +41,12 @@ def software_versions():
         ``cpu_count`` and ``machine``.
     """
     import os
+    import sys
 
-    from . import __version__
-
-    out = {"refraction_ref": __version__, "python": platform.python_version()}
+    # the package's version, read from the package already imported (this module is imported by it,
+    # so an import of it here would tie the two into a circle)
+    version = getattr(sys.modules.get(__package__), "__version__", None)
+    out = {"refraction_ref": version, "python": platform.python_version()}
     for mod in ("numpy", "numba", "trimesh", "embreex"):
         try:
             m = __import__(mod)

@@ -59,14 +59,38 @@ TIR_CHAOS = ("is_diamond_2_4", "is_tir_followed")
 
 def crosscheck_cases(only=None):
     """The golden catalogue's cases (or ``only`` those): every one gets a row, cases without a
-    cross-check a reason (:func:`run_case`)."""
+    cross-check a reason (:func:`run_case`).
+
+    Parameters
+    ----------
+    only : str or sequence of str, optional
+        Case names (comma-separated or a list); None for every case.
+
+    Returns
+    -------
+    list of dict
+        The cases (:func:`refraction_ref.golden.build.catalogue`).
+    """
     from .golden.build import catalogue
 
     return catalogue(only)
 
 
 def relative_rmse(a, b):
-    """``sqrt(mean((a - b)^2)) / mean(|b|)`` over all pixels and channels (b: the reference)."""
+    """``sqrt(mean((a - b)^2)) / mean(|b|)`` over all pixels and channels (b: the reference).
+
+    Parameters
+    ----------
+    a : array_like
+        The image to judge, e.g. (H, W, 3) or (P, 3).
+    b : array_like
+        The reference, same shape.
+
+    Returns
+    -------
+    float
+        Relative RMSE (the denominator floored at 1e-30).
+    """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     return float(np.sqrt(np.mean((a - b) ** 2)) / max(float(np.mean(np.abs(b))), 1e-30))
@@ -282,7 +306,27 @@ def _paths_only_scene(case, folder):
 
 
 def paths_case(case, folder, variant="llvm_ad_rgb"):
-    """The paths cross-check of one case: (numbers, arrays for the figures)."""
+    """The paths cross-check of one case: (numbers, arrays for the figures).
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with an exact per-pixel reference.
+    folder : str
+        Scratch folder for the scene and Mitsuba's files.
+    variant : str
+        Mitsuba variant for the path tracing (:func:`mitsuba_paths`).
+
+    Returns
+    -------
+    num : dict
+        Angles between the exit directions where both exit (median, p99, max,
+        by count of TIR events), exit-position differences relative to the
+        scene diagonal, status and interface agreement, timings.
+    figs : dict
+        ``angle`` (H, W) float64 (NaN where not both exit), ``status_ours``
+        and ``status_mitsuba`` (H, W).
+    """
     from .camera import Camera
 
     scene = _paths_only_scene(case, os.path.join(folder, "scene"))
@@ -380,7 +424,21 @@ def render_pixel_centres(mscene, spp, seed=0, pixels=None):
 
 
 def envmap_eval(mscene, dirs):
-    """Mitsuba's environment emitter along world directions (N, 3): (N, 3) float64 (NaN rows: 0)."""
+    """Mitsuba's environment emitter along world directions (N, 3): (N, 3) float64 (NaN rows: 0).
+
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        A loaded scene with an environment emitter (scalar variant).
+    dirs : (..., 3) array_like
+        World-space directions the light travels (reshaped to (N, 3)); zero or
+        NaN rows give 0.
+
+    Returns
+    -------
+    (N, 3) float64 ndarray
+        Radiance.
+    """
     import mitsuba as mi
 
     env = mscene.environment()
@@ -411,11 +469,29 @@ def loop_radiance(mscene, pixels, max_depth, spawn="line", eps=1e-5):
     :func:`images_case`), ``'line'`` from the hit point ``eps`` along the new
     direction (the exact tracer's offset, as :func:`mitsuba_paths`).
 
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        The scene loaded with the Fresnel-free BSDF (scalar variant).
+    pixels : (P,) array_like of int
+        Flat pixel indices ``row * W + col``.
+    max_depth : int
+        The integrator's ``max_depth`` (ray segments traced at most).
+    spawn : {'line', 'mitsuba'}
+        How a ray leaves a surface (see above).
+    eps : float
+        Offset along the new direction for ``'line'`` (world units).
+
     Returns
     -------
     radiance, exit_dir : (P, 3) float64
         Per pixel (flat indices ``pixels``); ``exit_dir`` NaN where the path
         ended at the limit.
+
+    References
+    ----------
+    .. [1] W. Jakob et al., "Mitsuba 3 renderer", 2022,
+       https://mitsuba-renderer.org (the ``path`` integrator).
     """
     import mitsuba as mi
 
@@ -471,6 +547,19 @@ def edge_margin_mask(mscene, dirs, env_width):
     bilinear blend across a checker edge reaches at most one texel from it,
     so these pixels' colours do not depend on the blend nor on a path
     difference smaller than a texel. ``dirs`` (N, 3), NaN rows fail.
+
+    Parameters
+    ----------
+    mscene : mitsuba.Scene
+        A loaded scene with the ``envmap`` emitter.
+    dirs : (..., 3) array_like
+        Exit directions (reshaped to (N, 3)).
+    env_width : int
+        Width ``W`` of the envmap bitmap (height ``W // 2 + 1``).
+
+    Returns
+    -------
+    (N,) bool ndarray
     """
     W = int(env_width)
     H = W // 2 + 1
@@ -501,6 +590,31 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
     exit direction more than a texel from a change of the envmap bitmap
     (:func:`edge_margin_mask`), and Mitsuba's exit direction within
     :data:`PATH_AGREE_DEG` of ours.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with an exact per-pixel reference.
+    folder : str
+        Scratch folder for the scenes and Mitsuba's files.
+    variant : str
+        Mitsuba variant (a scalar one: the loop calls Mitsuba per ray).
+    spp_fresnel : int
+        Samples per pixel centre of the ``dielectric`` image.
+    spp_absorb : int
+        Samples per pixel centre of the ``volpath`` image when an object
+        absorbs (1 otherwise: a delta BSDF is deterministic).
+    env_width : int, optional
+        Envmap bitmap width (default :data:`~refraction_ref.interop.mitsuba.ENV_WIDTH`).
+
+    Returns
+    -------
+    num : dict
+        Relative RMSEs (judged, all, away from bitmap edges; the integrator,
+        the Fresnel image), pixel counts, noise, timings.
+    figs : dict
+        ``ours``, ``mitsuba`` (the ``line`` loop), ``path``, ``fresnel``
+        (H, W, 3) float64 images and ``judged`` (H, W) bool.
     """
     from .interop import mitsuba as M
 
@@ -595,6 +709,67 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
 
 
 # --------------------------------------------------------------------------- caustics
+def _receiver_soup(v, f):
+    """A receiver as a triangle soup with its face normals at every corner (flat shading in Mitsuba).
+
+    Parameters
+    ----------
+    v : (V, 3) array_like
+    f : (F, 3) array_like
+
+    Returns
+    -------
+    dict
+        ``vertices`` (3F, 3), ``faces`` (F, 3), ``normals`` (3F, 3).
+    """
+    tri = np.asarray(v, dtype=np.float64)[np.asarray(f)]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return {"vertices": tri.reshape(-1, 3), "faces": np.arange(3 * len(tri)).reshape(-1, 3),
+            "normals": np.repeat(nrm, 3, axis=0)}
+
+
+def _light_photons(light, ov, n, rng, diag):
+    """``n`` x ``n`` jittered photons of a directional light over the objects' outline plus 2 %.
+
+    Parameters
+    ----------
+    light : dict
+        A directional light of the scene.
+    ov : (V, 3) float64
+        The objects' vertices.
+    n : int
+        Photons per side.
+    rng : numpy.random.Generator
+        Two draws of ``n^2`` each (columns, then rows).
+    diag : float
+        The scene's diagonal: the photons start ``2 diag`` before the objects' centre.
+
+    Returns
+    -------
+    o, dirn : (n^2, 3) float64
+        Start points and directions.
+    flux : (n^2,) float64
+        Each photon's share of the rectangle's area (unit irradiance perpendicular to the light).
+    """
+    L = np.asarray(light["direction"], np.float64)
+    L /= np.linalg.norm(L)
+    a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(L, a)
+    pa, pb = ov @ a, ov @ b
+    ca, cb = (pa.max() + pa.min()) / 2, (pb.max() + pb.min()) / 2
+    wa, wb = 1.02 * (pa.max() - pa.min()), 1.02 * (pb.max() - pb.min())
+    N = int(n) * int(n)
+    gi, gj = np.divmod(np.arange(N), int(n))
+    ua = (gj + rng.random(N)) / n - 0.5
+    ub = (gi + rng.random(N)) / n - 0.5
+    centre = ov.mean(axis=0)
+    base = centre - (centre @ a) * a - (centre @ b) * b - 2.0 * diag * L
+    o = base + (ca + ua * wa)[:, None] * a + (cb + ub * wb)[:, None] * b
+    return o, np.tile(L, (N, 1)), np.full(N, wa * wb / N)
+
+
 def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb", max_bounces=None):
     """Caustic maps from photons traced through Mitsuba's intersector, in our map frames.
 
@@ -616,9 +791,21 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
 
     Parameters
     ----------
+    scene : Scene
+        Directional lights only.
+    folder : str
+        Where the merged PLY of the objects and receivers is written.
     frames : list of (4, 3) arrays
         Our ``caustic_frame_r`` (the only thing read from our side).
     shapes : list of (Hc, Wc)
+    n : int
+        Photons per side, per light.
+    seed : int
+        Seed of the jitter.
+    variant : str
+        Mitsuba variant.
+    max_bounces : int, optional
+        Interfaces a photon may cross (default ``exact.max_bounces``).
 
     Returns
     -------
@@ -637,14 +824,7 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
         raise ValueError("mitsuba_photons: directional lights only (a point light's photons are not built)")
     objs = M.object_meshes(scene)
     K = len(objs)
-    recv = []
-    for rc in d["receivers"]:
-        v, f = object_mesh(rc, scene.base_dir)
-        tri = np.asarray(v, dtype=np.float64)[np.asarray(f)]
-        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        recv.append({"vertices": tri.reshape(-1, 3), "faces": np.arange(3 * len(tri)).reshape(-1, 3),
-                     "normals": np.repeat(nrm, 3, axis=0)})
+    recv = [_receiver_soup(*object_mesh(rc, scene.base_dir)) for rc in d["receivers"]]
     face_norm = any(m["normals"] is None for m in objs)
     parts = objs + [dict(r, normals=None if face_norm else r["normals"]) for r in recv]
     v, f, nrm, owner = _merged_mesh(parts)  # owner < K: object, else receiver owner - K
@@ -668,24 +848,9 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
     stats = {"photons": 0, "deposited": 0, "limit": 0}
     rng = np.random.default_rng(int(seed))
     for lt in lights:
-        L = np.asarray(lt["direction"], np.float64)
-        L /= np.linalg.norm(L)
-        a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
-        a /= np.linalg.norm(a)
-        b = np.cross(L, a)
-        pa, pb = ov @ a, ov @ b
-        ca, cb = (pa.max() + pa.min()) / 2, (pb.max() + pb.min()) / 2
-        wa, wb = 1.02 * (pa.max() - pa.min()), 1.02 * (pb.max() - pb.min())
-        N = int(n) * int(n)
-        gi, gj = np.divmod(np.arange(N), int(n))
-        ua = (gj + rng.random(N)) / n - 0.5
-        ub = (gi + rng.random(N)) / n - 0.5
-        centre = ov.mean(axis=0)
-        base = centre - (centre @ a) * a - (centre @ b) * b - 2.0 * diag * L
-        o = base + (ca + ua * wa)[:, None] * a + (cb + ub * wb)[:, None] * b
-        flux = np.full(N, wa * wb / N)
+        o, dirn, flux = _light_photons(lt, ov, n, rng, diag)
+        N = len(flux)
         rad = np.asarray(lt.get("radiance", [1.0, 1.0, 1.0]), np.float64)
-        dirn = np.tile(L, (N, 1))
         medium = np.full(N, outside)
         inter = np.zeros(N, np.int32)
         trans = np.ones((N, 3))
@@ -763,17 +928,36 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     ``golden build``), Mitsuba's with seeds ``1000 + k`` and
     ``oversample`` times our photon density (its per-photon flux at most
     ours / oversample). Per receiver: relative L1 of the K-batch means
-    (blurred one texel, :func:`~refraction_ref.levelmap.metrics.relative_l1`)
+    (blurred one texel, :func:`~refraction_ref.metrics.relative_l1`)
     beside each side's own noise (the same measure between its two halves of
     batches), and the golden suite's Z-test
     (:data:`~refraction_ref.golden.tolerances.ZTEST`, ``quantum`` as
     ``golden build``): every Mitsuba batch against our K batches.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with lights and receivers.
+    folder : str
+        Scratch folder for the scene and Mitsuba's files.
+    batches : int, optional
+        ``K``; default the case's ``batches`` or :data:`CAUSTIC_BATCHES`.
+    oversample : float
+        Mitsuba's photon density over ours.
+
+    Returns
+    -------
+    num : dict
+        Photon counts and fluxes, and per receiver (``receivers``) the
+        relative L1, the halves' noise, the power ratio and the Z-test counts.
+    figs : list of dict
+        Per receiver the K-batch means ``ours`` and ``mitsuba`` (map shape).
     """
     import refraction_ref as rr
 
     from .golden.build import _seed_key, case_scene, photon_quantum
     from .golden.tolerances import ZTEST, judge
-    from .levelmap.metrics import relative_l1
+    from .metrics import relative_l1
 
     K = int(batches or case.get("batches") or CAUSTIC_BATCHES)
     scene = case_scene(case, os.path.join(folder, "scene"))
@@ -788,7 +972,7 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     from .caustics.receivers import receiver_set
 
     texel_min = min(b.texel_area for b in receiver_set(scene, scene.data["lights"][0],
-                                                       int(scene.data["imagespace"]["caustic_map"])).boxes)
+                                                       int(scene.data["caustics"]["map_size"])).boxes)
     flux_ours = q * texel_min / max([float(np.max(lt.get("radiance", [1.0]))) for lt in scene.data["lights"]]
                                    + [1.0])
     # photons per side for Mitsuba's window at `oversample` times our density
@@ -899,7 +1083,25 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
 
     Paths and images run on the cases with an exact per-pixel reference
     (``reference: exact``), caustics on every case with lights and receivers
-    whose method or reference is exact."""
+    whose method or reference is exact.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case.
+    folder : str
+        The case's output folder (figures).
+    parts : sequence of {'paths', 'images', 'caustics'}
+        The cross-checks to run.
+    figures : bool
+        Write the PNG figures.
+
+    Returns
+    -------
+    dict
+        ``name``, ``purpose``, ``method``, and ``skipped`` (a reason) or the
+        parts' numbers and ``seconds``.
+    """
     t0 = time.perf_counter()
     entry = {"name": case["name"], "purpose": case["purpose"], "method": case["method"]}
     why = _skip_reason(case)
@@ -977,7 +1179,33 @@ def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, sch
         client=None, report=None):
     """Cross-check the catalogue (or ``only`` those cases) into ``out``: ``crosscheck.json``,
     ``crosscheck.md`` (or the Markdown file ``report``, its figure links relative to it) and ``<case>/*.png``. Cases run as Dask tasks with ``workers``
-    (a LocalCluster) or ``scheduler`` (as ``golden build``), else here one by one."""
+    (a LocalCluster) or ``scheduler`` (as ``golden build``), else here one by one.
+
+    Parameters
+    ----------
+    out : str
+        Output folder (created when missing).
+    only : str or sequence of str, optional
+        Case names; None for the whole catalogue.
+    parts : sequence of {'paths', 'images', 'caustics'}
+        The cross-checks to run.
+    workers : int, optional
+        Processes of a local Dask cluster.
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    log : callable
+        ``log(str)`` for one line per finished case.
+    client : distributed.Client, optional
+        An open Dask client to use.
+    report : str, optional
+        Path of the Markdown report (default ``out/crosscheck.md``).
+
+    Returns
+    -------
+    dict
+        ``targets``, ``tir_chaos``, ``versions`` and ``cases`` (per case its
+        :func:`run_case` entry), as written to ``crosscheck.json``.
+    """
     from .files import atomic_open
 
     cases = crosscheck_cases(only)
@@ -1041,7 +1269,19 @@ def _mark(ok):
 
 
 def verdicts(name, e):
-    """Each target's verdict for one case entry: {target: bool or None (reported, not judged)}."""
+    """Each target's verdict for one case entry: {target: bool or None (reported, not judged)}.
+
+    Parameters
+    ----------
+    name : str
+        The case name (the :data:`TIR_CHAOS` cases' angles are not judged).
+    e : dict
+        The case's entry (:func:`run_case`).
+
+    Returns
+    -------
+    dict of str to bool or None
+    """
     v = {}
     p = e.get("paths")
     if p:
@@ -1107,7 +1347,20 @@ def _summary(result):
 def report_markdown(result, link=""):
     """The cross-check report: findings, a summary table, then a table and figures per case.
 
-    ``link`` prefixes the figure paths (the case folders relative to the Markdown file)."""
+    ``link`` prefixes the figure paths (the case folders relative to the Markdown file).
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`run` returns.
+    link : str
+        Prefix of the figure paths (``""`` or ending in ``/``).
+
+    Returns
+    -------
+    str
+        The Markdown report.
+    """
     T = result["targets"]
     lines = ["# Cross-check of the exact references against Mitsuba 3", "",
              "Written by `refraction-ref crosscheck` (refraction_ref/crosscheck.py); conventions in "

@@ -2,7 +2,7 @@
 
 The exact reference (:mod:`refraction_ref.exact`), the caustics' receiver
 hits and shadow rays (:mod:`refraction_ref.caustics.receivers`) and the exact
-water reference (:mod:`refraction_ref.levelmap.exact_water`) all ask Embree
+water reference (:mod:`refraction_ref.exact.water`) all ask Embree
 (through embreex, float32) for the nearest triangle and then recompute the
 hit in float64 on that triangle. Embree's BVH build is the costly part, so
 triangle soups are cached by identity for the few scenes a render uses.
@@ -53,7 +53,27 @@ _LOCAL = threading.local()  # .busy: this thread runs a chunk of run_chunks
 
 
 def embree_scene(vertices, faces):
-    """An ``embreex`` scene of an indexed triangle mesh (float32 vertices, int32 faces), committed."""
+    """An ``embreex`` scene of an indexed triangle mesh (float32 vertices, int32 faces), committed.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like
+        Vertex positions, converted to float32.
+    faces : (F, 3) array_like
+        Vertex indices of each triangle, converted to int32; primitive k is
+        ``faces[k]``.
+
+    Returns
+    -------
+    embreex.rtcore_scene.EmbreeScene
+        The committed scene (its BVH is built).
+
+    References
+    ----------
+    .. [1] I. Wald, S. Woop, C. Benthin, G. S. Johnson, M. Ernst, "Embree: A
+       Kernel Framework for Efficient CPU Ray Tracing", ACM Trans. Graph.
+       33(4), 143, 2014.
+    """
     from embreex import rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
@@ -71,6 +91,23 @@ def mesh_scene(vertices, faces):
     mesh copy (about 45 ms for the bunny's 69k triangles, with the GIL held)
     and the BVH build (about 40 ms). A cached scene answers every query as a
     new one would (Embree's build and traversal are deterministic).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like
+        Vertex positions, converted to float32.
+    faces : (F, 3) array_like
+        Vertex indices of each triangle, converted to int32.
+
+    Returns
+    -------
+    embreex.rtcore_scene.EmbreeScene
+        A committed scene, possibly shared with earlier calls.
+
+    References
+    ----------
+    .. [1] I. Wald et al., "Embree: A Kernel Framework for Efficient CPU Ray
+       Tracing", ACM Trans. Graph. 33(4), 143, 2014.
     """
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.int32)
@@ -89,7 +126,18 @@ def mesh_scene(vertices, faces):
 
 
 def commit(scene):
-    """Commit an ``embreex`` scene now (its first ``run`` would), before several threads query it."""
+    """Commit an ``embreex`` scene now (its first ``run`` would), before several threads query it.
+
+    Parameters
+    ----------
+    scene : embreex.rtcore_scene.EmbreeScene
+        A scene, committed or not (committed by tracing zero rays).
+
+    Returns
+    -------
+    embreex.rtcore_scene.EmbreeScene
+        ``scene`` itself.
+    """
     if not getattr(scene, "is_committed", 1):
         empty = np.zeros((0, 3), dtype=np.float32)
         scene.run(empty, empty)
@@ -106,6 +154,23 @@ def soup_scene(tris, cache=True):
     the scene every render, skip embreex's copy and the BVH build, which
     runs on Embree's own TBB threads beside Numba's). A cached scene answers
     every query as a new one would.
+
+    Parameters
+    ----------
+    tris : (T, 3, 3) ndarray
+        Triangle corners in world space (converted to float32 for Embree).
+    cache : bool
+        Reuse and remember scenes (by identity and by content).
+
+    Returns
+    -------
+    embreex.rtcore_scene.EmbreeScene
+        A committed scene.
+
+    References
+    ----------
+    .. [1] I. Wald et al., "Embree: A Kernel Framework for Efficient CPU Ray
+       Tracing", ACM Trans. Graph. 33(4), 143, 2014.
     """
     key = (id(tris), tris.shape)
     hit = _SOUPS.get(key) if cache else None
@@ -157,7 +222,24 @@ def _executor(workers):
 def chunk_length(n, max_chunk, min_chunk=1024, multiple=8):
     """Rows per chunk for ``n`` rows: equal chunks of at most ``max_chunk``, their number a multiple
     of ``multiple`` (balanced over 2, 4, 8 threads) unless that would make them shorter than
-    ``min_chunk``. A function of ``n`` alone, never of the thread count."""
+    ``min_chunk``. A function of ``n`` alone, never of the thread count.
+
+    Parameters
+    ----------
+    n : int
+        Number of rows (rays) to split.
+    max_chunk : int
+        Largest chunk length (clamped to >= 1).
+    min_chunk : int
+        Shortest chunk length the rounding to ``multiple`` chunks may make.
+    multiple : int
+        The number of chunks is rounded up to a multiple of this.
+
+    Returns
+    -------
+    int
+        Rows per chunk (``max_chunk`` when ``n <= 0``).
+    """
     n, max_chunk = int(n), max(1, int(max_chunk))
     if n <= 0:
         return max_chunk
@@ -181,6 +263,26 @@ def run_chunks(fn, n, chunk, threads=None):
     some threading layers refuse concurrent launches). A ``run_chunks`` called
     from inside ``fn`` runs its chunks in its own thread. Exceptions are
     re-raised in the caller.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(start, stop)``, called once per chunk; its return value is ignored.
+    n : int
+        Number of rows.
+    chunk : int
+        Rows per chunk, >= 1 (see :func:`chunk_length`).
+    threads : int, optional
+        Most threads to use; default :func:`thread_count`.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    ValueError
+        ``chunk < 1``.
     """
     n, chunk = int(n), int(chunk)
     if chunk < 1:

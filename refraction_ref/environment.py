@@ -26,7 +26,20 @@ __all__ = ["environment_lookup", "latlong_uv", "read_latlong"]
 
 
 def latlong_uv(dirs):
-    """Lat-long texture coordinates (u, v) in [0, 1] of unit directions (..., 3)."""
+    """Lat-long texture coordinates (u, v) in [0, 1] of unit directions (..., 3).
+
+    Parameters
+    ----------
+    dirs : (..., 3) array_like
+        Unit world-space directions.
+
+    Returns
+    -------
+    u : (...) float64 ndarray
+        ``atan2(x, -z) / (2 pi) + 1/2``; u = 1/2 looks down -z.
+    v : (...) float64 ndarray
+        ``acos(y) / pi``; v = 0 is straight up (+y).
+    """
     d = np.asarray(dirs, dtype=np.float64)
     u = np.arctan2(d[..., 0], -d[..., 2]) / (2 * np.pi) + 0.5
     v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
@@ -56,6 +69,19 @@ def read_latlong(path, where="environment.path"):
 
     The image is cached: the shade stage's :func:`environment_lookup` reuses it.
 
+    Parameters
+    ----------
+    path : str
+        File of the equirectangular image (made absolute before reading).
+    where : str
+        Scene key named in the error message.
+
+    Returns
+    -------
+    (H, W, 3) float32 ndarray
+        Read-only linear RGB (8/16-bit images decoded from sRGB; grey
+        images repeated to three channels, alpha dropped).
+
     Raises
     ------
     SceneError
@@ -64,7 +90,7 @@ def read_latlong(path, where="environment.path"):
     import os
 
     from .files import file_kind
-    from .scene import SceneError
+    from .validation import SceneError
 
     try:
         return _load_image(os.path.abspath(path))

@@ -64,6 +64,22 @@ def check_out_file(path, what="the output"):
     Refused: an empty path, a path ending in a folder separator or naming an existing folder, a hidden or
     extension-only file name (``out/.npz``), a folder that is a file or where files cannot be created.
     Nothing is left on disk.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file (or file prefix) to check.
+    what : str
+        What the path is, for the message.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OutputError
+        Naming the path and the fix.
     """
     path = os.fspath(path)
     folder, name = os.path.split(path)
@@ -80,7 +96,24 @@ def check_out_file(path, what="the output"):
 
 def check_out_folder(path, what="the output folder"):
     """Refuse, before any work, a folder that cannot hold our outputs (:class:`OutputError`): an empty path,
-    an existing file, or a place where files cannot be created. Nothing is left on disk."""
+    an existing file, or a place where files cannot be created. Nothing is left on disk.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output folder (it may not exist yet).
+    what : str
+        What the folder is, for the message.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OutputError
+        Naming the folder and the fix.
+    """
     path = os.fspath(path)
     if not path.strip():
         raise OutputError(f"{what} is empty; give a folder such as out/golden")
@@ -100,10 +133,24 @@ def load_npz(path, what="result"):
     gave the wrong file should instead hear that it is not a ``.npz`` and what it looks like.
     A missing file raises :class:`FileNotFoundError` with the path.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.npz`` file.
+    what : str
+        What the file should be, for the messages (``"result"``).
+
     Returns
     -------
     numpy.lib.npyio.NpzFile
         Use as a context manager.
+
+    Raises
+    ------
+    NotNpzError
+        A folder, a file that is not a zip archive, or an unreadable archive.
+    FileNotFoundError
+        No such file.
     """
     import zipfile
 
@@ -125,7 +172,18 @@ def load_npz(path, what="result"):
 
 
 def file_kind(path):
-    """A few words on what a file is, from its first bytes."""
+    """A few words on what a file is, from its first bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An existing, readable file (its first 512 bytes are read).
+
+    Returns
+    -------
+    str
+        E.g. ``"a PNG image"``, ``"an empty file"``, ``"a text file, JSON"``.
+    """
     with open(path, "rb") as f:
         head = f.read(512)
     for magic, kind in ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"#?RADIANCE", "an HDR image"),
@@ -148,6 +206,16 @@ def atomic_path(path):
 
     On an exception the temporary file is removed, and so are the folders this call created,
     and ``path`` is untouched.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final file; its folder is created when missing.
+
+    Yields
+    ------
+    str
+        The temporary path (hidden, in the same folder) to write to.
 
     Examples
     --------
@@ -178,14 +246,44 @@ def atomic_path(path):
 
 @contextlib.contextmanager
 def atomic_open(path, mode="w", **kwargs):
-    """:func:`open` for writing, atomically (see :func:`atomic_path`)."""
+    """:func:`open` for writing, atomically (see :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final file.
+    mode : str
+        Mode for :func:`open` (a writing mode, ``"w"`` or ``"wb"``).
+    **kwargs
+        Passed to :func:`open` (``encoding``, ``newline``).
+
+    Yields
+    ------
+    file object
+        Open on the temporary file; renamed to ``path`` after the block.
+    """
     with atomic_path(path) as tmp:
         with open(tmp, mode, **kwargs) as f:
             yield f
 
 
 def savefig_atomic(fig, path, **kwargs):
-    """``fig.savefig(path, **kwargs)``, atomically; returns ``path``."""
+    """``fig.savefig(path, **kwargs)``, atomically; returns ``path``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure to save.
+    path : str or os.PathLike
+        The image file; the format follows its extension.
+    **kwargs
+        Passed to ``fig.savefig`` (``dpi``, ``bbox_inches``).
+
+    Returns
+    -------
+    str or os.PathLike
+        ``path``.
+    """
     with atomic_path(path) as tmp:
         fig.savefig(tmp, **kwargs)
     return path

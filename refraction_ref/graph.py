@@ -29,19 +29,23 @@ parameter block; build systems (make, Dask graphs) key work on its inputs.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import importlib
 import json
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
+from .validation import SceneError
+
 __all__ = ["Stage", "Method", "KnobBlock", "Context", "UndeclaredRead", "register_method", "register_block",
-           "get_method", "method_names", "BLOCKS", "run_graph", "stage_inputs", "STAGE_PREFIX", "describe",
-           "file_stamp"]
+           "get_method", "method_names", "BLOCKS", "Builtin",
+           "load_builtin_blocks", "load_builtin_methods", "method_blocks", "run_graph", "stage_inputs", "STAGE_PREFIX",
+           "describe", "file_stamp"]
 
 #: prefix of kept stage buffers in a result's arrays: ``stage.<stage>.<buffer>``
 STAGE_PREFIX = "stage."
@@ -138,9 +142,11 @@ class Method:
         ``skipped(scene) -> list of {stage, ran: False, why}`` for stages the
         scene does not need (said in ``meta.plan``).
     warm : callable or None
-        ``warm(scene)``: compile the kernels this scene's plan needs on a tiny
-        copy of it (once per process and plan), so that ``timings_ms``
-        measure run time, not JIT time.
+        ``warm(scene=None)``: compile the kernels this scene's plan needs on
+        a tiny copy of it (once per process and plan), so that ``timings_ms``
+        measure run time, not JIT time. Every built-in method registers
+        ``warm=refraction_ref.warm.warmer(name)``, the one warm-up, which
+        shrinks the scene by :attr:`tiny`.
     check : callable or None
         ``check(scene)``: the method's preconditions on a loaded scene
         (e.g. the memory its buffers need), raising
@@ -151,6 +157,22 @@ class Method:
         buffer once the last stage that reads it has run, so later stages
         reuse that memory (fresh pages cost several times a write here).
     doc : str
+        One line: the paper and what the method does (``refraction-ref
+        render --help``).
+    label : str
+        A few words naming the method's source (``"Chaudhari 2008"``), for
+        the command line's method lists.
+    params : callable or None
+        ``params(scene) -> tuple of str``: the knob blocks whose values
+        ``meta["params"]`` holds for this scene (e.g. the exact reference's
+        water blocks on a water scene); None for :attr:`blocks`.
+    tiny : callable or None
+        ``tiny(scene) -> dict`` of dotted overrides that shrink ``scene`` to
+        a warm-up size without changing which kernels run or their argument
+        types (:func:`refraction_ref.warm.tiny_scene`).
+    default_scene : str or None
+        The scene :func:`refraction_ref.warm.warm` warms when given none
+        (a path; None for the bundled default scene).
     """
 
     name: str
@@ -162,43 +184,153 @@ class Method:
     check: Callable | None = None
     results: tuple = ()
     doc: str = ""
+    label: str = ""
+    params: Callable | None = None
+    tiny: Callable | None = None
+    default_scene: str | None = None
+
+    def param_blocks(self, scene):
+        """The knob blocks whose values ``meta["params"]`` holds for ``scene``.
+
+        Parameters
+        ----------
+        scene : Scene
+            A validated scene.
+
+        Returns
+        -------
+        tuple of str
+            :attr:`params` ``(scene)``, or :attr:`blocks` when the method gives no ``params``.
+        """
+        return tuple(self.params(scene)) if self.params is not None else tuple(self.blocks)
 
 
 BLOCKS: dict = {}
 _METHODS: dict = {}
-#: where each built-in method registers itself (imported on first use: the kernels are heavy)
+
+
+class Builtin(NamedTuple):
+    """Where a built-in package registers itself: its knob blocks' module and its method's module."""
+
+    knobs: str  #: registers the package's :class:`KnobBlock` s on import (cheap: no kernels)
+    method: str | None  #: registers its :class:`Method` on import (the kernels); None for a service without one
+
+
+#: The built-in packages, one row each, in the order their blocks are registered. The scene loader imports
+#: only the ``knobs`` modules (:func:`load_builtin_blocks`), so it imports no method; :func:`get_method`
+#: imports a ``method`` module on first use.
 _BUILTIN = {
-    "imagespace": "refraction_ref.imagespace.pipeline",
-    "exact": "refraction_ref.exact_render",
-    "levelmap": "refraction_ref.levelmap.pipeline",
-    "volumetric": "refraction_ref.volumetric.pipeline",
+    "imagespace": Builtin("refraction_ref.imagespace.knobs", "refraction_ref.imagespace.pipeline"),
+    "exact": Builtin("refraction_ref.exact.knobs", "refraction_ref.exact.pipeline"),
+    "levelmap": Builtin("refraction_ref.levelmap.knobs", "refraction_ref.levelmap.pipeline"),
+    "volumetric": Builtin("refraction_ref.volumetric.knobs", "refraction_ref.volumetric.pipeline"),
+    "caustics": Builtin("refraction_ref.caustics.knobs", None),
 }
 
 
+def load_builtin_blocks():
+    """Import the built-in knob blocks' modules (cheap: no kernels); returns :data:`BLOCKS`.
+
+    Returns
+    -------
+    dict
+        Block name -> :class:`KnobBlock`, every built-in block registered.
+    """
+    for row in _BUILTIN.values():
+        importlib.import_module(row.knobs)
+    return BLOCKS
+
+
+def load_builtin_methods():
+    """Import every built-in method's module (the kernels: slow on a first run); returns the methods.
+
+    Returns
+    -------
+    dict
+        Method name -> :class:`Method`, every built-in and registered method, in :func:`method_names`'s order.
+    """
+    return {name: get_method(name) for name in method_names()}
+
+
+def method_blocks():
+    """Names of the knob blocks of the methods and services: what may differ between two runs of one scene.
+
+    Every registered :class:`KnobBlock` with defaults (``imagespace``,
+    ``exact``, ``levelmap``, ``volumetric``, a service's such as
+    ``caustics``); the blocks with no defaults (``water``, ``volume``) are
+    the scene's own inputs, present only when given. Cheap: imports the
+    knob modules only.
+
+    Returns
+    -------
+    tuple of str
+        Block names, in registration order.
+    """
+    return tuple(name for name, blk in load_builtin_blocks().items() if blk.defaults is not None)
+
+
 def register_block(block):
-    """Register a :class:`KnobBlock`; returns it."""
+    """Register a :class:`KnobBlock`.
+
+    Parameters
+    ----------
+    block : KnobBlock
+
+    Returns
+    -------
+    KnobBlock
+        ``block``, so that a knobs module can write ``X = register_block(KnobBlock(...))``.
+    """
     BLOCKS[block.name] = block
     return block
 
 
 def register_method(method):
-    """Register a :class:`Method` by name; returns it."""
+    """Register a :class:`Method` by name.
+
+    Parameters
+    ----------
+    method : Method
+
+    Returns
+    -------
+    Method
+        ``method``, so that a pipeline can write ``METHOD = register_method(Method(...))``.
+    """
     _METHODS[method.name] = method
     return method
 
 
 def method_names():
-    """Names of the registered (and built-in) methods."""
-    return tuple(dict.fromkeys([*_BUILTIN, *_METHODS]))
+    """Names of the built-in and registered methods (importing none).
+
+    Returns
+    -------
+    tuple of str
+        The built-in methods in :data:`_BUILTIN`'s order, then any other registered one.
+    """
+    return tuple(dict.fromkeys([*(n for n, row in _BUILTIN.items() if row.method), *_METHODS]))
 
 
 def get_method(name):
-    """The registered :class:`Method` called ``name`` (importing a built-in one on first use)."""
-    if name not in _METHODS and name in _BUILTIN:
-        importlib.import_module(_BUILTIN[name])
-    if name not in _METHODS:
-        from .scene import SceneError
+    """The registered :class:`Method` called ``name`` (importing a built-in one on first use).
 
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    Method
+
+    Raises
+    ------
+    SceneError
+        For a name no method has, listing the names there are.
+    """
+    if name not in _METHODS and name in _BUILTIN and _BUILTIN[name].method:
+        importlib.import_module(_BUILTIN[name].method)
+    if name not in _METHODS:
         raise SceneError(f"unknown method {name!r}; choose one of {', '.join(method_names())}")
     return _METHODS[name]
 
@@ -253,7 +385,21 @@ def _lookup(data, key):
 
 
 def describe(x, base_dir="."):
-    """JSON-able stand-in of a scene value: arrays by hash, files by stat, callables by identity."""
+    """JSON-able stand-in of a scene value: arrays by hash, files by stat, callables by identity.
+
+    Parameters
+    ----------
+    x : object
+        A scene value (nested dicts and lists are described item by item).
+    base_dir : str
+        Where relative file names resolve.
+
+    Returns
+    -------
+    object
+        JSON-able: equal for equal inputs, different when an array's bytes
+        or a file's stat differ.
+    """
     if isinstance(x, str) and os.path.splitext(x)[1] and os.path.isfile(os.path.join(base_dir, x)):
         return file_stamp(os.path.normpath(os.path.join(base_dir, x)))
     if isinstance(x, np.ndarray):
@@ -271,7 +417,18 @@ def describe(x, base_dir="."):
 
 
 def stage_inputs(scene, stage):
-    """The values a stage's cache key is made of: ``{key: value}`` over its ``reads``."""
+    """The values a stage's cache key is made of: ``{key: value}`` over its ``reads``.
+
+    Parameters
+    ----------
+    scene : Scene
+    stage : Stage
+
+    Returns
+    -------
+    dict
+        Dotted key -> :func:`describe` d value (JSON round-tripped).
+    """
     out = {}
     for key in stage.reads:
         v = describe(_lookup(scene.data, key), scene.base_dir)
@@ -330,13 +487,17 @@ class Context:
         self.progress = progress
 
     def note(self, text):
+        """Add a remark to the stage's ``plan`` entry.
+
+        Parameters
+        ----------
+        text : str
+        """
         self.notes.append(text)
 
 
 def _scene_view(scene, stage):
-    from .scene import Scene
-
-    return Scene(_project(scene.data, stage.reads, stage.name), scene.base_dir, scene.callables)
+    return dataclasses.replace(scene, data=_project(scene.data, stage.reads, stage.name))
 
 
 def _keep_names(method_name, stages, keep):
@@ -349,8 +510,6 @@ def _keep_names(method_name, stages, keep):
     asked = [k.strip() for k in (keep.split(",") if isinstance(keep, str) else keep) if k.strip()]
     bad = [k for k in asked if k not in names]
     if bad:
-        from .scene import SceneError
-
         raise SceneError(f"keep: unknown stage {', '.join(repr(b) for b in bad)} for the {method_name} method "
                          f"on this scene; its stages are {', '.join(names)} (or 'stages' for all)")
     return set(asked)
@@ -466,6 +625,16 @@ def _results_only(buffers, stage, results):
 
 
 def file_stamp(path):
-    """``{path, mtime, size}`` of a file, for cache keys of stages that read it."""
+    """``{path, mtime, size}`` of a file, for cache keys of stages that read it.
+
+    Parameters
+    ----------
+    path : str
+
+    Returns
+    -------
+    dict
+        ``mtime`` and ``size`` None for a file that does not exist.
+    """
     st = os.stat(path) if os.path.exists(path) else None
     return {"path": path, "mtime": st.st_mtime if st else None, "size": st.st_size if st else None}

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .scene import SceneError
+from .validation import SceneError
 
 __all__ = ["LIGHT_TYPES", "validate_lights", "light_camera", "light_direction_at"]
 
@@ -37,8 +37,25 @@ def validate_lights(data):
 
     For a scene with ``water``, a directional light must travel downwards
     (negative y) and a point light must sit above the highest crest.
+
+    Parameters
+    ----------
+    data : dict
+        The merged scene dictionary (``lights`` list, optional ``water``
+        block with ``height`` and ``waves``).
+
+    Returns
+    -------
+    dict
+        ``data`` itself, unchanged.
+
+    Raises
+    ------
+    SceneError
+        An unknown type, a zero direction, a missing position, a negative or
+        non-finite radiance, or a light that cannot reach the water from above.
     """
-    from .scene import _num, _vec
+    from .validation import check_number, check_vector
 
     w = data.get("water")
     top = None
@@ -48,7 +65,7 @@ def validate_lights(data):
         if lt["type"] not in LIGHT_TYPES:
             raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; use 'directional' or 'point'")
         if lt["type"] == "directional":
-            d = _vec(lt["direction"], 3, f"lights[{k}].direction")
+            d = check_vector(lt["direction"], 3, f"lights[{k}].direction")
             if not np.linalg.norm(d) > 0:
                 raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
             if top is not None and d[1] >= 0:
@@ -58,14 +75,14 @@ def validate_lights(data):
         else:
             if lt["position"] is None:
                 raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give [x, y, z]")
-            pos = _vec(lt["position"], 3, f"lights[{k}].position")
+            pos = check_vector(lt["position"], 3, f"lights[{k}].position")
             if top is not None and pos[1] <= top:
                 raise SceneError(f"scene: 'lights[{k}].position' y = {pos[1]} is not above the water "
                                  f"(its crests reach y = {top}); raise the light above the water")
-        rad = _vec(lt["radiance"], 3, f"lights[{k}].radiance")
+        rad = check_vector(lt["radiance"], 3, f"lights[{k}].radiance")
         if np.any(rad < 0):
             raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
-        _num(float(rad.max()), f"lights[{k}].radiance")
+        check_number(float(rad.max()), f"lights[{k}].radiance")
     return data
 
 
@@ -127,6 +144,14 @@ def light_camera(light, vertices, photons):
 
 def light_direction_at(light, points):
     """Unit directions the light travels at world points (..., 3), and the distance factor.
+
+    Parameters
+    ----------
+    light : dict
+        A scene light: ``directional`` with ``direction`` or ``point`` with
+        ``position``.
+    points : (..., 3) array_like
+        World-space points.
 
     Returns
     -------

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .scene import SceneError
+from .validation import SceneError
 from .vec3 import affine, dot, readonly
 
 __all__ = ["BUILTIN_MESHES", "Geometry", "corner_normals", "crease_edge_angles", "eye_inside", "file_vertex_normals",
@@ -108,6 +108,23 @@ def _icosphere(subdivisions):
 def load_mesh(name, size=None, base_dir="."):
     """Vertices (V, 3) and faces (F, 3) of a built-in mesh or a mesh file.
 
+    Parameters
+    ----------
+    name : str or (vertices, faces) pair
+        A built-in name (:data:`BUILTIN_MESHES`), a mesh file path any format
+        trimesh reads (PLY, OBJ, STL, OFF, GLB), or the two arrays themselves.
+    size : (2,) sequence of float, optional
+        ``[sx, sz]`` extent of the ``plane`` mesh (default 4 x 4); ignored otherwise.
+    base_dir : str
+        Folder for a relative file path.
+
+    Returns
+    -------
+    v : (V, 3) float64 ndarray
+        Vertex positions in the mesh's own frame (read-only for cached meshes).
+    f : (F, 3) int64 ndarray
+        Vertex indices of each triangle.
+
     Raises
     ------
     SceneError
@@ -145,7 +162,18 @@ def load_mesh(name, size=None, base_dir="."):
 
 
 def rotation_matrix(degrees):
-    """Rotation about x, then y, then z (degrees), as a (3, 3) matrix acting on column vectors."""
+    """Rotation about x, then y, then z (degrees), as a (3, 3) matrix acting on column vectors.
+
+    Parameters
+    ----------
+    degrees : (3,) array_like
+        Angles about x, y and z in degrees.
+
+    Returns
+    -------
+    (3, 3) float64 ndarray
+        ``Rz @ Ry @ Rx``.
+    """
     ax, ay, az = np.radians(np.asarray(degrees, dtype=np.float64))
     cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
     rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
@@ -155,7 +183,26 @@ def rotation_matrix(degrees):
 
 
 def vertex_normals(v, f):
-    """Area-weighted unit vertex normals (zero-area faces contribute nothing)."""
+    """Area-weighted unit vertex normals (zero-area faces contribute nothing).
+
+    Parameters
+    ----------
+    v : (V, 3) float64 ndarray
+        Vertex positions.
+    f : (F, 3) int ndarray
+        Counter-clockwise (outward) triangles.
+
+    Returns
+    -------
+    (V, 3) float64 ndarray
+        Unit normals; zero rows for vertices without an area-carrying face.
+
+    References
+    ----------
+    .. [1] N. Max, "Weights for Computing Vertex Normals from Facet Normals",
+       *Journal of Graphics Tools* 4(2), 1-6, 1999 (area weighting of face
+       normals).
+    """
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     n = np.zeros_like(v)
     for k in range(3):
@@ -164,7 +211,7 @@ def vertex_normals(v, f):
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
-_CREASE_MARGIN = 1e-12  # in cosine: an edge at the crease angle is sharp, whatever the rounding
+CREASE_MARGIN = 1e-12  # in cosine: an edge at the crease angle is sharp, whatever the rounding
 
 
 @nb.njit(cache=True, inline="always")
@@ -174,6 +221,31 @@ def face_corner_normals(fi, f, fn, un, start, incident, cos_t, out):
     ``start``/``incident``: the faces around each vertex in face order (a
     face that uses a vertex twice listed twice, counted once). Shared by the
     serial kernel here and the exact reference's parallel one.
+
+    Parameters
+    ----------
+    fi : int
+        Face index.
+    f : (F, 3) int64 ndarray
+        Triangles (vertex indices).
+    fn : (F, 3) float64 ndarray
+        Unnormalised face normals ``(v1 - v0) x (v2 - v0)``.
+    un : (F, 3) float64 ndarray
+        Unit face normals (zero rows for zero-area faces).
+    start : (V + 1,) int64 ndarray
+        ``incident[start[v]:start[v + 1]]`` are the faces around vertex ``v``.
+    incident : (3 F,) int64 ndarray
+        Face indices grouped by vertex, in increasing face order.
+    cos_t : float
+        Cosine of the crease angle plus the margin (``-inf`` for 180 degrees):
+        faces with ``un[fi] . un[g] > cos_t`` join the corner's group.
+    out : (F, 3, 3) float64 ndarray
+        Output corner normals; row ``fi`` is written (left as is for a
+        zero-area face).
+
+    Returns
+    -------
+    None
     """
     if un[fi, 0] == 0.0 and un[fi, 1] == 0.0 and un[fi, 2] == 0.0:
         return  # a zero-area face has no normal: zero corners (the tracer uses the face normal)
@@ -280,7 +352,7 @@ def corner_normals(vertices, faces, crease_deg):
     incident = np.ascontiguousarray(order // 3)
     start = np.zeros(len(v) + 1, dtype=np.int64)
     np.cumsum(np.bincount(corner_v, minlength=len(v)), out=start[1:])
-    cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + _CREASE_MARGIN
+    cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + CREASE_MARGIN
     _corner_normals_kernel(np.ascontiguousarray(f), fn, un, start, incident, cos_t, out)
     return out
 
@@ -292,6 +364,13 @@ def crease_edge_angles(vertices, faces):
     (boundary) or by more than two (non-manifold) is left out, as are pairs
     with a zero-area face. This is the angle :func:`corner_normals` compares
     with its crease angle.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles (vertex indices).
 
     Returns
     -------
@@ -370,6 +449,18 @@ def file_vertex_normals(name, base_dir="."):
     Normals are unit length (zero rows where the file's were zero or not
     finite) and in the mesh file's frame: apply the object's rotation for
     world space (``fit`` and the uniform ``scale`` do not turn them).
+
+    Parameters
+    ----------
+    name : str or (vertices, faces) pair
+        The object's ``mesh`` entry, as for :func:`load_mesh`.
+    base_dir : str
+        Folder for a relative file path.
+
+    Returns
+    -------
+    (V, 3) float64 ndarray or None
+        Read-only unit normals.
     """
     if not isinstance(name, str) or name in ("sphere", "plane"):
         return None
@@ -386,6 +477,31 @@ def sine_displacement(v, normals, amplitude, wavelength, direction, phase):
     The deforming-mesh demonstration of Chaudhari (2008), Fig. 4.2, where a
     vertex shader displaces the vertices before every pass that rasterizes
     the model.
+
+    Parameters
+    ----------
+    v : (V, 3) float64 ndarray
+        World-space vertices.
+    normals : (V, 3) float64 ndarray
+        Unit vertex normals (:func:`vertex_normals`).
+    amplitude : float
+        ``a``, in world units.
+    wavelength : float
+        ``lambda``, in world units.
+    direction : (3,) array_like
+        Wave direction ``u`` (normalised here).
+    phase : float
+        Phase in radians.
+
+    Returns
+    -------
+    (V, 3) float64 ndarray
+        Displaced vertices.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, Fig. 4.2 (deforming models).
     """
     u = np.asarray(direction, dtype=np.float64)
     u = u / np.linalg.norm(u)
@@ -405,7 +521,18 @@ def _bounds_kernel(v, lo, hi):
 
 
 def bounds(v):
-    """Axis-aligned bounds (lo, hi) of points (N, 3), N >= 1 (NaN coordinates are skipped)."""
+    """Axis-aligned bounds (lo, hi) of points (N, 3), N >= 1 (NaN coordinates are skipped).
+
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        Points (reshaped to (N, 3)).
+
+    Returns
+    -------
+    lo, hi : (3,) float64 ndarray
+        Per-axis minimum and maximum (``inf`` / ``-inf`` where no finite value).
+    """
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     _bounds_kernel(readonly(np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 3)), lo, hi)  # one signature
@@ -413,7 +540,36 @@ def bounds(v):
 
 
 def object_mesh(obj, base_dir=".", deform_fn=None):
-    """World-space vertices and faces of one scene object (or receiver) dict."""
+    """World-space vertices and faces of one scene object (or receiver) dict.
+
+    Fits the mesh (``fit``), applies ``transform`` (scale, rotate about x, y, z,
+    translate) and then the deformation: ``deform_fn`` if given, else a
+    ``deform`` dict's sine displacement.
+
+    Parameters
+    ----------
+    obj : dict
+        A merged ``objects[k]`` (or receiver) entry: ``mesh``, optional
+        ``size``, ``fit``, ``deform``, and ``transform`` (``scale``,
+        ``rotate`` in degrees, ``translate``).
+    base_dir : str
+        Folder for a relative mesh path.
+    deform_fn : callable, optional
+        ``deform_fn(vertices, normals) -> vertices`` on (V, 3) world-space arrays.
+
+    Returns
+    -------
+    v : (V, 3) float64 ndarray
+        World-space vertices.
+    f : (F, 3) ndarray
+        Triangles (vertex indices).
+
+    Raises
+    ------
+    SceneError
+        A mesh that cannot be loaded or fitted, or a deform callable returning
+        non-finite or misshaped vertices.
+    """
     v, f = load_mesh(obj["mesh"], obj.get("size"), base_dir)
     v = np.asarray(v, dtype=np.float64)  # not modified in place: every step below makes a new array
     if obj.get("fit") is not None:
@@ -471,7 +627,27 @@ def _degenerate_count(v, f):
 
 
 def mesh_topology(obj, base_dir, v, f):
-    """(boundary edges, zero-area faces) of an object's mesh, cached for mesh files."""
+    """(boundary edges, zero-area faces) of an object's mesh, cached for mesh files.
+
+    Parameters
+    ----------
+    obj : dict
+        The scene object (its ``mesh`` and ``deform`` decide whether the
+        file's cached counts apply).
+    base_dir : str
+        Folder for a relative mesh path.
+    v : (V, 3) float64 ndarray
+        The object's world-space vertices (used when not cached).
+    f : (F, 3) int ndarray
+        The object's triangles.
+
+    Returns
+    -------
+    boundary_edges : int
+        Edges used by exactly one face (0 = closed).
+    degenerate : int
+        Zero-area faces.
+    """
     name = obj["mesh"]
     if isinstance(name, str) and name not in ("sphere", "plane") and obj.get("deform") is None:
         path = os.path.join(_DATA, f"{name}.ply") if name in BUILTIN_MESHES else (
@@ -493,7 +669,24 @@ def _boundary_edge_count(f):
 
 
 def scene_geometry(scene):
-    """Merge the scene's refractive objects into one :class:`Geometry`."""
+    """Merge the scene's refractive objects into one :class:`Geometry`.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene (``data["objects"]``, ``base_dir`` and the ``deform``
+        callables in ``callables``).
+
+    Returns
+    -------
+    Geometry
+        Empty arrays when the scene has no object.
+
+    Raises
+    ------
+    SceneError
+        Naming ``objects[k].mesh`` for a mesh that cannot be built.
+    """
     vs, fs, fo, iors, absn, bnd, deg = [], [], [], [], [], [], []
     off = 0
     for k, o in enumerate(scene.data["objects"]):
@@ -526,6 +719,23 @@ def eye_inside(geom, eye):
     Counts the crossings of a ray from the eye in a fixed, irrational
     direction (so that it does not graze the vertices of regular meshes)
     with each object's triangles: odd means inside.
+
+    Parameters
+    ----------
+    geom : Geometry
+        The merged refractive objects (:func:`scene_geometry`).
+    eye : (3,) array_like
+        Camera position in world space.
+
+    Returns
+    -------
+    bool
+
+    References
+    ----------
+    .. [1] E. Haines, "Point in Polygon Strategies", *Graphics Gems IV*,
+       24-46, 1994 (crossings test, extended here to a ray through a closed
+       triangle mesh).
     """
     v = geom.vertices
     if len(v) == 0:

@@ -60,6 +60,13 @@ def refract3(dx, dy, dz, nx, ny, nz, eta):
         Unit transmitted direction; the mirror direction when ``tir``.
     tir : bool
         True when ``sin(theta_t) > 1`` (total internal reflection).
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.3 (specular transmission: Snell's law in vector form).
+    .. [2] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.6 (Snell's law at each interface).
     """
     c = -(dx * nx + dy * ny + dz * nz)
     if c < 0.0:  # make the normal face the incident ray
@@ -81,7 +88,25 @@ def refract3(dx, dy, dz, nx, ny, nz, eta):
 
 @nb.njit(cache=True, inline="always")
 def reflect3(dx, dy, dz, nx, ny, nz):
-    """Mirror direction of ``d`` about the plane with normal ``n``."""
+    """Mirror direction of ``d`` about the plane with normal ``n``.
+
+    Parameters
+    ----------
+    dx, dy, dz : float
+        Incident direction (unit length for a unit result).
+    nx, ny, nz : float
+        Unit surface normal, either orientation (the sign cancels).
+
+    Returns
+    -------
+    rx, ry, rz : float
+        Reflected direction ``d - 2 (d . n) n``.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.2 (specular reflection).
+    """
     c = dx * nx + dy * ny + dz * nz
     return dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
 
@@ -101,6 +126,11 @@ def fresnel_dielectric(cos_i, eta):
     -------
     float
         Reflectance in [0, 1]; 1 under total internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.1 (Fresnel reflectance of dielectrics).
     """
     cos_i = min(abs(cos_i), 1.0)
     sin2_t = eta * eta * (1.0 - cos_i * cos_i)
@@ -152,6 +182,11 @@ def refract(d, n, eta):
         Unit transmitted directions (mirror directions where ``tir``).
     tir : (...) ndarray of bool
         Total internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.3 (specular transmission: Snell's law in vector form).
     """
     d = np.asarray(d, dtype=np.float64)
     shape = d.shape[:-1]
@@ -165,14 +200,52 @@ def refract(d, n, eta):
 
 
 def reflect(d, n):
-    """Mirror directions ``d - 2 (d . n) n`` for unit normals ``n``."""
+    """Mirror directions ``d - 2 (d . n) n`` for unit normals ``n``.
+
+    Parameters
+    ----------
+    d : (..., 3) array_like
+        Incident directions.
+    n : (..., 3) array_like
+        Unit normals, broadcast against ``d``; either orientation.
+
+    Returns
+    -------
+    (..., 3) float64 ndarray
+        Reflected directions.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.2 (specular reflection).
+    """
     d = np.asarray(d, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
     return d - 2.0 * np.sum(d * n, axis=-1, keepdims=True) * n
 
 
 def fresnel(cos_i, eta):
-    """Unpolarised Fresnel reflectance (array version of :func:`fresnel_dielectric`)."""
+    """Unpolarised Fresnel reflectance (array version of :func:`fresnel_dielectric`).
+
+    Parameters
+    ----------
+    cos_i : array_like
+        Cosine of the incidence angle per direction (sign ignored), any shape.
+    eta : float or array_like
+        Index ratio n1 / n2 (incident over transmitted side), broadcast to
+        ``cos_i.shape``.
+
+    Returns
+    -------
+    float64 ndarray
+        Reflectance in [0, 1] with the shape of ``cos_i``; 1 under total
+        internal reflection.
+
+    References
+    ----------
+    .. [1] M. Pharr, W. Jakob, G. Humphreys, *Physically Based Rendering*, 3rd
+       ed., §8.2.1 (Fresnel reflectance of dielectrics).
+    """
     cos_i = np.asarray(cos_i, dtype=np.float64)
     c = np.ascontiguousarray(cos_i).reshape(-1)
     e = np.ascontiguousarray(np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)).reshape(-1)
@@ -200,6 +273,12 @@ def beer_lambert(absorption, length, ior=1.0):
     -------
     ndarray
         Transmittance with shape ``length.shape + (3,)``.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.8 (absorption
+       :math:`I = I_0 e^{-\\alpha l \\eta}`).
     """
     a = np.asarray(absorption, dtype=np.float64)
     length = np.asarray(length, dtype=np.float64)

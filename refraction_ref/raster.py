@@ -55,9 +55,11 @@ name                       used by
                            :mod:`~refraction_ref.levelmap.per_ray`
 :func:`edge_values`        :mod:`~refraction_ref.levelmap.caustics_map`,
                            :mod:`~refraction_ref.levelmap.per_ray`
+:func:`row_span`           :mod:`~refraction_ref.levelmap.caustics_map` (the scanline
+                           step: the covered run of a row, as :func:`_raster_band` walks it)
 ========================== ==========================================================
 
-:func:`bin_bands` is a parallel kernel called from Python. The four drawing
+:func:`bin_bands` is a parallel kernel called from Python. The five drawing
 helpers are ``numba.njit(inline="always")`` functions meant to be called
 from other njit kernels, into which they are inlined; changing one does not
 invalidate the Numba caches of kernels in *other* files that inline it
@@ -87,7 +89,7 @@ from .schedule import coprime_stride, strided
 __all__ = ["rasterize", "raster_setup", "RasterSetup", "Fragments", "clip_near", "OPS", "ortho_setup",
            "rasterize_ortho", "ortho_fragments",
            # public toolkit (see the module docstring)
-           "SUBPIXEL", "BAND", "MAX_COORD", "bin_bands", "oriented_triangle", "pixel_span", "edge_setup",
+           "SUBPIXEL", "BAND", "MAX_COORD", "bin_bands", "oriented_triangle", "pixel_span", "edge_setup", "row_span",
            "edge_values"]
 
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
@@ -427,6 +429,76 @@ def edge_values(x0, y0, x1, y1, x2, y2, px, py):
 
 
 @nb.njit(cache=True, inline="always")
+def _edge_cut(s, q, lo, hi):
+    """Narrow [lo, hi] (offsets from the row's first column) to the ``k`` with ``s - q k >= 0``."""
+    if q > 0:
+        hi = min(hi, s // q)  # floor division: the largest k with q k <= s
+    elif q < 0:
+        lo = max(lo, -((-s) // q))  # the smallest k with q k <= s, q negative (a ceiling)
+    elif s < 0:
+        hi = lo - 1  # an edge parallel to the rows, the row outside it
+    return lo, hi
+
+
+@nb.njit(cache=True, inline="always")
+def row_span(v, e, i, j0, j1):
+    """The covered pixel centres of row ``i`` between columns ``j0`` and ``j1``: the scanline step.
+
+    The one scanline kernel of every triangle drawn with the rasterizer's
+    coverage rule (:func:`_raster_band`, the intersection triangles of
+    :mod:`~refraction_ref.levelmap.caustics_map`). A triangle meets a row in
+    one run of pixels; its ends are solved exactly from the integer edge
+    functions (``w_k - 256 a_k (j - j0) + b_k >= 0`` for the three edges), so
+    the run holds the very pixels a test of every centre from ``j0`` to
+    ``j1`` would keep, and the edge values returned are the same integers as
+    those stepped there (no floating point involved: a caller interpolating
+    its attributes from them gets the same bits).
+
+    Walk the run as::
+
+        ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
+        for j in range(ja, jb + 1):
+            if j > ja:
+                w0 -= 256 * a0; w1 -= 256 * a1; w2 -= 256 * a2
+            ...  # every (i, j) here is covered
+
+    Parameters
+    ----------
+    v : tuple of 6 int
+        ``(x0, y0, x1, y1, x2, y2)``, snapped vertices in 1/256-pixel fixed
+        point with a positive area (:func:`oriented_triangle`).
+    e : tuple of 6 int
+        ``(a0, a1, a2, b0, b1, b2)`` from :func:`edge_setup`.
+    i : int
+        Row.
+    j0, j1 : int
+        Columns to consider (:func:`pixel_span` of the triangle, clamped to
+        the image or a scissor rectangle).
+
+    Returns
+    -------
+    ja, jb : int
+        First and last covered column; ``ja > jb`` when the row has none.
+    w0, w1, w2 : int
+        The edge functions (:func:`edge_values`) at the centre of ``(i, ja)``.
+
+    References
+    ----------
+    J. Pineda, "A Parallel Algorithm for Polygon Rasterization", SIGGRAPH
+    1988 (incremental edge functions); the top-left rule of D3D / Vulkan.
+    """
+    x0, y0, x1, y1, x2, y2 = v
+    a0, a1, a2, b0, b1, b2 = e
+    w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, 256 * j0 + 128, 256 * i + 128)
+    lo = 0
+    hi = j1 - j0
+    lo, hi = _edge_cut(w0 + b0, 256 * a0, lo, hi)
+    lo, hi = _edge_cut(w1 + b1, 256 * a1, lo, hi)
+    lo, hi = _edge_cut(w2 + b2, 256 * a2, lo, hi)
+    return j0 + lo, j0 + hi, w0 - 256 * a0 * lo, w1 - 256 * a1 * lo, w2 - 256 * a2 * lo
+
+
+@nb.njit(cache=True, inline="always")
 def _set_slice_bit(bits, i, j, d, lo, hi, slices, add):
     """Set the bit of slice ``round((d - lo) / (hi - lo) * (S - 1))`` in pixel (i, j)'s mask.
 
@@ -539,19 +611,18 @@ def _raster_band(b, op, tri, grid, blend, out, rec):
         j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), 0, W - 1)
         if j0 > j1 or i0 > i1:
             continue
-        a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
+        e = edge_setup(x0, y0, x1, y1, x2, y2)
+        a0, a1, a2 = e[0], e[1], e[2]
+        v = (x0, y0, x1, y1, x2, y2)
         inv_area = 1.0 / area
-        # edge functions at the first pixel centre of each row, stepped incrementally
-        px0 = 256 * j0 + 128
         for i in range(i0, i1 + 1):
-            w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
-            for j in range(j0, j1 + 1):
-                if j > j0:
+            # the row's covered run (row_span), its edge functions stepped incrementally
+            ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
+            for j in range(ja, jb + 1):
+                if j > ja:
                     w0 -= 256 * a0
                     w1 -= 256 * a1
                     w2 -= 256 * a2
-                if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                    continue
                 # D holds 1/depth for perspective set-ups, depth for orthographic ones:
                 # either way the attribute interpolates linearly on screen
                 if perspective:
@@ -768,6 +839,18 @@ def raster_setup(tri_view, camera, clip=True, faces=None):
     faces : (T, 3) int ndarray, optional
         Indexed triangles: vertices are then projected once each (the
         common case, when no triangle crosses the near plane).
+
+    Returns
+    -------
+    RasterSetup
+        Snapped vertices (1/256 pixel), per-vertex depth attribute (1/depth,
+        or depth for an orthographic camera), row ranges and band lists,
+        reusable by several :func:`rasterize` calls; ``dropped`` counts the
+        triangles beyond the guard band.
+
+    References
+    ----------
+    Chaudhari (2008), §4.2 (transformed vertices kept for several passes).
     """
     W, H, sx, sy = camera.kernel_args()
     if faces is not None:

@@ -7,38 +7,61 @@ import time
 import numba
 import numpy as np
 
+from . import warm
 from .contract import CONTRACT_VERSION, software_versions
 from .graph import get_method, method_names, run_graph
 from .result import Result
-from .scene import Scene, SceneError, load_scene
+from .validation import SceneError
+from .scene import Scene, load_scene
 
 __all__ = ["render", "METHODS", "run_method", "kernels_cached"]
 
 METHODS = method_names()
 
 
-def _params(method, scene):
-    blocks = get_method(method).blocks
-    if method == "exact" and scene.data.get("water") is not None:
-        blocks = ("levelmap", "water")
-    if len(blocks) == 1:
-        return scene.data[blocks[0]]
-    return {b: scene.data[b] for b in blocks}
-
-
 def kernels_cached(method):
     """Whether Numba's on-disk cache holds every kernel a default render of ``method`` compiles.
 
-    Checked kernel by kernel (``refraction_ref._warmup.kernels_cached``): a cache
-    filled in part by the tests or an interrupted run counts as not cached.
-    """
-    from ._warmup import kernels_cached as cached
+    Checked kernel by kernel (:func:`refraction_ref.warm.kernels_cached`): a
+    cache filled in part by the tests or an interrupted run counts as not cached.
 
-    return cached(method)
+    Parameters
+    ----------
+    method : str
+
+    Returns
+    -------
+    bool
+    """
+    return warm.kernels_cached(method)
 
 
 def run_method(scene, method, cache=None, keep=None, progress=False):
-    """Run a method's stage graph and wrap the outputs as a :class:`Result` with the full ``meta``."""
+    """Run a method's stage graph and wrap the outputs as a :class:`Result` with the full ``meta``.
+
+    The method's warm-up (:attr:`~refraction_ref.graph.Method.warm`) runs
+    first, outside ``total_ms`` (its time is ``jit_ms``).
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene.
+    method : str
+        A registered method.
+    cache : dict, optional
+        Stage cache (:class:`~refraction_ref.session.Session` keeps one).
+    keep : None, 'stages', str or list of str
+        As :func:`render`.
+    progress : bool
+        Show a progress bar on long work.
+
+    Returns
+    -------
+    Result
+        ``meta["params"]`` holds the knob blocks the method names for this
+        scene (:meth:`~refraction_ref.graph.Method.param_blocks`): the block
+        itself when it is one, else ``{block: values}``.
+    """
     m = get_method(method)
     t0 = time.perf_counter()
     if m.warm is not None:  # JIT compilation (or loading the cache) stays out of total_ms
@@ -47,10 +70,11 @@ def run_method(scene, method, cache=None, keep=None, progress=False):
     t0 = time.perf_counter()
     arrays, info = run_graph(m, scene, cache=cache, keep=keep, progress=progress, warm=False)
     total = (time.perf_counter() - t0) * 1e3
+    blocks = m.param_blocks(scene)
     meta = {
         "method": method,
         "scene": scene.data,
-        "params": _params(method, scene),
+        "params": scene.data[blocks[0]] if len(blocks) == 1 else {b: scene.data[b] for b in blocks},
         "version": software_versions()["refraction_ref"],
         "contract_version": CONTRACT_VERSION,
         "versions": software_versions(),
@@ -78,7 +102,7 @@ def render(scene=None, method="imagespace", overrides=None, progress=False, keep
         ``imagespace``: Chaudhari (2008); ``exact``: multi-interface Snell
         tracing through the actual triangles with Embree (for a scene with a
         ``water`` block: the exact water-caustics reference,
-        :mod:`refraction_ref.levelmap.exact_water`); ``levelmap``: water
+        :mod:`refraction_ref.exact.water`); ``levelmap``: water
         caustics, Tipprasert (2006); ``volumetric``: photon tracing through an
         index volume, Sun et al. (2008).
     overrides : dict, optional

@@ -14,7 +14,24 @@ __all__ = ["Result", "tonemap", "load_result", "output_paths", "check_writable"]
 
 
 def tonemap(image):
-    """Clamp linear RGB to [0, 1] and apply the sRGB transfer curve; uint8 (H, W, 3)."""
+    """Clamp linear RGB to [0, 1] and apply the sRGB transfer curve; uint8 (H, W, 3).
+
+    Parameters
+    ----------
+    image : (H, W, 3) array_like
+        Linear RGB radiance; NaN is shown black.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+        sRGB-encoded 8-bit image.
+
+    References
+    ----------
+    .. [1] IEC 61966-2-1:1999, Multimedia systems and equipment - Colour
+       measurement and management - Default RGB colour space - sRGB (the
+       transfer function).
+    """
     x = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64), nan=0.0), 0.0, 1.0)
     s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
     return np.round(s * 255.0).astype(np.uint8)
@@ -37,6 +54,27 @@ class Result:
         Each file is written under a temporary name and renamed into place
         when complete, so an interrupted save leaves no partial file.
         Returns the paths written.
+
+        Parameters
+        ----------
+        prefix : str or os.PathLike
+            Output prefix; a trailing ``.npz`` is dropped.
+        overwrite : bool
+            Replace existing files.
+        png : bool
+            Also write the tone-mapped ``image`` array as a PNG (when there is one).
+
+        Returns
+        -------
+        list of str
+            ``[PREFIX.npz]`` or ``[PREFIX.npz, PREFIX.png]``.
+
+        Raises
+        ------
+        FileExistsError
+            An output exists and ``overwrite`` is false.
+        OutputError
+            An output that cannot be written.
         """
         paths = output_paths(prefix, png and "image" in self.arrays)
         check_writable(paths, overwrite)
@@ -51,7 +89,24 @@ class Result:
 
 
 def output_paths(prefix, png=True):
-    """The files :meth:`Result.save` writes for ``prefix``: ``PREFIX.npz`` (and ``PREFIX.png``)."""
+    """The files :meth:`Result.save` writes for ``prefix``: ``PREFIX.npz`` (and ``PREFIX.png``).
+
+    Parameters
+    ----------
+    prefix : str or os.PathLike
+        Output prefix; a trailing ``.npz`` is dropped.
+    png : bool
+        Include the PNG.
+
+    Returns
+    -------
+    list of str
+
+    Raises
+    ------
+    OutputError
+        An empty prefix or one without a file name.
+    """
     prefix = os.fspath(prefix)
     if prefix.endswith(".npz"):
         prefix = prefix[:-4]
@@ -69,7 +124,19 @@ def output_paths(prefix, png=True):
 def check_writable(paths, overwrite=False):
     """Refuse, before any work, outputs that cannot be written (:class:`~refraction_ref.files.OutputError`: a
     folder that is a file or not writable) or that exist, unless ``overwrite`` (``FileExistsError``).
-    Nothing is left on disk."""
+    Nothing is left on disk.
+
+    Parameters
+    ----------
+    paths : iterable of str
+        Output files (:func:`output_paths`).
+    overwrite : bool
+        Existing files may be replaced.
+
+    Returns
+    -------
+    None
+    """
     for p in paths:
         if not overwrite and os.path.exists(p):
             raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite (CLI: --force)")
@@ -85,7 +152,25 @@ def _json_default(o):
 
 
 def load_result(path):
-    """Read a ``.npz`` written by :meth:`Result.save`."""
+    """Read a ``.npz`` written by :meth:`Result.save`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.npz`` file.
+
+    Returns
+    -------
+    Result
+        Every array but ``meta``, and ``meta`` decoded from JSON (empty when absent).
+
+    Raises
+    ------
+    NotNpzError
+        A file that is not a ``.npz``.
+    FileNotFoundError
+        No such file.
+    """
     path = os.fspath(path)
     with load_npz(path) as z:  # a PNG or a text file: NotNpzError naming it, not NumPy's pickle advice
         arrays = {k: z[k] for k in z.files if k != "meta"}

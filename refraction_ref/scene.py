@@ -15,19 +15,15 @@ from __future__ import annotations
 
 import copy
 import json
-import math
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .graph import BLOCKS
+from .graph import BLOCKS, load_builtin_blocks
+from .validation import SceneError, check_number, check_vector, merge_defaults
 
 __all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides", "BLOCKS"]
-
-
-class SceneError(ValueError):
-    """A scene that cannot be rendered, with a message saying what to change."""
 
 
 DEFAULT_CAMERA = {"eye": [0.0, 0.0, 2.6], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
@@ -93,6 +89,18 @@ class Scene:
         return json.dumps(self.data, indent=1, sort_keys=True)
 
     def resolve_path(self, p):
+        """A path of the scene, resolved against :attr:`base_dir` when relative.
+
+        Parameters
+        ----------
+        p : str
+            A path from the scene (mesh, image).
+
+        Returns
+        -------
+        str
+            ``p`` if absolute, else ``base_dir / p`` normalised.
+        """
         return p if os.path.isabs(p) else os.path.normpath(os.path.join(self.base_dir, p))
 
     def copy(self):
@@ -102,53 +110,6 @@ class Scene:
 def default_scene():
     """The bundled default scene: a glass bunny (IOR 1.2) in a checker environment, 512x512."""
     return load_scene({})
-
-
-def _merge(default, given, path):
-    """Merge ``given`` over ``default``; unknown keys are errors naming the key."""
-    if default is None or not isinstance(default, dict) or not default:
-        return copy.deepcopy(given)
-    if given is None:
-        return copy.deepcopy(default)
-    if not isinstance(given, dict):
-        raise SceneError(f"scene: '{path}' must be an object (a JSON dict), got {type(given).__name__}")
-    out = copy.deepcopy(default)
-    for k, v in given.items():
-        if k not in default:
-            name = f"{path}.{k}" if path else k
-            raise SceneError(f"scene: unknown key '{name}'; known keys here: {', '.join(sorted(default))}")
-        sub = default[k]
-        if isinstance(sub, dict) and sub and v is not None:
-            out[k] = _merge(sub, v, f"{path}.{k}" if path else k)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-def _vec(x, n, where, finite=True):
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"scene: '{where}' must be a list of {n} numbers, got {x!r}") from None
-    if a.shape != (n,):
-        raise SceneError(f"scene: '{where}' must be a list of {n} numbers, got {x!r}")
-    if finite and not np.all(np.isfinite(a)):
-        raise SceneError(f"scene: '{where}' holds a NaN or infinite value ({x!r}); give finite numbers")
-    return a
-
-
-def _num(x, where, lo=None, hi=None, lo_open=False, integer=False):
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise SceneError(f"scene: '{where}' must be a number, got {x!r}")
-    if not math.isfinite(float(x)):
-        raise SceneError(f"scene: '{where}' is {x!r}; give a finite number")
-    if integer and int(x) != x:
-        raise SceneError(f"scene: '{where}' must be a whole number, got {x!r}")
-    if lo is not None and (x <= lo if lo_open else x < lo):
-        raise SceneError(f"scene: '{where}' is {x!r}; it must be {'>' if lo_open else '>='} {lo}")
-    if hi is not None and x > hi:
-        raise SceneError(f"scene: '{where}' is {x!r}; it must be <= {hi}")
-    return x
 
 
 def _check_mesh_ref(mesh, where, base_dir):
@@ -169,53 +130,75 @@ def _check_mesh_ref(mesh, where, base_dir):
 
 
 def _check_transform(t, where):
-    _num(t["scale"], f"{where}.scale", 0.0, lo_open=True)
-    _vec(t["rotate"], 3, f"{where}.rotate")
-    _vec(t["translate"], 3, f"{where}.translate")
+    check_number(t["scale"], f"{where}.scale", 0.0, lo_open=True)
+    check_vector(t["rotate"], 3, f"{where}.rotate")
+    check_vector(t["translate"], 3, f"{where}.translate")
 
 
 def validate(data, base_dir="."):
-    """Check a merged scene; raise :class:`SceneError` on the first problem."""
+    """Check a merged scene; raise :class:`SceneError` on the first problem.
+
+    Also fills the partially given knob blocks (each block's ``merge``)
+    and the objects' ``deform`` defaults in place, reads a ``latlong``
+    environment image once, and runs each registered knob block's checks.
+
+    Parameters
+    ----------
+    data : dict
+        The merged scene dictionary (every key present).
+    base_dir : str
+        Folder for relative mesh and image paths.
+
+    Returns
+    -------
+    dict
+        ``data`` itself.
+
+    Raises
+    ------
+    SceneError
+        Naming the key and the fix.
+    """
     c = data["camera"]
-    eye = _vec(c["eye"], 3, "camera.eye")
-    target = _vec(c["target"], 3, "camera.target")
-    up = _vec(c["up"], 3, "camera.up")
+    eye = check_vector(c["eye"], 3, "camera.eye")
+    target = check_vector(c["target"], 3, "camera.target")
+    up = check_vector(c["up"], 3, "camera.up")
     if np.linalg.norm(target - eye) == 0:
         raise SceneError("scene: camera.eye and camera.target coincide; move the target")
     if np.linalg.norm(np.cross(target - eye, up)) < 1e-12 * np.linalg.norm(target - eye) * max(np.linalg.norm(up), 1e-300):
         raise SceneError("scene: camera.up is parallel to the viewing direction; choose another up vector")
-    _num(c["fov_y"], "camera.fov_y", 0.0, 179.0, lo_open=True)
-    _num(c["width"], "camera.width", 1, integer=True)
-    _num(c["height"], "camera.height", 1, integer=True)
-    _num(c["near"], "camera.near", 0.0, lo_open=True)
-    _num(c["far"], "camera.far", c["near"], lo_open=True)
+    check_number(c["fov_y"], "camera.fov_y", 0.0, 179.0, lo_open=True)
+    check_number(c["width"], "camera.width", 1, integer=True)
+    check_number(c["height"], "camera.height", 1, integer=True)
+    check_number(c["near"], "camera.near", 0.0, lo_open=True)
+    check_number(c["far"], "camera.far", c["near"], lo_open=True)
     if c["width"] * c["height"] > 16384 * 16384:
         raise SceneError(f"scene: camera {c['width']}x{c['height']} is too large for memory; "
                          "use at most 16384x16384 pixels")
-    _num(data["outside_ior"], "outside_ior", 0.0, lo_open=True)
+    check_number(data["outside_ior"], "outside_ior", 0.0, lo_open=True)
     if not isinstance(data["objects"], list):
         raise SceneError("scene: 'objects' must be a list")
     for k, o in enumerate(data["objects"]):
         w = f"objects[{k}]"
         _check_mesh_ref(o["mesh"], f"{w}.mesh", base_dir)
         if o["fit"] is not None:
-            _num(o["fit"], f"{w}.fit", 0.0, lo_open=True)
+            check_number(o["fit"], f"{w}.fit", 0.0, lo_open=True)
         _check_transform(o["transform"], f"{w}.transform")
         m = o["material"]
-        _num(m["ior"], f"{w}.material.ior", 0.0, lo_open=True)
-        a = _vec(m["absorption"], 3, f"{w}.material.absorption")
+        check_number(m["ior"], f"{w}.material.ior", 0.0, lo_open=True)
+        a = check_vector(m["absorption"], 3, f"{w}.material.absorption")
         if np.any(a < 0):
             raise SceneError(f"scene: '{w}.material.absorption' is {m['absorption']}; "
                              "absorption coefficients must be >= 0")
         if o["deform"] is not None and not callable(o["deform"]) and o["deform"] != "<python callable>":
-            o["deform"] = _merge(DEFAULT_DEFORM, o["deform"], f"{w}.deform")
+            o["deform"] = merge_defaults(DEFAULT_DEFORM, o["deform"], f"{w}.deform")
             d = o["deform"]
             if d["type"] != "sine":
                 raise SceneError(f"scene: '{w}.deform.type' is {d['type']!r}; only 'sine' is known")
-            _num(d["amplitude"], f"{w}.deform.amplitude")
-            _num(d["wavelength"], f"{w}.deform.wavelength", 0.0, lo_open=True)
-            _vec(d["direction"], 3, f"{w}.deform.direction")
-            _num(d["phase"], f"{w}.deform.phase")
+            check_number(d["amplitude"], f"{w}.deform.amplitude")
+            check_number(d["wavelength"], f"{w}.deform.wavelength", 0.0, lo_open=True)
+            check_vector(d["direction"], 3, f"{w}.deform.direction")
+            check_number(d["phase"], f"{w}.deform.phase")
     for k, r in enumerate(data["receivers"] or []):
         _check_mesh_ref(r["mesh"], f"receivers[{k}].mesh", base_dir)
         _check_transform(r["transform"], f"receivers[{k}].transform")
@@ -223,7 +206,7 @@ def validate(data, base_dir="."):
     if env["type"] not in ("checker", "latlong", "constant"):
         raise SceneError(f"scene: environment.type is {env['type']!r}; use 'checker', 'latlong' or 'constant'")
     if env["type"] == "checker":
-        _num(env["tiles"], "environment.tiles", 1, integer=True)
+        check_number(env["tiles"], "environment.tiles", 1, integer=True)
     if env["type"] == "latlong":
         if not env["path"]:
             raise SceneError("scene: environment.type 'latlong' needs environment.path (an image file)")
@@ -240,7 +223,7 @@ def validate(data, base_dir="."):
             block.merge(data)
     validate_lights(data)
     for k, r in enumerate(data["receivers"] or []):
-        alb = _vec(r["albedo"], 3, f"receivers[{k}].albedo")
+        alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo")
         if np.any(alb < 0):
             raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
     for name, block in BLOCKS.items():  # each method's own checks, beside the code that reads them
@@ -267,12 +250,30 @@ def apply_overrides(data, overrides):
 
     String values are parsed as JSON where they can be (``"10"`` -> 10,
     ``"[0,0,3]"`` -> a list), so CLI ``--set key=value`` works unchanged.
+
+    Parameters
+    ----------
+    data : dict
+        A scene dictionary (not modified: a deep copy is changed).
+    overrides : dict or None
+        Dotted key -> value; list items by index (``objects.0``); a knob
+        block's aliases apply to two-part keys.
+
+    Returns
+    -------
+    dict
+        The new scene dictionary.
+
+    Raises
+    ------
+    SceneError
+        An unknown key or a bad list index.
     """
     data = copy.deepcopy(data)
     for key, value in (overrides or {}).items():
         parts = key.split(".")
         if len(parts) == 2:
-            parts[1] = _alias(parts[0], parts[1])
+            parts[0], parts[1] = _alias(parts[0], parts[1])
         node, where = data, ""
         for p in parts[:-1]:
             if isinstance(node, list):
@@ -316,24 +317,53 @@ def _list_index(items, p, key, where):
 
 
 def _alias(block, key):
-    """The current name of a knob that moved (``KnobBlock.aliases``), else ``key``."""
+    """The current ``(block, key)`` of a knob that moved (``KnobBlock.aliases``), else ``(block, key)``.
+
+    An alias is a key of the same block (``"old": "new"``) or, for a knob that
+    moved to another block, a dotted name (``"caustic_map": "caustics.map_size"``).
+    """
     b = BLOCKS.get(block)
-    return b.aliases.get(key, key) if b is not None else key
+    new = b.aliases.get(key, key) if b is not None else key
+    if "." in new:
+        nb, nk = new.split(".", 1)
+        return nb, nk
+    return block, new
 
 
 def _unalias(raw):
-    """Rename moved knobs in a scene's blocks to their current names (a key keeps its old name as an alias)."""
+    """Rename moved knobs in a scene's blocks to their current names (a key keeps its old name as an alias).
+
+    A knob given under its old name in another block moves there; given
+    twice (old and new name, or two old names of one knob) with different
+    values, it is an error naming both.
+    """
     out = dict(raw)
+    given_as = {}
     for name, b in BLOCKS.items():
         given = raw.get(name)
-        if b.aliases and isinstance(given, dict):
-            out[name] = {_alias(name, k): v for k, v in given.items()}
+        if not (b.aliases and isinstance(given, dict)):
+            continue
+        out[name] = dict(given)
+        for k in given:
+            nb, nk = _alias(name, k)
+            if (nb, nk) == (name, k):
+                continue
+            v = out[name].pop(k)
+            target = out.get(nb)
+            target = dict(target) if isinstance(target, dict) else {}
+            if nk in target and target[nk] != v:
+                first = given_as.get((nb, nk), f"{nb}.{nk}")
+                raise SceneError(f"scene: '{name}.{k}' (now '{nb}.{nk}') is {v!r} but '{first}' gives "
+                                 f"{target[nk]!r}; they are one knob: give it once, as '{nb}.{nk}'")
+            target[nk] = v
+            given_as[(nb, nk)] = f"{name}.{k}"
+            out[nb] = target
     return out
 
 
 def _resolve(raw, base_dir, callables):
     raw = _unalias(raw)
-    data = _merge({k: v for k, v in DEFAULTS.items() if k not in ("objects", "receivers", "lights")},
+    data = merge_defaults({k: v for k, v in DEFAULTS.items() if k not in ("objects", "receivers", "lights")},
                   {k: v for k, v in raw.items() if k not in ("objects", "receivers", "lights")}, "")
     for key, default in (("objects", DEFAULT_OBJECT), ("receivers", DEFAULT_RECEIVER), ("lights", DEFAULT_LIGHT)):
         given = raw.get(key, DEFAULTS[key])
@@ -346,7 +376,7 @@ def _resolve(raw, base_dir, callables):
             item = dict(item)
             if key == "objects" and callable(item.get("deform")):
                 callables[("deform", k)] = item.pop("deform")
-            items.append(_merge(default, item, f"{key}[{k}]"))
+            items.append(merge_defaults(default, item, f"{key}[{k}]"))
         data[key] = items
     for (kind, k), fn in callables.items():
         if kind == "deform":
@@ -435,12 +465,8 @@ def load_scene(src=None, overrides=None):
     return Scene(data, base_dir, callables)
 
 
-# The knob blocks register themselves on import (cheap modules: no kernels). Imported last, as
-# they use this module's checks; then the scene's defaults gain every block.
-from . import exact_knobs as _exact_knobs  # noqa: E402,F401
-from .imagespace import knobs as _imagespace_knobs  # noqa: E402,F401
-from .levelmap import knobs as _levelmap_knobs  # noqa: E402,F401
-from .volumetric import knobs as _volumetric_knobs  # noqa: E402,F401
-
+# The knob blocks register themselves when the graph loads them by name (cheap modules, no kernels);
+# then the scene's defaults gain every block.
+load_builtin_blocks()
 DEFAULTS.update(_block_defaults())
-IMAGESPACE_DEFAULTS = _imagespace_knobs.IMAGESPACE_DEFAULTS  # for existing imports
+IMAGESPACE_DEFAULTS = BLOCKS["imagespace"].defaults  # for existing imports

@@ -21,7 +21,18 @@ __all__ = ["coprime_stride", "strided"]
 @nb.njit(cache=True)
 def coprime_stride(n):
     """A stride coprime with ``n`` (a small prime that does not divide it), so that
-    ``k * s mod n`` for ``k = 0 .. n-1`` visits every index once."""
+    ``k * s mod n`` for ``k = 0 .. n-1`` visits every index once.
+
+    Parameters
+    ----------
+    n : int
+        Number of tasks (rows or bands), > 0.
+
+    Returns
+    -------
+    int
+        The first of the primes 7 .. 47 that does not divide ``n``; 1 when all do.
+    """
     for p in (7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47):
         if n % p != 0:
             return p
@@ -30,5 +41,20 @@ def coprime_stride(n):
 
 @nb.njit(cache=True, inline="always")
 def strided(k, s, n):
-    """The index task ``k`` works on (``s = coprime_stride(n)``), as a signed integer."""
+    """The index task ``k`` works on (``s = coprime_stride(n)``), as a signed integer.
+
+    Parameters
+    ----------
+    k : int
+        Task number, ``0 <= k < n`` (the ``prange`` index).
+    s : int
+        Stride from :func:`coprime_stride`.
+    n : int
+        Number of tasks.
+
+    Returns
+    -------
+    int64
+        ``k * s mod n``.
+    """
     return (np.int64(k) * s) % n

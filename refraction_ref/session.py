@@ -24,7 +24,8 @@ from __future__ import annotations
 
 from .graph import method_names
 from .render import run_method
-from .scene import Scene, SceneError, load_scene
+from .validation import SceneError
+from .scene import Scene, load_scene
 
 __all__ = ["Session"]
 
@@ -52,9 +53,18 @@ class Session:
     def update(self, overrides):
         """Change dotted keys, e.g. ``{"camera.eye": [0, 0, 3]}``; the scene is re-validated.
 
-        Returns the session, so calls chain. On a bad key or value
-        :class:`SceneError` is raised naming it, and the scene and the cached
-        stages are left as they were.
+        On a bad key or value :class:`SceneError` is raised naming it, and
+        the scene and the cached stages are left as they were.
+
+        Parameters
+        ----------
+        overrides : dict
+            Dotted keys and their new values.
+
+        Returns
+        -------
+        Session
+            This session, so calls chain.
         """
         self.scene = load_scene(self.scene, overrides)
         return self

@@ -18,6 +18,24 @@ the pipelines, ``compare`` and the tests read the same names.
                                converged where the layer is absent); for the exact
                                reference, a hit it could not resolve in float64
 ==  =========================  ==================================================================
+
+The level map's view through the water (Tipprasert 2006; the ``image`` stage
+buffer ``view_status`` of :mod:`refraction_ref.levelmap.view`) has codes of its
+own, the ``VIEW_*`` family: the same small integers with other meanings (its
+2 is a ray lost after the water, its 4 total internal reflection), so they
+have their own names and never mix with the per-pixel ``status`` above.
+
+==  =========================  ==================================================================
+ 0  ``VIEW_MISSED``            no water and no receiver along the eye ray: black
+ 1  ``VIEW_THROUGH``           refracted by the water onto a receiver (the thesis's view)
+ 2  ``VIEW_LOST``              refracted by the water, then met no receiver: black
+ 3  ``VIEW_DIRECT``            missed the water rectangle, met a receiver directly
+ 4  ``VIEW_TIR``               total internal reflection at the water (only when
+                               ``outside_ior > water.ior``): black, not followed
+==  =========================  ==================================================================
+
+(The volumetric march's ``photon_status`` codes are the ``PHOTON_*`` names and
+``STATUS`` of :mod:`refraction_ref.volumetric.march`.)
 """
 
 MISSED = 0
@@ -35,4 +53,18 @@ MEANINGS = {
     LOST: ("lost", "the search could not resolve an intersection"),
 }
 
-__all__ = ["MISSED", "EXITED", "LIMIT", "TIR", "LOST", "MEANINGS"]
+#: code -> its label in reports and plot legends (``"3 TIR"``)
+LABELS = {MISSED: "0 missed", EXITED: "1 exited", LIMIT: "2 limit", TIR: "3 TIR", LOST: "4 lost"}
+
+VIEW_MISSED = 0
+VIEW_THROUGH = 1
+VIEW_LOST = 2
+VIEW_DIRECT = 3
+VIEW_TIR = 4
+
+#: view code -> name (``stage.image.view_status`` of the level map and the exact water reference)
+VIEW_STATUS = {VIEW_MISSED: "missed", VIEW_THROUGH: "through", VIEW_LOST: "lost", VIEW_DIRECT: "direct",
+               VIEW_TIR: "tir"}
+
+__all__ = ["MISSED", "EXITED", "LIMIT", "TIR", "LOST", "MEANINGS", "LABELS", "VIEW_MISSED", "VIEW_THROUGH",
+           "VIEW_LOST", "VIEW_DIRECT", "VIEW_TIR", "VIEW_STATUS"]

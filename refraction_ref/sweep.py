@@ -78,7 +78,23 @@ class SweepError(ValueError):
 
 
 def load_spec(src):
-    """Read and check a sweep spec (a path or a dict); relative scene paths resolve against the spec's folder."""
+    """Read and check a sweep spec (a path or a dict); relative scene paths resolve against the spec's folder.
+
+    Parameters
+    ----------
+    src : str, os.PathLike or dict
+        A JSON spec file, or the spec itself (module docstring).
+
+    Returns
+    -------
+    dict
+        The spec with its defaults filled in.
+
+    Raises
+    ------
+    SweepError
+        Naming the key that is unknown or wrong.
+    """
     base_dir = "."
     if isinstance(src, (str, os.PathLike)):
         path = os.fspath(src)
@@ -151,7 +167,8 @@ def load_spec(src):
             s = os.path.join(base_dir, s)
         scenes[name] = s
     spec["scenes"] = scenes
-    from .scene import SceneError, load_scene
+    from .validation import SceneError
+    from .scene import load_scene
 
     if spec.get("task"):
         return spec
@@ -198,7 +215,18 @@ def _ref_key(combo, follows=()):
 
 
 def tasks_of(spec):
-    """Every (scene, method, overrides) of the grid, in a fixed order (``family`` set with ``families``)."""
+    """Every (scene, method, overrides) of the grid, in a fixed order (``family`` set with ``families``).
+
+    Parameters
+    ----------
+    spec : dict
+        A spec from :func:`load_spec`.
+
+    Returns
+    -------
+    list of dict
+        ``scene_name``, ``scene``, ``method``, ``overrides`` (and ``family``) per task.
+    """
     return [{"scene_name": sn, "scene": s, "method": m, "overrides": combo,
              **({"family": fam} if fam is not None else {})}
             for sn, s in spec["scenes"].items() for m in spec["methods"] for fam, combo in _family_combos(spec)]
@@ -237,7 +265,25 @@ def _worker_address():
 
 
 def run_function(task, fn, base, threads):
-    """A grid point of a ``task`` spec: ``fn(**{**base, **overrides})``'s dict is the row."""
+    """A grid point of a ``task`` spec: ``fn(**{**base, **overrides})``'s dict is the row.
+
+    Parameters
+    ----------
+    task : dict
+        One of :func:`tasks_of`.
+    fn : str
+        ``"FILE.py:FUNCTION"``; called once untimed first in each process.
+    base : dict
+        Keyword arguments every call gets; the task's overrides win.
+    threads : int
+        Numba threads.
+
+    Returns
+    -------
+    dict
+        The CSV row: the overrides, ``status`` (``ok`` or ``failed: ...``),
+        ``worker``, ``threads`` and the function's scalar outputs.
+    """
     row = {**({"family": task["family"]} if "family" in task else {}), **task["overrides"], "status": "ok"}
     row["worker"] = _worker_address()
     try:
@@ -263,7 +309,25 @@ def _pin_threads(n):
 
 
 def run_reference(scene, method, overrides, threads=1):
-    """The exact reference's arrays of a scene at the task's camera (a task of its own)."""
+    """The exact reference's arrays of a scene at the task's camera (a task of its own).
+
+    Parameters
+    ----------
+    scene : Scene, dict, str or None
+        As :func:`refraction_ref.render`.
+    method : str
+        The reference method (the spec's ``reference``).
+    overrides : dict
+        Dotted keys (the task's camera and the ``reference_base``).
+    threads : int
+        Numba threads.
+
+    Returns
+    -------
+    dict
+        ``status``, ``hit``, ``exit_dir``, ``interfaces``, ``image`` and the
+        ``caustic_map_*`` arrays it has.
+    """
     import refraction_ref as rr
 
     _pin_threads(threads)
@@ -276,6 +340,24 @@ def run_task(task, base, repeats, threads, reference=None):
     """Render one grid point ``repeats`` times after a warm-up; the row of the CSV.
 
     A failure becomes the row's ``status`` (``failed: <message>``); nothing is raised.
+
+    Parameters
+    ----------
+    task : dict
+        One of :func:`tasks_of`.
+    base : dict
+        Dotted overrides every task gets; the task's own win.
+    repeats : int
+        Timed renders; the row holds their median.
+    threads : int
+        Numba threads.
+    reference : dict, optional
+        :func:`run_reference`'s arrays, to measure the error against.
+
+    Returns
+    -------
+    dict
+        The CSV row.
     """
     import statistics
 
@@ -387,6 +469,15 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
 def plot_series(rows, err_key, time_key="total_ms", knobs=()):
     """The plot's series: one per scene, method and family, its points in the rows' (the grid's) order.
 
+    Parameters
+    ----------
+    rows : list of dict
+        The sweep's rows (failed ones are left out).
+    err_key, time_key : str
+        The columns on the y and x axes.
+    knobs : sequence of str
+        Grid keys whose values label the points where they vary along a series.
+
     Returns
     -------
     list of (label, points, notes)
@@ -407,9 +498,29 @@ def plot_series(rows, err_key, time_key="total_ms", knobs=()):
 
 
 def write_rows(rows, out, name, err_key=None, time_key="total_ms", knobs=()):
-    """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot
-    (``err_key`` against ``time_key``: one line per scene, method and family, each point labelled with
-    the values of the grid keys ``knobs`` that vary along it; :func:`plot_series`)."""
+    """The sweep's CSV (and Parquet where pyarrow is installed) and its error-against-time plot.
+
+    The plot draws ``err_key`` against ``time_key``: one line per scene,
+    method and family, each point labelled with the values of the grid keys
+    ``knobs`` that vary along it (:func:`plot_series`).
+
+    Parameters
+    ----------
+    rows : list of dict
+    out : str
+        The folder (created if missing).
+    name : str
+        File stem: ``NAME.csv``, ``NAME.parquet``, ``NAME.png``.
+    err_key : str, optional
+        Default: ``exit_dir_median_deg`` or else ``image_rmse``, whichever the rows have.
+    time_key : str
+    knobs : sequence of str
+
+    Returns
+    -------
+    list of str
+        The paths written.
+    """
     from .files import atomic_open, atomic_path, savefig_atomic
 
     os.makedirs(out, exist_ok=True)

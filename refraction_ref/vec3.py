@@ -31,6 +31,16 @@ def readonly(a):
     Numba compiles one version per argument type, and a read-only array (the
     mesh cache freezes its arrays) is another type than a writable one: passing
     every input as read-only gives each kernel one signature, not two.
+
+    Parameters
+    ----------
+    a : ndarray
+        Any array; it is not modified.
+
+    Returns
+    -------
+    ndarray
+        A view of ``a`` with the writeable flag cleared.
     """
     a = a.view()
     a.flags.writeable = False
@@ -54,6 +64,16 @@ def _dot_kernel(p, v, out):
 def affine(p, m, t=None):
     """``p @ m + t`` for points ``p`` (..., 3), ``m`` (3, C), ``t`` (C,) (default 0).
 
+    Parameters
+    ----------
+    p : (..., 3) array_like
+        Points (or vectors), converted to float64.
+    m : (3, C) array_like
+        Matrix applied on the right; each output column is
+        ``x m[0, c] + y m[1, c] + z m[2, c]`` summed in that order.
+    t : (C,) array_like, optional
+        Offset added last; zero when None.
+
     Returns
     -------
     ndarray (..., C) float64
@@ -72,6 +92,13 @@ def affine(p, m, t=None):
 
 def dot(p, v):
     """``p @ v`` for vectors ``p`` (..., 3) and one vector ``v`` (3,).
+
+    Parameters
+    ----------
+    p : (..., 3) array_like
+        Vectors, converted to float64.
+    v : (3,) array_like
+        The one vector; each result is ``x v0 + y v1 + z v2`` in that order.
 
     Returns
     -------

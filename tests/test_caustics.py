@@ -16,7 +16,7 @@ from refraction_ref.analytic import sphere_refraction
 from refraction_ref.camera import Camera
 from refraction_ref.caustics.receivers import march_eyespace
 from refraction_ref.caustics.splat import gather_gaussian, splat_bilinear
-from refraction_ref.levelmap.metrics import relative_l1
+from refraction_ref.metrics import relative_l1
 
 R = 0.5  # the sphere's radius (fit 1.0)
 FLOOR_Y = -0.6
@@ -285,3 +285,21 @@ def test_point_light_inside_the_object_is_refused():
     sc["lights"] = [{"type": "point", "position": [0.0, 0.1, 0.0]}]
     with pytest.raises(rr.SceneError, match="point light"):
         rr.render(sc)
+
+
+def test_moved_caustic_knobs_keep_their_old_names():
+    """The receivers' caustic maps' settings are the ``caustics`` block; the old keys are aliases."""
+    from refraction_ref.levelmap.pipeline import DEFAULT_SCENE_PATH
+
+    sc = rr.load_scene(DEFAULT_SCENE_PATH, {"levelmap.map_size": 64, "levelmap.ambient": 0.25,
+                                            "levelmap.placement": "tight", "levelmap.shadows": False})
+    assert sc.data["caustics"] == dict(sc.data["caustics"], map_size=64, ambient=0.25, placement="tight",
+                                       shadows=False)
+    assert not {"map_size", "ambient", "placement", "shadows"} & set(sc.data["levelmap"])
+    sc = rr.load_scene({"imagespace": {"caustic_map": 32, "gather": 5}})
+    assert (sc.data["caustics"]["map_size"], sc.data["caustics"]["gather"]) == (32, 5)
+    assert not {"caustic_map", "gather"} & set(sc.data["imagespace"])
+    with pytest.raises(rr.SceneError, match="caustics.map_size"):
+        rr.load_scene({"imagespace": {"caustic_map": 32}, "levelmap": {"map_size": 64}})
+    with pytest.raises(rr.SceneError, match="caustics.gather"):
+        rr.load_scene({"caustics": {"gather": 4}})

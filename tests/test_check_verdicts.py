@@ -194,7 +194,7 @@ def test_a_tolerated_bitmask_tie_does_not_name_reduce(suite, gold, tmp_path):
     first-layer pixel: the LDI and the layer's bound move with it, and are judged against the candidate's own
     bitmask (through the oracle's peel and reduce passes)."""
     from refraction_ref.imagespace.depth_bounds import global_bounds
-    from refraction_ref.imagespace.pipeline import pass_peel, pass_reduce
+    from refraction_ref.imagespace.pipeline import MinMax, Voxels, pass_peel, pass_reduce
 
     p = rr.load_scene(os.path.join(suite, CASE, "scene.json")).data["imagespace"]
     gmin, gmax = global_bounds(gold["stage.minmax.zmin"], gold["stage.minmax.zmax"])
@@ -207,15 +207,16 @@ def test_a_tolerated_bitmask_tie_does_not_name_reduce(suite, gold, tmp_path):
         if k + 1 < flat.size and flat[k + 1] == 0:
             flat[k], flat[k + 1] = 0, 1
             bits[i, j] = np.packbits(flat, bitorder="little").view(np.uint32)
-            pl = pass_peel({"bits": bits, "zlo": gold["stage.voxelize.zlo"], "zhi": gold["stage.voxelize.zhi"]},
-                           bits.shape[:2], p)
-            red = pass_reduce({"gmin": gmin, "gmax": gmax}, pl, p)
-            if red["bounds_hi"][layer] > gold["stage.reduce.bounds_hi"][layer]:  # the tie moved the layer's bound
+            vox = Voxels(bits=bits, zlo=gold["stage.voxelize.zlo"], zhi=gold["stage.voxelize.zhi"], ldi=None,
+                         total=None)
+            pl = pass_peel(vox, bits.shape[:2], p)
+            red = pass_reduce(MinMax(tri_view=None, zmin=None, zmax=None, frags=None, gmin=gmin, gmax=gmax), pl, p)
+            if red.bounds_hi[layer] > gold["stage.reduce.bounds_hi"][layer]:  # the tie moved the layer's bound
                 break
     else:
         pytest.fail("no layer of the bunny has a movable deepest fragment")
-    a = dict(gold, **{"stage.voxelize.bits": bits, "stage.peel.ldi": pl["ldi"],
-                      "stage.reduce.bounds_hi": red["bounds_hi"], "stage.reduce.bounds_lo": red["bounds_lo"]})
+    a = dict(gold, **{"stage.voxelize.bits": bits, "stage.peel.ldi": pl.ldi,
+                      "stage.reduce.bounds_hi": red.bounds_hi, "stage.reduce.bounds_lo": red.bounds_lo})
     res = _run(suite, _cand(tmp_path, a)).cases[CASE]
     assert res.ok, (res.failing_keys, res.earliest_failing_stage)
     assert "candidate's own" in res["keys"]["stage.reduce.bounds_hi"]["detail"]

@@ -77,7 +77,7 @@ def test_export_round_trip_loads_in_mitsuba(tmp_path):
 
 def test_export_normals_follow_the_exact_reference(tmp_path):
     """Crease normals split a sharp vertex per side; face normals export as face_normals; smooth per vertex."""
-    from refraction_ref.exact_render import shading_normals
+    from refraction_ref.exact.pipeline import shading_normals
     from refraction_ref.meshes import scene_geometry
 
     base = {"objects": [{"mesh": "sphere", "fit": 1.0}], "camera": {"width": 8, "height": 8}}

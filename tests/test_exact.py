@@ -361,16 +361,16 @@ def test_vertex_normals_default_and_explicit():
     assert _angle_deg(vn, v).max() < 2.0  # close to radial on an icosphere
     o, d = _parallel_grid([0, 0, 1], 0.4, 9)
     a = _trace_single(v, f, 1.5, o, d)
-    b = _trace_single(v, f, 1.5, o, d, vertex_normals=vn)
+    b = _trace_single(v, f, 1.5, o, d, normals=vn)
     np.testing.assert_array_equal(a["exit_dir"], b["exit_dir"])
     # inward-pointing shading normals are flipped to the geometric side
-    i = _trace_single(v, f, 1.5, o, d, vertex_normals=-vn)
+    i = _trace_single(v, f, 1.5, o, d, normals=-vn)
     np.testing.assert_array_equal(i["first_normal"], a["first_normal"])
     np.testing.assert_allclose(i["exit_dir"], a["exit_dir"], atol=1e-15)
     # explicit normals are really used: exact radial normals differ from the
     # area-weighted ones and bring the result closer to the analytic sphere
     # (measured max error 1.72 deg -> 1.12 deg on this coarse icosphere)
-    c = _trace_single(v, f, 1.5, o, d, vertex_normals=v / np.linalg.norm(v, axis=1, keepdims=True))
+    c = _trace_single(v, f, 1.5, o, d, normals=v / np.linalg.norm(v, axis=1, keepdims=True))
     s = sphere_refraction(o, d, [0, 0, 0], 0.5, 1.5)
     assert _angle_deg(c["exit_dir"], a["exit_dir"]).max() > 0.1
     assert _angle_deg(c["exit_dir"], s["exit_dir"]).max() < _angle_deg(a["exit_dir"], s["exit_dir"]).max()
@@ -420,8 +420,8 @@ def test_input_validation_keywords():
         trace_exact(**g, outside_ior=0.0)
     with pytest.raises(ValueError, match="max_bounces"):
         trace_exact(**g, max_bounces=-1)
-    with pytest.raises(ValueError, match="vertex_normals"):
-        trace_exact(**g, vertex_normals=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="normals must have shape"):
+        trace_exact(**g, normals=np.zeros((3, 3)))
 
 
 def test_smooth_normals_never_break_the_geometry():

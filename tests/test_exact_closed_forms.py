@@ -25,7 +25,7 @@ import trimesh
 
 import refraction_ref as rr
 from refraction_ref.exact import STATUS_EXITED, trace_exact
-from refraction_ref.exact_knobs import EXACT_DEFAULTS
+from refraction_ref.exact.knobs import EXACT_DEFAULTS
 from refraction_ref.meshes import (corner_normals, crease_edge_angles, file_vertex_normals, load_mesh, rotation_matrix,
                                    vertex_normals)
 from refraction_ref.scene import SceneError, load_scene
@@ -366,11 +366,14 @@ def test_trace_exact_accepts_per_corner_normals():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     args = (v, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]], src, d)
     vn = vertex_normals(v, f)
-    a = trace_exact(*args, vertex_normals=vn, smooth=True)
+    a = trace_exact(*args, normals=vn, smooth=True)
     b = trace_exact(*args, normals=vn[f], smooth=True)  # per corner, the same values: bit for bit
+    with pytest.warns(DeprecationWarning, match="vertex_normals"):  # the former name still works
+        c = trace_exact(*args, vertex_normals=vn, smooth=True)
     for key in ("exit_dir", "exit_pos", "status", "path_length"):
         np.testing.assert_array_equal(a[key], b[key])
-    with pytest.raises(ValueError, match="not both"):
+        np.testing.assert_array_equal(a[key], c[key])
+    with pytest.raises(ValueError, match="not both"), pytest.warns(DeprecationWarning):
         trace_exact(*args, normals=vn, vertex_normals=vn)
     with pytest.raises(ValueError, match="normals must have shape"):
         trace_exact(*args, normals=np.zeros((len(f), 3)))

@@ -25,7 +25,7 @@ import refraction_ref as rr
 from refraction_ref import embree, optics
 from refraction_ref.analytic import icosphere_mesh
 from refraction_ref.exact import area_weighted_vertex_normals, trace_exact
-from refraction_ref.levelmap import exact_water
+from refraction_ref.exact import water as exact_water
 from refraction_ref.meshes import corner_normals, load_mesh
 from refraction_ref.status import EXITED, LIMIT, LOST, MISSED, TIR
 
@@ -296,7 +296,7 @@ def _water_scene():
     return rr.load_scene(sc)
 
 
-_WATER = {"camera.width": 32, "camera.height": 32, "levelmap.map_size": 96, "levelmap.exact_samples": 160}
+_WATER = {"camera.width": 32, "camera.height": 32, "caustics.map_size": 96, "exact.water_samples": 160}
 
 
 def _water_maps(scene):

@@ -1,4 +1,4 @@
-"""The first run (refraction_ref._warmup): the warm-up compiles the scene's own plan, the cache is checked
+"""The first run (refraction_ref.warm): the warm-up compiles the scene's own plan, the cache is checked
 kernel by kernel, and compilation is shown while it happens."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from numba.core.registry import CPUDispatcher
 
 import refraction_ref as rr
-from refraction_ref import _warmup
+from refraction_ref import warm as warmup
 from refraction_ref.scene import load_scene
 
 POOL = "refraction_ref/data/levelmap_default.json"
@@ -29,19 +29,19 @@ def _never_called(x):  # its cache index is never written: a kernel missing from
 
 def test_every_listed_kernel_is_a_kernel_of_the_package():
     for method in ("imagespace", "exact", "levelmap", "volumetric"):
-        names = _warmup.expected_kernels(method)
+        names = warmup.expected_kernels(method)
         assert names, f"data/kernels.json lists no kernel for {method}"
         for q in names:
-            assert isinstance(_warmup._dispatcher(q), CPUDispatcher), f"{method}: {q} is not a Numba kernel"
+            assert isinstance(warmup._dispatcher(q), CPUDispatcher), f"{method}: {q} is not a Numba kernel"
 
 
 def test_the_cache_is_checked_kernel_by_kernel(monkeypatch):
     assert _called(2) == 3  # compiled (or loaded) now: on disk
     names = [f"{__name__}._called"]
-    monkeypatch.setattr(_warmup, "expected_kernels", lambda method: names)
-    assert _warmup.kernels_cached("imagespace")
+    monkeypatch.setattr(warmup, "expected_kernels", lambda method: names)
+    assert warmup.kernels_cached("imagespace")
     names.append(f"{__name__}._never_called")
-    assert not _warmup.kernels_cached("imagespace")  # one kernel missing: not cached, whatever the others
+    assert not warmup.kernels_cached("imagespace")  # one kernel missing: not cached, whatever the others
 
 
 @pytest.mark.parametrize("method,src,block", [("imagespace", None, "imagespace"),
@@ -52,15 +52,15 @@ def test_the_warm_up_renders_the_scene_s_own_knobs_small(method, src, block):
              "levelmap": {"levelmap.variant": "per_ray"},
              "volumetric": {"volumetric.integrator": "rk4"}}[method]
     scene = load_scene(src, knobs)
-    tiny = _warmup.tiny_scene(method, scene)
+    tiny = warmup.tiny_scene(method, scene)
     assert tiny.data["camera"]["width"] * tiny.data["camera"]["height"] <= 256
     for k, v in knobs.items():  # the variant the scene asks for, not every variant
         b, key = k.split(".")
         assert tiny.data[b][key] == v
     assert tiny.data["objects"] == scene.data["objects"] and tiny.data["environment"] == scene.data["environment"]
     same_plan = load_scene(scene, {"camera.width": 100})
-    assert _warmup._key(method, same_plan) == _warmup._key(method, scene)  # a size does not warm again
-    assert _warmup._key(method, load_scene(src)) != _warmup._key(method, scene)  # another variant does
+    assert warmup._key(method, same_plan) == warmup._key(method, scene)  # a size does not warm again
+    assert warmup._key(method, load_scene(src)) != warmup._key(method, scene)  # another variant does
 
 
 def test_compilation_is_reported_once_each_way_off_a_terminal():
@@ -69,13 +69,13 @@ def test_compilation_is_reported_once_each_way_off_a_terminal():
         return x * 2
 
     out = io.StringIO()
-    with _warmup.compile_report("imagespace", stream=out):
+    with warmup.compile_report("imagespace", stream=out):
         assert fresh(3) == 6
     lines = out.getvalue().splitlines()
     assert len(lines) == 2 and "compiling the imagespace kernels" in lines[0]
     assert lines[1].startswith("refraction-ref: compiled 1 imagespace kernels in ")
     out = io.StringIO()
-    with _warmup.compile_report("imagespace", stream=out):
+    with warmup.compile_report("imagespace", stream=out):
         assert fresh(4) == 8  # compiled already: nothing to say
     assert out.getvalue() == ""
 
@@ -103,7 +103,7 @@ def test_warmup_verb_compiles_or_loads_and_says_which(capsys, monkeypatch):
 
     assert _called(1) == 2
     names = [f"{__name__}._called"]  # the verb's wording follows the kernel-by-kernel check
-    monkeypatch.setattr(_warmup, "expected_kernels", lambda method: names)
+    monkeypatch.setattr(warmup, "expected_kernels", lambda method: names)
     assert cli.main(["warmup", "--method", "imagespace"]) == 0
     names.append(f"{__name__}._never_called")
     assert cli.main(["warmup", "--method", "imagespace"]) == 0

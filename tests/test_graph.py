@@ -25,7 +25,8 @@ CAUSTICS = {
     "objects": [{"mesh": "sphere", "fit": 0.8, "material": {"ior": 1.5}}],
     "lights": [{"type": "directional", "direction": [0.2, -1.0, 0.1]}],
     "receivers": [{"mesh": "plane", "size": [2.0, 2.0], "transform": {"translate": [0.0, -0.6, 0.0]}}],
-    "imagespace": {"photons": 16, "caustic_map": 16, "gather": 3},
+    "imagespace": {"photons": 16},
+    "caustics": {"map_size": 16, "gather": 3},
     "exact": {"photons": 16},
 }
 WATER = {
@@ -34,7 +35,9 @@ WATER = {
     "receivers": [{"mesh": "plane", "size": [2.0, 2.0], "transform": {"translate": [0.0, -1.0, 0.0]}}],
     "water": {"size": [2.0, 2.0], "resolution": 8, "waves": [{"amplitude": 0.02, "wavelength": 0.7}]},
     "lights": [{"type": "directional", "direction": [0.1, -1.0, 0.0]}],
-    "levelmap": {"planes": 6, "map_size": 24, "exact_samples": 24},
+    "levelmap": {"planes": 6},
+    "caustics": {"map_size": 24},
+    "exact": {"water_samples": 24},
 }
 VOLUME = {
     "camera": {"width": 16, "height": 16},
@@ -48,13 +51,12 @@ MUTATIONS = {
                    "bound_margin": 0.05, "blend": "or", "endpoint": "bracket", "filter": "nearest",
                    "peel_all": True, "depth": "float", "slicing": "global",
                    "peeling": "lut", "normals": "cross", "delta": 1, "exit_threshold": 2.0, "tir": True,
-                   "max_interfaces": 3, "record": 2, "photons": 12, "gather": 5, "receiver_hit": "exact",
-                   "caustic_map": 12},
+                   "max_interfaces": 3, "record": 2, "photons": 12, "receiver_hit": "exact"},
     "exact": {"normals": "face", "crease_deg": 30.0, "max_bounces": 2, "photons": 12, "photon_seed": 1,
-              "record": 2},
+              "record": 2, "water_samples": 20},
     "levelmap": {"planes": 7, "smart_slicing": False, "depth_levels": 8, "variant": "volumetric",
-                 "map_size": 20, "shadows": False, "ambient": 0.3, "exact_samples": 20, "exact_seed": 1,
-                 "placement": "tight", "smart_spacing": "respace", "culling": "bounds"},
+                 "smart_spacing": "respace", "culling": "bounds"},
+    "caustics": {"map_size": 20, "gather": 5, "placement": "tight", "shadows": False, "ambient": 0.3},
     "water": {"ior": 1.4, "height": 0.05, "resolution": 6, "absorption": 0.2, "size": [2.2, 2.0],
               "waves": [{"amplitude": 0.03, "wavelength": 0.5}]},
     "volumetric": {"resolution": 14, "photons": 10, "ds_min": 0.5, "ds_max": 4.0, "eps": 0.01, "eps2": 0.03,
@@ -69,10 +71,10 @@ SHARED = {"camera.eye": [0.1, 1.1, 2.4], "outside_ior": 1.05, "environment.tiles
           "lights.0.direction": [0.0, -1.0, 0.2], "objects.0.material.ior": 1.4}
 
 CASES = [  # (method, base scene, blocks whose knobs it reads)
-    ("imagespace", CAUSTICS, ("imagespace",)),
-    ("exact", CAUSTICS, ("exact",)),
-    ("levelmap", WATER, ("levelmap", "water")),
-    ("exact", WATER, ()),
+    ("imagespace", CAUSTICS, ("imagespace", "caustics")),
+    ("exact", CAUSTICS, ("exact", "caustics")),
+    ("levelmap", WATER, ("levelmap", "water", "caustics")),
+    ("exact", WATER, ("caustics",)),
     ("volumetric", VOLUME, ("volumetric",)),
 ]
 
@@ -92,7 +94,7 @@ def _reads_key(stage, key):
 def _mutations(scene_dict, blocks, method):
     out = [(f"{b}.{k}", v) for b in blocks for k, v in MUTATIONS[b].items()]
     if method == "exact" and "water" in scene_dict:
-        out += [("levelmap.exact_samples", 20), ("levelmap.exact_seed", 1), ("levelmap.ambient", 0.3)]
+        out += [("exact.water_samples", 20), ("exact.photon_seed", 1)]
     for k, v in SHARED.items():
         if k == "objects.0.material.ior" and not scene_dict.get("objects", [1]):
             continue
@@ -161,7 +163,7 @@ _POOL = [("camera.eye", [[0.0, 1.2, 2.4], [0.2, 1.0, 2.5]]),
          ("objects.0.material.ior", [1.5, 1.33]),
          ("imagespace.iterations", [5, 3]),
          ("imagespace.normals", ["central", "forward"]),
-         ("imagespace.gather", [3, 1]),
+         ("caustics.gather", [3, 1]),
          ("receivers.0.albedo", [[0.8, 0.8, 0.8], [0.5, 0.6, 0.7]])]
 
 

@@ -15,10 +15,10 @@ import pytest
 import refraction_ref as rr
 from refraction_ref.levelmap import default_scene
 from refraction_ref.levelmap.illumination import illumination_volumes
-from refraction_ref.levelmap.metrics import luv_difference, relative_l1
 from refraction_ref.levelmap.pipeline import _caustics_pair, prepare, render_levelmap
 from refraction_ref.levelmap.planes import from_map
 from refraction_ref.levelmap.water import WaterMesh, water_mesh
+from refraction_ref.metrics import luv_difference, relative_l1
 from refraction_ref.scene import SceneError, load_scene
 
 FLOOR_Y = -0.5

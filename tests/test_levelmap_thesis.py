@@ -12,9 +12,9 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.camera import Camera
-from refraction_ref.levelmap.metrics import luv_difference
 from refraction_ref.levelmap.pipeline import prepare, render_levelmap
 from refraction_ref.levelmap.planes import plane_lattice, reference_box
+from refraction_ref.metrics import luv_difference
 from refraction_ref.scene import load_scene
 
 FLOOR_Y = -0.5
@@ -51,7 +51,7 @@ def snell_view(scene, E, K):
     s = (0.0 - FLOOR_Y) / -T[:, 1]
     q = p + s[:, None] * T
     on = (np.abs(q[:, 0]) <= 1.0) & (np.abs(q[:, 2]) <= 1.0) & (np.abs(p[:, 0]) <= 2) & (np.abs(p[:, 2]) <= 2)
-    amb = scene.data["levelmap"]["ambient"]
+    amb = scene.data["caustics"]["ambient"]
     img = ALBEDO[None, :] * (E + amb) * np.exp(-K * s)[:, None]
     H, W = cam.shape
     return np.where(on[:, None], img, 0.0).reshape(H, W, 3), on.reshape(H, W), q.reshape(H, W, 3), s.reshape(H, W)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import refraction_ref as rr
-from refraction_ref.levelmap.metrics import relative_l1
+from refraction_ref.metrics import relative_l1
 from refraction_ref.scene import SceneError, load_scene
 from refraction_ref.volumetric.gradient import gradient_field
 from refraction_ref.volumetric.march import STATUS, march_photons, receiver_tuple

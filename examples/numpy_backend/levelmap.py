@@ -132,6 +132,8 @@ def resolve(scene):
           "placement": "thesis", "smart_spacing": "lattice", "variant": "levelmap",
           "shadows": True}
     lm.update(scene.get("levelmap") or {})
+    # the caustic maps' knobs moved to the "caustics" block (levelmap.map_size etc. are its aliases)
+    lm.update({k: v for k, v in (scene.get("caustics") or {}).items() if k in ("map_size", "placement", "shadows")})
     if (lm["placement"], lm["smart_spacing"], lm["variant"]) != ("thesis", "lattice", "levelmap"):
         raise ValueError("numpy_backend.levelmap ports only levelmap.placement='thesis', "
                          "smart_spacing='lattice', variant='levelmap'")

@@ -1,14 +1,23 @@
-"""Caustics from multiply-refracted photons onto diffuse receivers (Chaudhari 2008, §4.1).
+"""Caustics onto diffuse receivers: a service every method uses (Chaudhari 2008, §4.1).
 
-``light`` (the light's camera and photon flux) -> the image-space passes of
-chapter 3 in the light's view (:func:`~refraction_ref.imagespace.pipeline.layered_trace`)
--> ``receivers`` (caustic-map frames; eye-space march of Krüger et al. 2006
-or Embree) -> ``splat`` (bilinear splat, Gaussian gathering of Wyman and
-Davis 2006) -> ``shade`` (direct light with a shadow test plus caustics),
-put together by ``pipeline`` for the image-space method and for the exact
-photon reference.
+``knobs`` (the ``caustics`` block: map size, gathering, the level map's
+placement, shadows and ambient) -> ``light`` (the light's camera and photon
+flux) -> ``receivers`` (the receivers' triangle soup, caustic-map frames;
+eye-space march of Krüger et al. 2006 or Embree) -> ``splat`` (bilinear
+splat, Gaussian gathering of Wyman and Davis 2006) -> ``shade`` (direct
+light with a shadow test plus caustics), and ``pipeline``: the generic
+stages (receivers, receiver hits, splat, gather) that the image-space
+method (:mod:`refraction_ref.imagespace.caustics`), the volumetric method
+and the exact photon reference (:mod:`refraction_ref.exact.caustics`) put
+around their own photon traces. This package imports no method.
 """
 
-from .pipeline import exact_caustic_stages, has_caustics, imagespace_caustic_stages
+__all__ = ["has_caustics", "merge_caustics", "skip_reason", "caustic_arrays"]
 
-__all__ = ["imagespace_caustic_stages", "exact_caustic_stages", "has_caustics"]
+
+def __getattr__(name):  # lazy: scene loading imports .knobs without the kernels
+    if name in __all__:
+        from . import pipeline
+
+        return getattr(pipeline, name)
+    raise AttributeError(name)

@@ -54,6 +54,11 @@ def texel_flux(cam, col, row):
     -------
     ndarray
         Area of the texel (orthographic) or its solid angle (perspective).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     W, H, sx, sy = cam.kernel_args()
     a = (2.0 * sx / W) * (2.0 * sy / H)
@@ -70,6 +75,15 @@ def window_samples(cam, n, seed):
 
     One photon per cell of an ``n`` x ``n`` grid over the same window as the
     photon texture, at a uniformly random position inside its cell.
+
+    Parameters
+    ----------
+    cam : Camera
+        The light's camera (:func:`light_camera`): its window.
+    n : int
+        Cells per side of the grid (``exact.photons``).
+    seed : int
+        Seed of the jitter (``exact.photon_seed`` plus the light's index).
 
     Returns
     -------
@@ -90,6 +104,11 @@ def window_samples(cam, n, seed):
     draw theirs on ``numba.get_num_threads()`` threads, each from a copy of
     the generator advanced to its first draw (``PCG64.advance``), so the
     samples are the same bits whatever the thread count.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     n = int(n)
     N = n * n

@@ -1,23 +1,25 @@
-"""Caustics from multiply-refracted photons onto diffuse receivers (Chaudhari 2008, §4.1), pass by pass.
+"""Caustics onto diffuse receivers (Chaudhari 2008, §4.1): the generic stages every method shares.
 
 ==========================  =====================================================  ===========
 stage (``timings_ms``)      pass                                                   section
 ==========================  =====================================================  ===========
 ``receivers``               receiver triangles and their caustic-map frames         §4.1
+                            (``caustics.map_size``)
 ``receiver_depth``          the receivers' depth image from the camera              §4.1
-``photon_trace``            per light: its camera, then min/max, voxelization,      §3.3-3.8
-                            peeling, reduction (``photon_trace.minmax`` ...) and
-                            one photon per texel through every layer
 ``receiver_hit``            eye-space march (Krüger 2006) or Embree                 §4.1
 ``splat``                   bilinear splat of irradiance into each receiver's map   §2.3.2
-``gather``                  Gaussian gathering in a window (Wyman & Davis 2006)     §2.3.2
-``caustic_final``           receivers lit directly (shadow test) and by caustics;   §4.1
-                            the object with single-surface and multi-layer passes
+``gather``                  Gaussian gathering in a window (Wyman & Davis 2006,     §2.3.2
+                            ``caustics.gather``), or a plain sum over lights
 ==========================  =====================================================  ===========
 
-These are stages of the image-space and exact methods' graphs
-(:func:`imagespace_caustic_stages`, :func:`exact_caustic_stages`), added
-when the scene has lights and receivers.
+A method puts its own ``photon_trace`` (the photons that leave its objects)
+and ``caustic_final`` (the final image) around these:
+:func:`refraction_ref.imagespace.caustics.imagespace_caustic_stages` (the
+passes of chapter 3 in each light's view),
+:func:`refraction_ref.exact.caustics.exact_caustic_stages` (the exact photon
+reference); the volumetric method uses :func:`~.receivers.receiver_set`'s maps,
+:func:`splat_maps` and :func:`collect_maps` in its own ``caustics`` stage.
+This module imports no method.
 
 Outputs (docs/oracle.md, per receiver ``r``): ``caustic_map_r`` (Hc, Wc) float32,
 the irradiance carried by photons that passed through a refractive object,
@@ -50,7 +52,7 @@ pass shades the receivers seen directly and both passes' rays in one call
 stream, drawn in fixed chunks that each jump to their own draws
 (:func:`~.light.window_samples`); its splat makes the whole map and the two
 halves' maps from one footprint and binning, the halves' blur for the noise
-estimate is a kernel (:func:`~refraction_ref.levelmap.metrics.relative_l1`),
+estimate is a kernel (:func:`~refraction_ref.metrics.relative_l1`),
 and the rows that NumPy's boolean masks and fancy indexing gathered or
 scattered (exited photons, receiver pixels, the energy book-keeping's
 subsets) are gathered by kernels in the same order. Sums that cross threads
@@ -64,38 +66,18 @@ import math
 import numba as nb
 import numpy as np
 
-from ..embree import mesh_scene
 from ..environment import environment_lookup
 from ..graph import Stage
-from ..lights import light_camera
-from ..optics import beer_lambert, refract
 from ..status import EXITED
-from .light import texel_flux, window_samples
-from .receivers import IndexedTriangles, eye_buffers, hit_exact, march_eyespace, receiver_set
-from .shade import _take_rows, exact_visibility, shade_points, shadow_map_visibility
+from .receivers import eye_buffers, hit_exact, march_eyespace, receiver_set
+from .shade import shade_points
 from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
                     splat_bilinear, splat_bilinear_groups)
 
-__all__ = ["has_caustics", "imagespace_caustic_stages", "exact_caustic_stages", "caustic_arrays", "receiver_hits",
-           "splat_maps", "merge_caustics", "skip_reason", "camera_array"]
-
-
-@nb.njit(cache=True, parallel=True)
-def _ray_points_kernel(o, t, d, idx, out):
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        for c in range(3):
-            out[k, c] = o[i, c] + t[i] * d[i, c]
-
-
-def _ray_points(o, t, d, idx):
-    """``o[idx] + t[idx, None] * d[idx]`` on every thread."""
-    out = np.empty((len(idx), 3))
-    if len(idx):
-        _ray_points_kernel(o, np.ascontiguousarray(t, dtype=np.float64), d, np.ascontiguousarray(idx, np.int64),
-                           out)
-    return out
+__all__ = ["has_caustics", "caustic_arrays", "receiver_hits", "collect_maps",
+           "splat_maps", "merge_caustics", "skip_reason", "camera_array", "receiver_stages", "photon_buffer_names",
+           "per_light_names", "gather_names", "receiver_hit_stage", "splat_stage", "gather_stage", "shade_rays",
+           "put_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -111,74 +93,18 @@ def _put_rows_kernel(a, idx, vals, scale):
                 a[i, c] = vals[k, c]
 
 
-def _put_rows(a, idx, vals):
-    """``a[idx] = vals`` (rows of an (N, C) float64 array), on every thread."""
+def put_rows(a, idx, vals):
+    """``a[idx] = vals`` (rows of an (N, C) float64 array), on every thread.
+
+    Parameters
+    ----------
+    a : (N, C) float64
+        Written in place.
+    idx : (M,) array_like of int
+    vals : (M, C) array_like
+    """
     if len(idx):
         _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64), False)
-
-
-@nb.njit(cache=True, parallel=True)
-def _mul_rows_kernel(a, idx, vals):
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        for c in range(a.shape[1]):
-            a[idx[k], c] *= vals[k, c]
-
-
-def _mul_rows(a, idx, vals):
-    """``a[idx] *= vals`` (rows of an (N, C) float64 array), on every thread."""
-    if len(idx):
-        _mul_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
-
-
-@nb.njit(cache=True, parallel=True)
-def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
-    # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        s = rdepth[i] / (rdir[i, 0] * fwd[0] + rdir[i, 1] * fwd[1] + rdir[i, 2] * fwd[2])
-        for c in range(3):
-            out[k, c] = origin[i, c] + rdir[i, c] * s
-
-
-def _depth_points(origin, rdir, rdepth, idx, fwd):
-    out = np.empty((len(idx), 3))
-    if len(idx):
-        _depth_points_kernel(origin, rdir, rdepth, np.ascontiguousarray(idx, np.int64),
-                             np.ascontiguousarray(fwd, dtype=np.float64), out)
-    return out
-
-
-@nb.njit(cache=True, parallel=True)
-def _front_points_kernel(t, dv, oi, zfront, W, H, sx, sy, ortho, pv):
-    # t = where(all(isfinite(t)), t, dv) in place; pv: _final_imagespace's NumPy expressions
-    for k0 in nb.prange(oi.shape[0]):
-        k = np.int64(k0)
-        if not (math.isfinite(t[k, 0]) and math.isfinite(t[k, 1]) and math.isfinite(t[k, 2])):
-            for c in range(3):
-                t[k, c] = dv[k, c]
-        p = oi[k]
-        ii = p // W
-        jj = p - ii * W
-        xs = jj + 0.5
-        ys = ii + 0.5
-        x = (xs / W * 2.0 - 1.0) * sx
-        y = (1.0 - ys / H * 2.0) * sy
-        dfront = zfront[p]
-        if ortho:
-            pv[k, 0] = x
-            pv[k, 1] = y
-        else:
-            pv[k, 0] = x * dfront
-            pv[k, 1] = y * dfront
-        pv[k, 2] = -dfront
-
-
-def _scale_rows(a, idx, vals):
-    """``a[idx] *= vals[idx]`` on every thread."""
-    if len(idx):
-        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), vals, True)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -227,22 +153,17 @@ def _row_means(a):
     return out
 
 
-@nb.njit(cache=True, parallel=True)
-def _distance_kernel(hp, o, out):
-    # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf): sqrt((x x + y y) + z z)
-    for k0 in nb.prange(hp.shape[0]):
-        k = np.int64(k0)
-        if not math.isfinite(hp[k, 0]):
-            out[k] = np.inf
-            continue
-        x = hp[k, 0] - o[k, 0]
-        y = hp[k, 1] - o[k, 1]
-        z = hp[k, 2] - o[k, 2]
-        out[k] = np.sqrt((x * x + y * y) + z * z)
-
-
 def has_caustics(scene):
-    """A scene casts caustics when it has at least one light and one receiver."""
+    """A scene casts caustics when it has at least one light and one receiver.
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Returns
+    -------
+    bool
+    """
     return bool(scene.data["lights"]) and bool(scene.data["receivers"])
 
 
@@ -253,6 +174,18 @@ def merge_caustics(arrays, c_arrays):
     lit directly and by the caustics, seen through the object); the
     refraction-only view of the environment is kept as ``image_refraction``.
     Both the image-space method and the exact reference call this.
+
+    Parameters
+    ----------
+    arrays : dict
+        The method's output arrays (``image`` among them); updated in place.
+    c_arrays : dict
+        The caustic outputs (:func:`caustic_arrays`), ``image_caustics`` among them.
+
+    Returns
+    -------
+    dict
+        ``arrays``.
     """
     arrays.update(c_arrays)
     arrays["image_refraction"] = arrays["image"]
@@ -261,12 +194,34 @@ def merge_caustics(arrays, c_arrays):
 
 
 def skip_reason(scene):
+    """Why a scene has no caustic stages (for ``meta.plan``).
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Returns
+    -------
+    str
+    """
     missing = [k for k in ("lights", "receivers") if not scene.data[k]]
     return f"the scene has no {' and no '.join(missing)}: no caustics to map"
 
 
 def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
     """Where world rays meet the receivers: eye-space march or Embree.
+
+    Parameters
+    ----------
+    rs : ReceiverSet
+    origins, dirs : (N, 3) array_like
+        World rays.
+    mode : str
+        ``"eyespace"`` (march in ``eyebuf``, Krüger et al. 2006) or ``"exact"`` (Embree).
+    cam : Camera, optional
+        The eye camera (eye-space mode).
+    eyebuf : (depth, tri), optional
+        :func:`~refraction_ref.caustics.receivers.eye_buffers` (eye-space mode).
 
     Returns
     -------
@@ -304,11 +259,28 @@ def _hit_points_kernel(o, t, d, face, P, face_out):
 def splat_maps(rs, P, face, flux, size, groups=None):
     """Irradiance maps (Hc, Wc, C) per receiver from photon hits (see :mod:`.splat`).
 
-    ``groups`` (N,) int, optional: also the maps of the photons of each group
-    ``0 .. groups.max()`` alone (the exact reference's two interleaved halves),
-    from the same map positions and values (every photon's are its own, so
-    they are those of ``splat_maps`` on the group's photons alone); then
-    returns ``(maps, [maps of group 0, maps of group 1, ...])``.
+    Parameters
+    ----------
+    rs : ReceiverSet
+    P : (N, 3) array_like
+        Photon hit points.
+    face : (N,) array_like of int
+        Receiver triangle of each photon, ``-1`` none.
+    flux : (N,) or (N, C) array_like
+        Each photon's flux.
+    size : int
+        Texels per side (``caustics.map_size``; the boxes carry it).
+    groups : (N,) array_like of int, optional
+        Also the maps of the photons of each group ``0 .. groups.max()`` alone
+        (the exact reference's two interleaved halves), from the same map
+        positions and values (every photon's are its own, so they are those of
+        ``splat_maps`` on the group's photons alone).
+
+    Returns
+    -------
+    list of (Hc, Wc, C) float64
+        One map per receiver; with ``groups``, ``(maps, [maps of group 0,
+        maps of group 1, ...])``.
     """
     maps = []
     ng = 0 if groups is None else int(np.max(groups, initial=-1)) + 1
@@ -418,8 +390,26 @@ def _split_flux(f, status):
     return f_sil, f_ex, f_lost
 
 
-def _collect(lights, rs, per_light, arrays, gather):
-    """Sum per-light unit maps into ``caustic_map_r`` / ``caustic_rgb_r``; returns the RGB maps."""
+def collect_maps(lights, rs, per_light, arrays, gather):
+    """Sum per-light unit maps into ``caustic_map_r`` / ``caustic_rgb_r``; returns the RGB maps.
+
+    Parameters
+    ----------
+    lights : list of dict
+        The scene's lights (their ``radiance``).
+    rs : ReceiverSet
+    per_light : list of list of (Hc, Wc, 3) float64
+        ``per_light[l][r]``: light ``l``'s map of receiver ``r`` for a unit light.
+    arrays : dict
+        Gets ``caustic_map_r``, ``caustic_frame_r`` and ``caustic_rgb_r``.
+    gather : int
+        Gaussian gathering window (Wyman & Davis 2006); 1 for none.
+
+    Returns
+    -------
+    list of (Hc, Wc, 3) float64
+        Per receiver, the caustic irradiance with each light's radiance.
+    """
     rgb_maps = []
     for r, box in enumerate(rs.boxes):
         unit = np.zeros(box.size)
@@ -443,15 +433,24 @@ def _collect(lights, rs, per_light, arrays, gather):
 # ---------------------------------------------------------------------------
 
 def camera_array(cam):
-    """A camera as a (6, 3) float64 buffer: eye; right, up, back axes; (sx, sy, ortho); (near, far, width)."""
+    """A camera as a (6, 3) float64 buffer: eye; right, up, back axes; (sx, sy, ortho); (near, far, width).
+
+    Parameters
+    ----------
+    cam : Camera
+
+    Returns
+    -------
+    (6, 3) float64
+    """
     return np.array([np.asarray(cam.eye, dtype=np.float64), *cam.basis, [cam.sx, cam.sy, float(cam.ortho)],
                      [cam.near, cam.far, float(cam.width)]], dtype=np.float64)
 
 
 def _st_receivers(ctx):
     d = ctx.scene.data
-    rs = receiver_set(ctx.scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
-    ctx.note(f"{len(rs.boxes)} receiver(s), {len(rs.tris)} triangles, {d['imagespace']['caustic_map']}^2 maps")
+    rs = receiver_set(ctx.scene, d["lights"][0], int(d["caustics"]["map_size"]))
+    ctx.note(f"{len(rs.boxes)} receiver(s), {len(rs.tris)} triangles, {d['caustics']['map_size']}^2 maps")
     return {"rs": rs, **{f"frame_{r}": rs.frame(r).astype(np.float64) for r in range(len(rs.boxes))}}
 
 
@@ -463,9 +462,21 @@ def _st_receiver_depth(ctx):
     return {"eyebuf": (depth, tri), "depth": depth, "triangle": tri, "cam": cam}
 
 
-def _receiver_stages(n_receivers):
+def receiver_stages(n_receivers):
+    """The ``receivers`` and ``receiver_depth`` stages (§4.1), shared by the methods.
+
+    Parameters
+    ----------
+    n_receivers : int
+        The scene's receivers (one frame buffer each).
+
+    Returns
+    -------
+    tuple of Stage
+        ``receivers`` (reads ``caustics.map_size``) and ``receiver_depth``.
+    """
     return (
-        Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
+        Stage("receivers", _st_receivers, reads=("receivers", "lights", "caustics.map_size"),
               makes=tuple(f"frame_{r}" for r in range(n_receivers)),
               doc="receiver triangles and caustic-map frames (§4.1)"),
         Stage("receiver_depth", _st_receiver_depth, reads=("camera",), after=("receivers",),
@@ -473,79 +484,101 @@ def _receiver_stages(n_receivers):
     )
 
 
-def _per_light_names(prefix, n):
+def per_light_names(prefix, n):
+    """``prefix_0 .. prefix_{n-1}``: one buffer name per light (or receiver).
+
+    Parameters
+    ----------
+    prefix : str
+    n : int
+
+    Returns
+    -------
+    tuple of str
+    """
     return tuple(f"{prefix}_{l}" for l in range(n))
 
 
-def _gather_names(nr):
-    """The gather stage's outputs per receiver: the map, its frame and the per-channel map."""
-    return tuple(nm for k in ("caustic_map", "caustic_frame", "caustic_rgb") for nm in _per_light_names(k, nr))
+def gather_names(nr):
+    """The gather stage's outputs per receiver: the map, its frame and the per-channel map.
+
+    Parameters
+    ----------
+    nr : int
+        Number of receivers.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(nm for k in ("caustic_map", "caustic_frame", "caustic_rgb") for nm in per_light_names(k, nr))
 
 
-def _photon_buffer_names(n, with_ldi):
-    """Per-light buffers of ``photon_trace`` (None for a light whose photons meet no object)."""
+def photon_buffer_names(n, with_ldi):
+    """Per-light buffers of ``photon_trace`` (None for a light whose photons meet no object).
+
+    Parameters
+    ----------
+    n : int
+        Number of lights.
+    with_ldi : bool
+        The image-space trace also keeps each light's layered depth image.
+
+    Returns
+    -------
+    tuple of str
+    """
     names = ("camera", "ldi", "exit_pos", "exit_dir") if with_ldi else ("camera", "exit_pos", "exit_dir")
-    return tuple(nm for k in names for nm in _per_light_names(k, n))
+    return tuple(nm for k in names for nm in per_light_names(k, n))
 
 
-def _st_gather(ctx, gather_key):
+def gather_stage(ctx, gather_key):
+    """The ``gather`` stage: per-light maps summed into the output maps, gathered or not.
+
+    Parameters
+    ----------
+    ctx : Context
+        The stage's context (``receivers`` and ``splat`` buffers).
+    gather_key : bool
+        Read the window from ``caustics.gather`` (image-space method); False:
+        no gathering (the exact reference).
+
+    Returns
+    -------
+    dict
+        ``arrays``, ``rgb_maps`` and the output maps by name.
+    """
     d = ctx.scene.data
     rs = ctx.buf["receivers"]["rs"]
     per_light = ctx.buf["splat"]["maps"]
-    g = int(d["imagespace"]["gather"]) if gather_key else 1
+    g = int(d["caustics"]["gather"]) if gather_key else 1
     arrays = {}
-    rgb_maps = _collect(d["lights"], rs, per_light, arrays, g)
+    rgb_maps = collect_maps(d["lights"], rs, per_light, arrays, g)
     ctx.note(f"Gaussian gathering, window {g} texels (Wyman & Davis 2006)" if g > 1 else "no gathering")
     return {"arrays": arrays, "rgb_maps": rgb_maps, **arrays}
 
 
-# ---------------------------------------------------------------------------
-# image-space method (§4.1)
-# ---------------------------------------------------------------------------
 
-def _st_photon_trace_is(ctx):
-    from ..imagespace.pipeline import layered_trace
+def receiver_hit_stage(ctx, eyespace):
+    """The ``receiver_hit`` stage: where each light's exiting photons meet the receivers.
 
-    d = ctx.scene.data
-    p = d["imagespace"]
-    g = ctx.buf["geometry"]
-    geom, ior, outside, absorption = g["geom"], g["ior"], g["outside_ior"], g["absorption"]
-    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), True))}
-    for l, light in enumerate(d["lights"]):
-        lcam = light_camera(light, geom.vertices, int(p["photons"])) if len(geom.faces) else None
-        if lcam is None:
-            out["lights"].append(None)
-            continue
-        lt = {}
-        tv = layered_trace(geom, lcam, p, ior, outside, lt, [])
-        for k, v in lt.items():
-            ctx.timings[k] = ctx.timings.get(k, 0.0) + v
-        tr = tv["trace"]
-        st = tr["status"].ravel()
-        N = lcam.width
-        cols = np.tile(np.arange(N) + 0.5, N)
-        rows = np.repeat(np.arange(N) + 0.5, N)
-        flux0 = texel_flux(lcam, cols, rows)
-        ex = np.flatnonzero(st == EXITED)
-        trans = beer_lambert(absorption, tr["path_length"].ravel()[ex], ior)
-        o = tr["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
-        dd = tr["exit_dir"].reshape(-1, 3)[ex]
-        bias = 1e-3 * (lcam.far - lcam.near) + 2.0 * 2.0 * lcam.sy / N
-        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": trans, "o": o, "d": dd,
-                              "shadow": (lcam, tv["zmin"], bias)})
-        out[f"camera_{l}"] = camera_array(lcam)
-        out[f"ldi_{l}"] = tv["ldi"] if 0 not in tv["ldi"].strides else None
-        out[f"exit_pos_{l}"] = o
-        out[f"exit_dir_{l}"] = dd
-    ctx.note(f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1)")
-    return out
+    Parameters
+    ----------
+    ctx : Context
+        The stage's context (``receivers``, ``photon_trace`` and, eye-space,
+        ``receiver_depth`` buffers).
+    eyespace : bool
+        March in the camera's depth image (Krüger et al. 2006); else Embree.
 
-
-def _st_receiver_hit(ctx, eyespace):
+    Returns
+    -------
+    dict
+        ``hits`` per light and ``hit_pos_l`` / ``hit_face_l``.
+    """
     rs = ctx.buf["receivers"]["rs"]
     rd = ctx.buf.get("receiver_depth") if eyespace else None
     nl = len(ctx.buf["photon_trace"]["lights"])
-    out = {"hits": [], **dict.fromkeys(_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl))}
+    out = {"hits": [], **dict.fromkeys(per_light_names("hit_pos", nl) + per_light_names("hit_face", nl))}
     for l, L in enumerate(ctx.buf["photon_trace"]["lights"]):
         if L is None:
             out["hits"].append(None)
@@ -560,10 +593,24 @@ def _st_receiver_hit(ctx, eyespace):
     return out
 
 
-def _st_splat(ctx, reference):
-    """Splat each light's photons into the receivers' maps; the reference also splats its two halves."""
+def splat_stage(ctx, reference):
+    """Splat each light's photons into the receivers' maps; the reference also splats its two halves.
+
+    Parameters
+    ----------
+    ctx : Context
+        The stage's context (``receivers``, ``photon_trace``, ``receiver_hit``).
+    reference : bool
+        The exact reference: also the two interleaved halves' maps, whose
+        difference is its own noise (``ctx.stats["reference_noise_rel_l1"]``).
+
+    Returns
+    -------
+    dict
+        ``maps`` (per light, per receiver) and ``splat_r``.
+    """
     d = ctx.scene.data
-    size = int(d["imagespace"]["caustic_map"])
+    size = int(d["caustics"]["map_size"])
     rs = ctx.buf["receivers"]["rs"]
     maps, stats, halves = [], [], []
     for L, hit in zip(ctx.buf["photon_trace"]["lights"], ctx.buf["receiver_hit"]["hits"]):
@@ -600,7 +647,7 @@ def _st_splat(ctx, reference):
 
 def _reference_noise(rs, halves):
     """Half the relative L1 difference of the two interleaved halves' maps, per receiver."""
-    from ..levelmap.metrics import relative_l1
+    from ..metrics import relative_l1
 
     noise = []
     for r in range(len(rs.boxes)):
@@ -615,83 +662,66 @@ def _splat_buffers(maps, R):
     return {f"splat_{r}": np.sum([channel_mean(m[r]) for m in maps], axis=0).astype(np.float32) for r in range(R)}
 
 
-def _st_final_is(ctx):
-    d = ctx.scene.data
-    p = d["imagespace"]
-    b = ctx.buf
-    g = b["geometry"]
-    rs = b["receivers"]["rs"]
-    rd = b["receiver_depth"]
-    shadow = [None if L is None else L["shadow"] for L in b["photon_trace"]["lights"]]
-
-    def vis(l, pts, nrm):
-        if shadow[l] is None:
-            return np.ones(len(pts))
-        lcam, zmin, bias = shadow[l]
-        return shadow_map_visibility(lcam, zmin, pts, bias)
-
-    eye = {"trace": b["trace"], "zmin": b["minmax"]["zmin"]}
-    img, img1 = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"], vis,
-                                  p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
-    ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
-             "single-surface (the thesis's) final passes")
-    return {"image_caustics": img, "image_caustics_single": img1}
-
-
-def imagespace_caustic_stages(scene):
-    """The caustic stages the image-space method adds for a scene with lights and receivers (§4.1)."""
-    from ..imagespace.pipeline import MINMAX_KNOBS, PEEL_KNOBS, REDUCE_KNOBS, TRACE_KNOBS, VOXELIZE_KNOBS
-
-    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
-    eyespace = scene.data["imagespace"]["receiver_hit"] == "eyespace"
-    knobs = tuple(dict.fromkeys(("photons",) + MINMAX_KNOBS + VOXELIZE_KNOBS + PEEL_KNOBS + REDUCE_KNOBS
-                                + TRACE_KNOBS))
-    return _receiver_stages(nr) + (
-        Stage("photon_trace", _st_photon_trace_is, reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs),
-              after=("geometry",),
-              makes=_photon_buffer_names(nl, True),
-              doc="per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)"),
-        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, eyespace),
-              reads=("imagespace.receiver_hit",),
-              after=("receivers", "photon_trace") + (("receiver_depth",) if eyespace else ()),
-              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
-              doc="where exiting photons meet the receivers (§4.1)"),
-        Stage("splat", lambda ctx: _st_splat(ctx, False), reads=("imagespace.caustic_map",),
-              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
-              doc="bilinear splat of each photon's irradiance (§2.3.2)"),
-        Stage("gather", lambda ctx: _st_gather(ctx, True), reads=("imagespace.gather", "lights"),
-              after=("receivers", "splat"), makes=_gather_names(nr),
-              doc="Gaussian gathering (Wyman & Davis 2006)"),
-        Stage("caustic_final", _st_final_is,
-              reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
-                     "imagespace.receiver_hit"),
-              after=("geometry", "minmax", "trace", "receivers", "receiver_depth", "photon_trace", "gather"),
-              makes=("image_caustics", "image_caustics_single"),
-              doc="receivers lit directly and by caustics, seen through the object (§4.1)"),
-    )
-
-
 def caustic_arrays(scene, method, bufs, stats):
-    """The caustic output keys and ``meta['caustics']`` from the caustic stages' buffers."""
+    """The caustic output keys and ``meta['caustics']`` from the caustic stages' buffers.
+
+    Parameters
+    ----------
+    scene : Scene
+    method : str
+        ``"imagespace"`` or ``"exact"`` (what ``meta['caustics']`` reports).
+    bufs : dict
+        The stages' buffers (``gather``, ``caustic_final``, ``receivers``).
+    stats : dict
+        The run's stats (``caustic_lights``, ``reference_noise_rel_l1``).
+
+    Returns
+    -------
+    arrays : dict
+        ``caustic_map_r``, ``caustic_frame_r``, ``caustic_rgb_r``, ``image_caustics*``.
+    info : dict
+        ``meta['caustics']``.
+    """
     arrays = dict(bufs["gather"]["arrays"])
     arrays.update({k: v for k, v in bufs["caustic_final"].items() if k.startswith("image_caustics")})
     d = scene.data
     info = {"lights": stats.get("caustic_lights", []), "receivers": len(bufs["receivers"]["rs"].boxes),
-            "caustic_map": int(d["imagespace"]["caustic_map"])}
+            "caustic_map": int(d["caustics"]["map_size"])}
     if method == "exact":
         info.update({"receiver_hit": "exact", "gather": 1, "photons": int(d["exact"]["photons"]),
                      "reference_noise_rel_l1": stats.get("reference_noise_rel_l1", [])})
     else:
-        info.update({"receiver_hit": d["imagespace"]["receiver_hit"], "gather": int(d["imagespace"]["gather"]),
+        info.update({"receiver_hit": d["imagespace"]["receiver_hit"], "gather": int(d["caustics"]["gather"]),
                      "photons": int(d["imagespace"]["photons"])})
     return arrays, info
 
 
-def _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
+def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
     """Colour seen along world rays: the receiver they meet (shaded), else the environment.
 
-    ``direct``: (points, faces, ray directions) of receiver points seen directly, shaded in
-    the same call (every point's colour is its own); then returns ``(rays' colours, theirs)``.
+    Parameters
+    ----------
+    scene : Scene
+    rs : ReceiverSet
+    cam : Camera or None
+        The eye camera (eye-space hits).
+    o, d : (N, 3) float64
+        World rays.
+    mode : str
+        ``"eyespace"`` or ``"exact"`` (:func:`receiver_hits`).
+    eyebuf : (depth, tri) or None
+    rgb_maps : list of (Hc, Wc, 3) float64
+        Caustic irradiance per receiver (:func:`collect_maps`).
+    vis : callable
+        ``vis(l, points, normals)``: light ``l``'s visibility.
+    direct : (points, faces, ray directions), optional
+        Receiver points seen directly, shaded in the same call (every point's
+        colour is its own).
+
+    Returns
+    -------
+    (N, 3) float64
+        The rays' colours; with ``direct``, ``(rays' colours, theirs)``.
     """
     out = np.zeros((len(o), 3))
     if len(o):
@@ -709,179 +739,3 @@ def _shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
         out[~hit] = environment_lookup(scene.data["environment"], d[~hit], scene.base_dir)
     return out if direct is None else (out, c[nh:])
 
-
-def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
-    from ..imagespace.normals import layer_normals
-
-    H, W = cam.shape
-    tr = eye["trace"]
-    zfront = eye["zmin"]
-    rdepth, rtri = eyebuf
-    origin, rdir = cam.primary_rays()
-    env = scene.data["environment"]
-    obj = np.isfinite(zfront)
-    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
-    obj &= ~rec
-    base = np.zeros((H, W, 3))
-    # receivers seen directly: shaded with the object's rays below (one call); the rows of
-    # the boolean masks (row-major) gathered by kernels on every thread
-    ri = np.flatnonzero(rec)
-    rdir_f = np.ascontiguousarray(rdir.reshape(-1, 3))
-    dirs = _take_rows(rdir_f, ri)
-    fwd = -cam.basis[2]
-    # origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None]
-    direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
-                            np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
-              rtri.reshape(-1)[ri], dirs)
-    bg = ~rec & ~obj
-    if bg.any():
-        base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
-    if not obj.any():
-        _, base[rec] = _shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
-                                   direct)
-        return base.astype(np.float32), base.astype(np.float32)
-    # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
-    st = tr["status"]
-    ex = obj & (st == 1)
-    oi = np.flatnonzero(obj)
-    xi = np.flatnonzero(ex)
-    trans = beer_lambert(absorption, tr["path_length"].reshape(-1)[oi], ior)  # per pixel: only the object's
-    o_full = _take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
-    d_full = _take_rows(tr["exit_dir"].reshape(-1, 3), xi)
-    # the thesis's final pass: refraction at the front surface only
-    nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
-    dv = _take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
-    t, _ = refract(dv, _take_rows(nrm.reshape(-1, 3), oi), outside / ior)
-    # np.where(all(isfinite(t), axis=1), t, dv), and the front points in view space (pixel
-    # centres (jj + .5, ii + .5) at depth zfront), on every thread
-    pv = np.empty((len(oi), 3))
-    _front_points_kernel(t, dv, oi, np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), W, H,
-                         float(cam.sx), float(cam.sy), bool(cam.ortho), pv)
-    # both passes' rays in one march and one shading: each ray's colour is its own, and one call
-    # instead of two halves the serial work around the kernels
-    n_full = len(o_full)
-    c, cd = _shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
-                        np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
-    base = base.reshape(-1, 3)
-    _put_rows(base, ri, cd)
-    full = base.copy()
-    single = base.copy()
-    if n_full:
-        _put_rows(full, xi, c[:n_full])
-    stuck = obj & (st != 1)
-    if stuck.any():
-        full[stuck.reshape(-1)] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
-    _mul_rows(full, oi, trans)  # full[obj] *= trans
-    _put_rows(single, oi, c[n_full:])
-    full, single = full.reshape(H, W, 3), single.reshape(H, W, 3)
-    return full.astype(np.float32), single.astype(np.float32)
-
-
-# ---------------------------------------------------------------------------
-# exact photon reference
-# ---------------------------------------------------------------------------
-
-def _st_photon_trace_exact(ctx):
-    from ..exact import trace_exact
-
-    d = ctx.scene.data
-    pe = d["exact"]
-    g = ctx.buf["geometry"]
-    geom = g["geom"]
-    n = int(pe["photons"])
-    out = {"lights": [], **dict.fromkeys(_photon_buffer_names(len(d["lights"]), False))}
-    for l, light in enumerate(d["lights"]):
-        if not len(geom.faces):
-            out["lights"].append(None)
-            continue
-        lcam = light_camera(light, geom.vertices, n)
-        o, dd, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
-        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, dd,
-                         normals=g["normals"], smooth=g["smooth"],
-                         outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
-        st = tr["status"].astype(np.int8)
-        ex = np.flatnonzero(st == EXITED)
-        # the exited photons' rows, gathered on every thread; the buffers are those arrays
-        eo, ed = _take_rows(tr["exit_pos"], ex), _take_rows(tr["exit_dir"], ex)
-        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex,
-                              "trans": _take_rows(tr["transmittance"], ex), "o": eo, "d": ed, "half": half[ex]})
-        out[f"camera_{l}"] = camera_array(lcam)
-        out[f"exit_pos_{l}"] = eo
-        out[f"exit_dir_{l}"] = ed
-    ctx.note(f"exact photon reference: {n}x{n} jittered photons per light through the triangles")
-    return out
-
-
-def _st_final_exact(ctx):
-    d = ctx.scene.data
-    b = ctx.buf
-    geom = b["geometry"]["geom"]
-    lights = d["lights"]
-    rs = b["receivers"]["rs"]
-    rgb_maps = b["gather"]["rgb_maps"]
-    eye_tr = b["trace"]["flat"]
-    origin, rdir = b["trace"]["ray_origin"], b["trace"]["ray_dir"]
-    # the objects' triangles read in place, and the exact tracer's scene of them (cached by
-    # content: primitive k is face k); building vertices[faces] was serial work every render
-    obj_tris = IndexedTriangles(geom.vertices, geom.faces)
-    obj_scene = mesh_scene(geom.vertices, geom.faces) if len(geom.faces) else None
-    scale = max(obj_tris.abs_max(), 1.0)
-
-    def vis(l, pts, nrm):
-        return exact_visibility(obj_tris, lights[l], pts, nrm, scene=obj_scene, scale=scale)
-
-    H, W = origin.shape[:2]
-    o = np.ascontiguousarray(origin.reshape(-1, 3), dtype=np.float64)
-    dd = np.ascontiguousarray(rdir.reshape(-1, 3), dtype=np.float64)
-    t_rec, f_rec = hit_exact(rs.tris, o, dd)
-    hp = eye_tr.get("hit_pos")
-    t_obj = np.full(len(o), np.inf)
-    if hp is not None:  # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf), on every thread
-        _distance_kernel(np.ascontiguousarray(hp, dtype=np.float64), o, t_obj)
-    rec = np.isfinite(t_rec) & (t_rec < t_obj)
-    img = np.zeros((len(o), 3))
-    obj = np.isfinite(t_obj) & ~rec
-    bg = ~rec & ~obj
-    env = d["environment"]
-    if bg.any():
-        img[bg] = environment_lookup(env, dd[bg], ctx.scene.base_dir)
-    st = eye_tr["status"]
-    ex = obj & (st == EXITED)
-    # the receivers seen directly (o + t d) and the exit rays' receivers in one shading call
-    # (every point's colour is its own): one pass of shadow rays, one of map look-ups
-    ri, xi = np.flatnonzero(rec), np.flatnonzero(ex)
-    if len(ri) or len(xi):
-        direct = (_ray_points(o, t_rec, dd, ri), f_rec[ri], _take_rows(dd, ri))
-        c, cd = _shade_rays(ctx.scene, rs, None, _take_rows(eye_tr["exit_pos"], xi),
-                            _take_rows(eye_tr["exit_dir"], xi), "exact", None, rgb_maps, vis, direct)
-        _put_rows(img, ri, cd)
-        _put_rows(img, xi, c)
-    stuck = obj & (st != EXITED)
-    if stuck.any():
-        img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], ctx.scene.base_dir)
-    _scale_rows(img, np.flatnonzero(obj), np.ascontiguousarray(eye_tr["transmittance"], dtype=np.float64))
-    ctx.note("receivers lit directly (exact shadow rays) and by the caustics; the object traced exactly")
-    return {"image_caustics": img.reshape(H, W, 3).astype(np.float32)}
-
-
-def exact_caustic_stages(scene):
-    """The caustic stages of the exact reference for a scene with lights and receivers."""
-    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
-    return _receiver_stages(nr)[:1] + (
-        Stage("photon_trace", _st_photon_trace_exact,
-              reads=("lights", "outside_ior", "exact.photons", "exact.photon_seed", "exact.max_bounces"),
-              after=("geometry",),
-              makes=_photon_buffer_names(nl, False),
-              doc="exact photons through the triangles (Embree)"),
-        Stage("receiver_hit", lambda ctx: _st_receiver_hit(ctx, False), after=("receivers", "photon_trace"),
-              makes=_per_light_names("hit_pos", nl) + _per_light_names("hit_face", nl),
-              doc="Embree on the receivers' triangles"),
-        Stage("splat", lambda ctx: _st_splat(ctx, True), reads=("imagespace.caustic_map", "exact.photons"),
-              after=("receivers", "photon_trace", "receiver_hit"), makes=_per_light_names("splat", nr),
-              doc="bilinear splat; the reference's own noise from two interleaved halves"),
-        Stage("gather", lambda ctx: _st_gather(ctx, False), reads=("lights",), after=("receivers", "splat"),
-              makes=_gather_names(nr), doc="sum over lights, no gathering"),
-        Stage("caustic_final", _st_final_exact, reads=("environment", "lights"),
-              after=("geometry", "trace", "receivers", "gather"), makes=("image_caustics",),
-              doc="receivers lit directly and by caustics, the object traced exactly"),
-    )

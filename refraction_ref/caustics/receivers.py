@@ -1,5 +1,19 @@
-"""Diffuse receivers: their caustic-map frames and where photons meet them (Chaudhari 2008, §4.1).
+"""Diffuse receivers, once for every method: their triangles, caustic-map frames and hits (Chaudhari 2008, §4.1).
 
+Triangles
+    A scene's ``receivers`` (a floor, a pool's walls) take light: caustics
+    from the image-space, volumetric and exact methods (Chaudhari 2008,
+    §4.1; Sun et al. 2008, §6.2.2) and water caustics (Tipprasert 2006,
+    ch. 4). :func:`receiver_soup` places every receiver's mesh
+    (``fit``/``size`` then ``transform``, as objects) and merges them into
+    one triangle soup (:class:`Receivers`); :func:`receiver_set` adds each
+    receiver's caustic-map box (:class:`ReceiverSet`). The level map's own
+    reference boxes, planes and position maps
+    (:mod:`refraction_ref.levelmap.planes`, :mod:`refraction_ref.levelmap.maps`)
+    are not receivers: they are the level-map method's reference planes
+    (Tipprasert 2006, eqs. 4-1 to 4-13) laid over this same soup, one box
+    per (receiver, light), where the caustic map of the other methods is one
+    box per receiver aligned with the first light.
 Frames
     Receiver ``r``'s caustic map lies on the face (nearest the light) of a
     box around it aligned with the first light's direction at the
@@ -46,12 +60,82 @@ import numpy as np
 
 from ..camera import project_point
 from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
-from ..levelmap.planes import frame_of, reference_box, to_map
-from ..receivers import receiver_soup
+from .boxes import frame_of, reference_box, to_map
+from ..meshes import object_mesh
 from ..raster import clip_near, rasterize
+from ..validation import SceneError
 
-__all__ = ["ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position",
+__all__ = ["Receivers", "receiver_soup", "ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position",
            "IndexedTriangles"]
+
+
+class Receivers(NamedTuple):
+    """Every receiver triangle of a scene in one soup.
+
+    Attributes
+    ----------
+    tris : (T, 3, 3) float64 world vertices
+    owner : (T,) int64 receiver index
+    normals : (T, 3) float64 unit face normals (zero for zero-area faces)
+    albedo : (R, 3) float64
+    vertices : list of (V_r, 3) per receiver (for the bounding boxes)
+    """
+
+    tris: np.ndarray
+    owner: np.ndarray
+    normals: np.ndarray
+    albedo: np.ndarray
+    vertices: list
+
+
+def receiver_soup(scene, method="scene"):
+    """All receiver triangles of a scene (:class:`Receivers`), for every method.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene; its ``receivers`` are placed as objects are
+        (``fit``/``size``, then ``transform``).
+    method : str
+        The method that needs receivers, named in the error.
+
+    Returns
+    -------
+    Receivers
+        The triangle soup, owners, unit face normals, albedo and each
+        receiver's vertices.
+
+    Raises
+    ------
+    SceneError
+        When the scene has no receivers (naming ``method``, which needs them).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+       with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+       University, 2006, §4.2 (the receivers of the level map).
+    """
+    tris, owner, alb, verts = [], [], [], []
+    for k, rc in enumerate(scene.data["receivers"] or []):
+        try:
+            v, f = object_mesh(rc, scene.base_dir)
+        except SceneError as e:
+            raise SceneError(f"receivers[{k}].mesh: {e}") from None
+        tris.append(v[f])
+        owner.append(np.full(len(f), k, np.int64))
+        alb.append(np.asarray(rc["albedo"], dtype=np.float64))
+        verts.append(v)
+    if not tris:
+        raise SceneError(f"{method}: the scene has no receivers; add at least one entry to 'receivers' "
+                         "(e.g. a pool floor: {\"mesh\": \"plane\", \"size\": [4, 4]})")
+    t = np.concatenate(tris)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+    return Receivers(t, np.concatenate(owner), n, np.stack(alb), verts)
 
 
 class ReceiverSet(NamedTuple):
@@ -73,7 +157,17 @@ class ReceiverSet(NamedTuple):
     boxes: list
 
     def frame(self, r):
-        """``caustic_frame_r`` (4, 3): origin, u, v, normal (docs/oracle.md)."""
+        """``caustic_frame_r`` (4, 3): origin, u, v, normal (docs/oracle.md).
+
+        Parameters
+        ----------
+        r : int
+            The receiver.
+
+        Returns
+        -------
+        (4, 3) float64
+        """
         return frame_of(self.boxes[r])
 
 
@@ -86,7 +180,17 @@ def receiver_set(scene, light, size):
     light : dict
         The first light: its direction at each receiver's centre orients the box.
     size : int
-        Texels per side of each caustic map.
+        Texels per side of each caustic map (``caustics.map_size``).
+
+    Returns
+    -------
+    ReceiverSet
+        The soup of :func:`receiver_soup` with one caustic-map box per receiver.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     soup = receiver_soup(scene, "caustics")
     boxes = []
@@ -108,6 +212,24 @@ def map_position(rs, r, points):
     :func:`~refraction_ref.levelmap.planes.to_map`'s col and row, operation for operation
     (``q = p - centre``, ``col = (q.U / w + 0.5) Wc``, ``row = (q.W / d + 0.5) Hc``, the dot
     products in :func:`~refraction_ref.vec3.dot`'s order), in a kernel parallel over the points.
+
+    Parameters
+    ----------
+    rs : ReceiverSet
+    r : int
+        The receiver.
+    points : (N, 3) array_like
+        World points.
+
+    Returns
+    -------
+    col, row : (N,) float64
+        Map positions (texel centres at ``+0.5``).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     box = rs.boxes[r]
     p = np.asarray(points, dtype=np.float64)
@@ -140,12 +262,25 @@ def _map_position_kernel(p, frame, Hc, Wc, col, row):
 def eye_buffers(rs, cam):
     """The receivers' depth image from the camera and the triangle seen at each pixel.
 
+    Parameters
+    ----------
+    rs : ReceiverSet
+    cam : Camera
+        The eye camera.
+
     Returns
     -------
     depth : (H, W) float64
         Nearest receiver depth, ``+inf`` where none.
     tri : (H, W) int64
         Index into ``rs.tris``, ``-1`` where none.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
+       Accurate Photon Tracing on GPUs", EGSR 2006.
     """
     tv = cam.world_to_view(rs.tris)
     d = -tv[..., 2]
@@ -307,6 +442,13 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
         Ray parameter of the hit, NaN where none.
     pix : (N, 2) int64
         Pixel (row, column) of the hit, ``-1`` where none.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
+       Accurate Photon Tracing on GPUs", EGSR 2006.
     """
     O = np.ascontiguousarray(origins_view, dtype=np.float64).reshape(-1, 3)
     D = np.ascontiguousarray(dirs_view, dtype=np.float64).reshape(-1, 3)
@@ -388,6 +530,11 @@ def hit_exact(tris, origins, dirs, scene=None):
         Distance along the ray, NaN on a miss.
     face : (N,) int64
         Triangle index, ``-1`` on a miss.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
@@ -482,9 +629,27 @@ def _indexed(tris):
 
 
 def occluded(tris, origins, dirs, tmax=None, scene=None):
-    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test, (N,) bool.
+    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test.
 
-    ``scene``: as for :func:`hit_exact`.
+    Parameters
+    ----------
+    tris : (T, 3, 3) float64 or IndexedTriangles
+    origins, dirs : (N, 3) float64
+        World rays.
+    tmax : (N,) float64, optional
+        Farthest distance tested per ray; default unbounded.
+    scene : embreex scene, optional
+        As for :func:`hit_exact`.
+
+    Returns
+    -------
+    (N,) bool
+        True where the ray is blocked.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     if len(o) == 0 or len(tris) == 0:

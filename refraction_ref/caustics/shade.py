@@ -38,7 +38,7 @@ from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
-__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility"]
+__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility", "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -122,8 +122,24 @@ def _take_rows_kernel(a, idx, out):
             out[k, c] = a[idx[k], c]
 
 
-def _take_rows(a, idx):
-    """``a[idx]`` of an (N, C) float64 array, on every thread."""
+def take_rows(a, idx):
+    """``a[idx]`` of an (N, C) float64 array, on every thread.
+
+    Parameters
+    ----------
+    a : (N, C) array_like
+    idx : (M,) array_like of int
+        Rows to take, in order.
+
+    Returns
+    -------
+    (M, C) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
     a = np.ascontiguousarray(a, dtype=np.float64)
     out = np.empty((len(idx), a.shape[1]))
     if len(idx):
@@ -132,7 +148,24 @@ def _take_rows(a, idx):
 
 
 def sample_bilinear(E, col, row):
-    """Bilinear look-up of a map (Hc, Wc, C) at continuous texel positions, clamped at the border."""
+    """Bilinear look-up of a map (Hc, Wc, C) at continuous texel positions, clamped at the border.
+
+    Parameters
+    ----------
+    E : (Hc, Wc, C) array_like
+        A caustic map.
+    col, row : (M,) array_like
+        Continuous positions (texel centres at ``+0.5``).
+
+    Returns
+    -------
+    (M, C) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
     Hc, Wc = E.shape[:2]
     x = np.clip(np.asarray(col, dtype=np.float64) - 0.5, 0.0, Wc - 1.0)
     y = np.clip(np.asarray(row, dtype=np.float64) - 0.5, 0.0, Hc - 1.0)
@@ -185,6 +218,26 @@ def shadow_map_visibility(lcam, zmin, points, bias):
     """Visibility of a light at world points from its min-depth image (1 lit, 0 shadowed).
 
     Points outside the light's window are lit (the window covers the objects).
+
+    Parameters
+    ----------
+    lcam : Camera
+        The light's camera.
+    zmin : (N, N) float64
+        The objects' nearest depth from the light (the photon pass's min/max).
+    points : (M, 3) array_like
+        World points.
+    bias : float
+        Depth offset against self-shadowing.
+
+    Returns
+    -------
+    (M,) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0:
@@ -238,6 +291,11 @@ def exact_visibility(obj_tris, light, points, normals, chunk=None, scene=None, s
     scale : float, optional
         ``max(|obj_tris|.max(), 1)``, the scale of the push off the surface,
         when known.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0 or len(obj_tris) == 0:
@@ -292,6 +350,11 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     Returns
     -------
     (M, 3) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     M = len(P)
@@ -310,13 +373,13 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
         lit = np.flatnonzero(cos > 0)
         v = np.zeros(M)
         if len(lit):  # v[lit] = visibility(l, P[lit], n[lit]), the rows gathered on every thread
-            v[lit] = visibility(l, P if len(lit) == M else _take_rows(P, lit),
-                                n if len(lit) == M else _take_rows(n, lit))
+            v[lit] = visibility(l, P if len(lit) == M else take_rows(P, lit),
+                                n if len(lit) == M else take_rows(n, lit))
         _add_direct_kernel(np.asarray(lt["radiance"], dtype=np.float64), cos, fall, v, light_sum)
     for r in range(len(rs.boxes)):
         sel = np.flatnonzero(owner == r)
         if len(sel):
-            col, row = map_position(rs, r, P if len(sel) == M else _take_rows(P, sel))
+            col, row = map_position(rs, r, P if len(sel) == M else take_rows(P, sel))
             # light_sum[sel] += sample_bilinear(maps_rgb[r], col, row), on every thread
             _add_bilinear_kernel(np.ascontiguousarray(maps_rgb[r], dtype=np.float64),
                                  np.ascontiguousarray(col, dtype=np.float64),

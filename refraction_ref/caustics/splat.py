@@ -38,10 +38,13 @@ References
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
+from ..filters import gather_gaussian
+from ..filters import gather_taps as gaussian_weights
 from ..raster import BAND, bin_bands
 
 __all__ = ["splat_bilinear", "splat_bilinear_groups", "receiver_photons", "gather_gaussian", "gaussian_weights", "accumulate_light", "channel_mean", "finite_maps"]
@@ -135,6 +138,13 @@ def splat_bilinear(col, row, values, shape, out=None):
         The sum over points of the value times the bilinear weight; weights
         off the map are folded onto the border texels, so
         ``out.sum(axis=(0, 1)) == values.sum(axis=0)`` up to round-off.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     Hc, Wc = int(shape[0]), int(shape[1])
     val = np.ascontiguousarray(values, dtype=np.float64)
@@ -180,12 +190,26 @@ def _group_fill_kernel(counts, items, grp, goff, gitems):
                 pos[g] += 1
 
 
+class _GroupBins(NamedTuple):
+    """The points binned by band (``counts``, ``items``) and, within a band, by group (``goff``, ``gitems``)."""
+
+    counts: np.ndarray  # (bands + 1,) int64: band b's points are items[counts[b]:counts[b + 1]]
+    items: np.ndarray  # (N',) int64 point indices
+    goff: np.ndarray  # (bands * ng + 1,) int64: band b's points of group g at gitems[goff[b ng + g]:...]
+    gitems: np.ndarray  # int64 point indices
+
+
 @nb.njit(cache=True, parallel=True)
-def _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, band, out):
+def _splat_groups_kernel(i0s, j0s, fx, fy, val, bins, Hc, Wc, band, out):
     # out[0]: every photon; out[1 + g]: the photons of group g. Work item q is (band q // M,
     # map q % M): each owned by one thread, which adds the band's photons (of its group) in
     # index order, so every map is the one _splat_kernel makes of its photons alone, and a
     # crowded band's maps go to different threads
+    # the named tuple unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
+    counts = bins.counts
+    items = bins.items
+    goff = bins.goff
+    gitems = bins.gitems
     M = out.shape[0]
     ng = M - 1
     nb_bands = counts.shape[0] - 1
@@ -208,11 +232,30 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     """:func:`splat_bilinear` of every point, and of the points of each group ``0 .. ng - 1`` alone,
     from one footprint and one binning (the same bits as separate calls on each subset).
 
+    Parameters
+    ----------
+    col, row : (N,) array_like
+        Continuous map positions.
+    values : (N, C) array_like
+        What each point deposits.
+    shape : (Hc, Wc)
+    groups : (N,) array_like of int
+        Each point's group (negative: in none but the whole map).
+    ng : int
+        Number of groups.
+
     Returns
     -------
     (1 + ng, Hc, Wc, C) float64
         Row 0 the map of every point, row ``1 + g`` that of group ``g`` (points of other
         groups, e.g. negative, in none).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     Hc, Wc = int(shape[0]), int(shape[1])
     ng = int(ng)
@@ -236,7 +279,7 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     if ng:
         _group_fill_kernel(counts, items, grp, goff, gitems)
     with nb.parallel_chunksize(1):
-        _splat_groups_kernel(i0s, j0s, fx, fy, val, counts, items, goff, gitems, Hc, Wc, BAND, out)
+        _splat_groups_kernel(i0s, j0s, fx, fy, val, _GroupBins(counts, items, goff, gitems), Hc, Wc, BAND, out)
     return out
 
 
@@ -267,7 +310,37 @@ def _receiver_photons_kernel(P, face, idx, normals, frame, texel_area, Hc, Wc, f
 
 
 def receiver_photons(P, face, idx, normals, box, flux):
-    """Map positions (col, row) and splat values (N, C) of the photons ``idx`` on receiver ``box``."""
+    """Map positions (col, row) and splat values (N, C) of the photons ``idx`` on receiver ``box``.
+
+    Parameters
+    ----------
+    P : (M, 3) float64
+        Photon hit points.
+    face : (M,) int64
+        Receiver triangle hit by each photon.
+    idx : (N,) int64
+        The photons on this receiver.
+    normals : (T, 3) float64
+        The receivers' face normals.
+    box : Box
+        The receiver's caustic-map box.
+    flux : (M, C) float64
+        Each photon's flux.
+
+    Returns
+    -------
+    col, row : (N,) float64
+        Map positions.
+    val : (N, C) float64
+        Irradiance deposits (flux over the texel area, times the cosine).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
+    """
     Hc, Wc = box.size
     frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
     n = len(idx)
@@ -276,67 +349,6 @@ def receiver_photons(P, face, idx, normals, box, flux):
         _receiver_photons_kernel(P, face, idx, normals, frame, float(box.texel_area), float(Hc), float(Wc), flux,
                                  col, row, val)
     return col, row, val
-
-
-def gaussian_weights(window):
-    """Normalised 1-D Gaussian taps of a ``window``-texel gathering kernel, ``sigma = (window - 1) / 6``."""
-    r = int(window) // 2
-    if r == 0:
-        return np.ones(1)
-    x = np.arange(-r, r + 1, dtype=np.float64)
-    sigma = (int(window) - 1) / 6.0
-    w = np.exp(-0.5 * (x / sigma) ** 2)
-    return w / w.sum()
-
-
-@nb.njit(cache=True, parallel=True)
-def _fold_rows(a, w, out):
-    """out[i, j] = sum_k w[k] a[i, j - k + r] with mirror folding at the ends of each row."""
-    H, N, C = a.shape
-    r = (w.shape[0] - 1) // 2
-    for i0 in nb.prange(H):
-        i = np.int64(i0)
-        for j in range(N):
-            for c in range(C):
-                s = 0.0
-                for t in range(-r, r + 1):
-                    wt = w[t + r]
-                    src = j - t
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = -1 - j - t  # mass that left through the first edge, mirrored back
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = 2 * N - 1 - j - t  # ... through the last edge
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                out[i, j, c] = s
-
-
-@nb.njit(cache=True, parallel=True)
-def _fold_cols(a, w, out):
-    """out[i, j] = sum_k w[k] a[i - k + r, j] with mirror folding at the ends of each column.
-
-    :func:`_fold_rows` applied to ``a.transpose(1, 0, 2)`` and transposed back, term for
-    term in the same order (the same bits), without the two transposed copies: each
-    thread owns rows of ``out`` and reads along rows of ``a``.
-    """
-    N, Wc, C = a.shape
-    r = (w.shape[0] - 1) // 2
-    for i0 in nb.prange(N):
-        i = np.int64(i0)
-        # each texel's sum starts at 0 and takes the terms in _fold_rows's order (t, then the two
-        # mirrors); whole rows at a time, so the inner loop runs along memory
-        for j in range(Wc):
-            for c in range(C):
-                out[i, j, c] = 0.0
-        for t in range(-r, r + 1):
-            wt = w[t + r]
-            for src in (i - t, -1 - i - t, 2 * N - 1 - i - t):
-                if 0 <= src < N:
-                    for j in range(Wc):
-                        for c in range(C):
-                            out[i, j, c] += wt * a[src, j, c]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -367,7 +379,21 @@ def _channel_mean_kernel(m, out):
 
 def channel_mean(m):
     """``m.mean(axis=2)`` of an (Hc, Wc, C) map on every thread, bit for bit NumPy's
-    (the channels summed in order, then divided by ``C``)."""
+    (the channels summed in order, then divided by ``C``).
+
+    Parameters
+    ----------
+    m : (Hc, Wc, C) float64
+
+    Returns
+    -------
+    (Hc, Wc) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
     m = np.ascontiguousarray(m, dtype=np.float64)
     out = np.empty(m.shape[:2])
     _channel_mean_kernel(m, out)
@@ -398,6 +424,11 @@ def finite_maps(a):
     -------
     a, a32
         The same array, and its float32 copy.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     flat = a.reshape(a.shape[0], -1)
     out = np.empty(flat.shape, np.float32)
@@ -416,43 +447,13 @@ def accumulate_light(m, radiance, unit, rgb):
         The light's RGB radiance.
     unit : (Hc, Wc) float64
     rgb : (Hc, Wc, 3) float64
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (splatting and gathering).
     """
     _accumulate_kernel(np.ascontiguousarray(m, dtype=np.float64), np.asarray(radiance, dtype=np.float64),
                        unit, rgb)
-
-
-def gather_gaussian(E, window=7):
-    """Image-space photon gathering: a separable, flux-conserving Gaussian (Wyman & Davis 2006).
-
-    Parameters
-    ----------
-    E : (Hc, Wc) or (Hc, Wc, C) array_like
-        Splatted map.
-    window : int
-        Odd window size in texels; 1 returns the map unchanged.
-
-    Returns
-    -------
-    ndarray
-        Same shape, float64. The sum over the map is kept (mirror folding
-        at the border).
-    """
-    a = np.asarray(E, dtype=np.float64)
-    squeeze = a.ndim == 2
-    if squeeze:
-        a = a[..., None]
-    w = gaussian_weights(window)
-    r = (len(w) - 1) // 2
-    if r == 0:
-        return a[..., 0].copy() if squeeze else a.copy()
-    r = min(r, min(a.shape[0], a.shape[1]) - 1)
-    if r <= 0:
-        return a[..., 0].copy() if squeeze else a.copy()
-    if r < (len(w) - 1) // 2:
-        w = w[(len(w) - 1) // 2 - r: (len(w) - 1) // 2 + r + 1]
-        w = w / w.sum()
-    tmp = np.empty(a.shape)
-    _fold_rows(np.ascontiguousarray(a), w, tmp)
-    out = np.empty(a.shape)
-    _fold_cols(tmp, w, out)
-    return out[..., 0] if squeeze else out

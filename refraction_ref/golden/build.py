@@ -50,12 +50,23 @@ CATALOGUE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__f
 def catalogue(only=None):
     """The cases shipped in ``refraction_ref/data/golden`` (sorted by name), optionally a subset.
 
+    Parameters
+    ----------
+    only : str or sequence of str, optional
+        Case names (a comma-separated string or a list), in the order wanted;
+        None or empty for every case.
+
+    Returns
+    -------
+    list of dict
+        Each case's JSON (``scene``, the method and the rest) with its ``name``.
+
     Raises
     ------
     SceneError
         For a name in ``only`` that is not a case (naming the known ones).
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     cases = {}
     for p in sorted(glob.glob(os.path.join(CATALOGUE_DIR, "*.json"))):
@@ -94,7 +105,23 @@ def _generate_volume(spec):
 
 
 def case_scene(case, folder, overrides=None):
-    """Write the case's scene (and generated volume) into ``folder`` and load it from there."""
+    """Write the case's scene (and generated volume) into ``folder`` and load it from there.
+
+    Parameters
+    ----------
+    case : dict
+        A case of :func:`catalogue`; its ``scene`` is copied, and a ``volume``
+        with a ``generator`` is generated into ``volume_ior.npy``.
+    folder : str
+        Folder for ``scene.json`` (created when missing).
+    overrides : dict, optional
+        Dotted-key overrides passed to :func:`~refraction_ref.scene.load_scene`.
+
+    Returns
+    -------
+    Scene
+        The scene loaded from ``folder/scene.json``.
+    """
     from ..scene import load_scene
 
     os.makedirs(folder, exist_ok=True)
@@ -112,7 +139,18 @@ def case_scene(case, folder, overrides=None):
 
 
 def array_sha256(a):
-    """sha256 of an array's dtype, shape and bytes (C order)."""
+    """sha256 of an array's dtype, shape and bytes (C order).
+
+    Parameters
+    ----------
+    a : array_like
+        Any array.
+
+    Returns
+    -------
+    str
+        Hex digest of ``dtype.str``, ``shape`` and the C-ordered bytes.
+    """
     a = np.ascontiguousarray(a)
     h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
     h.update(a.view(np.uint8).tobytes() if a.size else b"")
@@ -152,6 +190,16 @@ def stage_order(stages):
     Every stage comes after the stages whose buffers it reads (``Stage.after``),
     so the first failing stage in this order is one whose inputs all passed.
     Inspection stages are included (their buffers can be supplied and judged).
+
+    Parameters
+    ----------
+    stages : sequence of Stage
+        A method's registered stages (``name`` and ``after`` of each).
+
+    Returns
+    -------
+    list of str
+        Stage names.
     """
     names = [s.name for s in stages]
     after = {s.name: [u for u in s.after if u in names] for s in stages}
@@ -174,6 +222,18 @@ def key_stage(key, stages):
     ``trace``; in the volumetric method ``exit_pos`` -> ``view``, after the
     march's photon ``exit_pos``), else its :data:`FINAL_KEY_STAGES` owner.
 
+    Parameters
+    ----------
+    key : str
+        An array key of a result.
+    stages : sequence of Stage
+        The method's registered stages (``name`` and ``makes`` of each).
+
+    Returns
+    -------
+    str
+        The stage name.
+
     Raises
     ------
     KeyError
@@ -195,7 +255,7 @@ def key_stage(key, stages):
 
 
 def _seed_key(scene):
-    return "levelmap.exact_seed" if scene.data.get("water") is not None else "exact.photon_seed"
+    return "exact.photon_seed"  # the exact reference's one seed, of its photons and of its water samples
 
 
 def photon_quantum(scene):
@@ -206,6 +266,17 @@ def photon_quantum(scene):
     smallest texel area of the receivers' maps; for the exact water
     reference: one water sample's area over the texel area. Per unit light
     (the maps are for lights of unit strength) times the largest radiance.
+
+    Parameters
+    ----------
+    scene : Scene
+        A case's loaded scene (with ``water`` for the exact water reference,
+        else receivers and lights for the exact photon reference).
+
+    Returns
+    -------
+    float
+        Irradiance of one photon in one texel (radiance units).
     """
     d = scene.data
     rad = max([float(np.max(lt["radiance"])) for lt in d["lights"]] + [1.0])
@@ -214,7 +285,7 @@ def photon_quantum(scene):
 
         boxes = [b for row in planes_pass(scene)["boxes"] for b in row]
         sx, sz = (float(v) for v in d["water"]["size"])
-        M = int(d["levelmap"]["exact_samples"])
+        M = int(d["exact"]["water_samples"])
         return rad * (sx / M) * (sz / M) / min(b.texel_area for b in boxes)
     from ..caustics.light import window_samples
     from ..caustics.receivers import receiver_set
@@ -223,7 +294,7 @@ def photon_quantum(scene):
 
     geom = scene_geometry(scene)
     n = int(d["exact"]["photons"])
-    rs = receiver_set(scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    rs = receiver_set(scene, d["lights"][0], int(d["caustics"]["map_size"]))
     flux = max(float(window_samples(light_camera(lt, geom.vertices, n), n, 0)[2].max()) for lt in d["lights"])
     return rad * flux / min(b.texel_area for b in rs.boxes)
 
@@ -349,14 +420,13 @@ def _geometry_arrays(scene):
 
 def _build_case(case, d, progress=False):
     """Render one case into folder ``d``; its manifest entry."""
-    import refraction_ref as rr
-
     from ..graph import get_method
+    from ..render import render
 
     t0 = time.perf_counter()
     scene = case_scene(case, d)
     method = case["method"]
-    res = rr.render(scene, method=method, keep="stages", progress=progress)
+    res = render(scene, method=method, keep="stages", progress=progress)
     stages = get_method(method).stages(scene)
     noisy = bool(case.get("batches"))
     keys = {}
@@ -374,7 +444,7 @@ def _build_case(case, d, progress=False):
         sk = _seed_key(scene)
         maps = {}
         for b in range(K):
-            r = rr.render(scene, method=method, overrides={sk: b})
+            r = render(scene, method=method, overrides={sk: b})
             for k, a in r.arrays.items():
                 if k.startswith("caustic_map_"):
                     maps.setdefault(k, []).append(a)
@@ -385,7 +455,7 @@ def _build_case(case, d, progress=False):
         entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
         entry["files"].append("batches.npz")
     if case.get("reference"):
-        ref = rr.render(scene, method=case["reference"])
+        ref = render(scene, method=case["reference"])
         _save_npz(os.path.join(d, "reference.npz"), ref.arrays)
         entry["reference"] = case["reference"]
         entry["files"].append("reference.npz")

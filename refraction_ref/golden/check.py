@@ -261,9 +261,9 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
     ldi_ok = "stage.peel.ldi" in cand and passed.get("stage.peel.ldi")
     if not (bits_ok or ldi_ok):
         return out
-    from .. import load_scene
+    from ..scene import load_scene
     from ..imagespace.depth_bounds import global_bounds
-    from ..imagespace.pipeline import pass_peel, pass_reduce
+    from ..imagespace.pipeline import Layers, MinMax, Voxels, pass_peel, pass_reduce
 
     p = load_scene(os.path.join(golden, name, "scene.json")).data["imagespace"]
     if p.get("peeling", "separate") != "separate":
@@ -275,31 +275,32 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
     # the replay on the golden's buffers reads the golden's other inputs too (zlo, zhi, zmin, zmax): a
     # candidate's depths within tolerance (an unsnapped rasterizer's) must not spoil the replay's check
     def peel(bits, src=pick):
-        vox = {"bits": bits, "zlo": src("stage.voxelize.zlo"), "zhi": src("stage.voxelize.zhi")}
+        vox = Voxels(bits=bits, zlo=src("stage.voxelize.zlo"), zhi=src("stage.voxelize.zhi"), ldi=None, total=None)
         return pass_peel(vox, bits.shape[:2], p)
 
     def reduce(ldi, src=pick):
         gmin, gmax = global_bounds(src("stage.minmax.zmin"), src("stage.minmax.zmax"))
-        return pass_reduce({"gmin": gmin, "gmax": gmax}, {"ldi": ldi, "lut": None}, p)
+        mm = MinMax(tri_view=None, zmin=None, zmax=None, frags=None, gmin=gmin, gmax=gmax)
+        return pass_reduce(mm, Layers(ldi=ldi, total=None, lut=None, ran=False, why=""), p)
 
     try:
         ldi = None
         if bits_ok:
             gp = peel(gold["stage.voxelize.bits"], gold.__getitem__)
-            if np.array_equal(gp["ldi"], gold["stage.peel.ldi"]):
+            if np.array_equal(gp.ldi, gold["stage.peel.ldi"]):
                 cp = peel(cand["stage.voxelize.bits"])
-                ldi = cp["ldi"]
+                ldi = cp.ldi
                 if ldi.shape == gold["stage.peel.ldi"].shape:
                     out["stage.peel.ldi"] = ldi
-                dc = cp["total"].astype(np.int16)
+                dc = cp.total.astype(np.int16)
                 out["stage.peel.depth_complexity"] = out["depth_complexity"] = dc
         if ldi_ok:
             ldi = cand["stage.peel.ldi"]
         if ldi is not None and ldi.shape == gold["stage.peel.ldi"].shape:
             gr = reduce(gold["stage.peel.ldi"], gold.__getitem__)
-            if all(np.array_equal(gr[b], gold[f"stage.reduce.{b}"]) for b in ("bounds_hi", "bounds_lo")):
+            if all(np.array_equal(getattr(gr, b), gold[f"stage.reduce.{b}"]) for b in ("bounds_hi", "bounds_lo")):
                 cr = reduce(ldi)
-                out.update({f"stage.reduce.{b}": cr[b] for b in ("bounds_hi", "bounds_lo")})
+                out.update({f"stage.reduce.{b}": getattr(cr, b) for b in ("bounds_hi", "bounds_lo")})
     except (KeyError, ValueError, TypeError):  # a golden without these buffers: judge against the golden alone
         return out
     return out
@@ -595,7 +596,21 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
 
 
 def format_report(out):
-    """The Markdown report of a :func:`check`."""
+    """The Markdown report of a :func:`check`.
+
+    Parameters
+    ----------
+    out : CheckReport or dict
+        What :func:`check` returns: ``ok``, ``candidate``, ``golden``,
+        ``contract_version`` and per case ``ok``, ``method``,
+        ``earliest_failing_stage``, ``problems`` and ``keys``.
+
+    Returns
+    -------
+    str
+        The report: a summary table, then per case its problems and a table of
+        its judged keys.
+    """
     n_ok = sum(1 for c in out["cases"].values() if c["ok"])
     lines = [f"# Conformance report: {'PASS' if out['ok'] else 'FAIL'}", "",
              f"{n_ok} of {len(out['cases'])} cases pass; candidate `{out['candidate']}` against the golden suite "

@@ -181,7 +181,26 @@ ZTEST = {"kind": "ztest", "alpha": 1e-3, "atol": 1e-3, "over": "all",
 
 
 def tolerance_for(key, noisy=False):
-    """The tolerance spec of an array key (a copy of the first matching :data:`TOLERANCES` entry)."""
+    """The tolerance spec of an array key (a copy of the first matching :data:`TOLERANCES` entry).
+
+    Parameters
+    ----------
+    key : str
+        An array key.
+    noisy : bool
+        The case is judged statistically: keys matching :data:`NOISY` get the
+        :data:`ZTEST` spec.
+
+    Returns
+    -------
+    dict
+        The spec (``kind``, tolerances, ``over``, ...), a copy.
+
+    Raises
+    ------
+    KeyError
+        No pattern matches ``key``.
+    """
     if noisy and any(fnmatch.fnmatchcase(key, p) for p in NOISY):
         return dict(ZTEST)
     for pat, spec in TOLERANCES:
@@ -195,12 +214,36 @@ FINITENESS = ("NaN", "+inf", "-inf", "finite")
 
 
 def finiteness(a):
-    """Per element of a float array its :data:`FINITENESS` code: 0 NaN, 1 +inf, 2 -inf, 3 finite."""
+    """Per element of a float array its :data:`FINITENESS` code: 0 NaN, 1 +inf, 2 -inf, 3 finite.
+
+    Parameters
+    ----------
+    a : ndarray
+        A float array.
+
+    Returns
+    -------
+    int ndarray
+        Codes with the shape of ``a``.
+    """
     return np.where(np.isnan(a), 0, np.where(a == np.inf, 1, np.where(a == -np.inf, 2, 3)))
 
 
 def nonfinite_mismatch(c, g):
-    """Counts of NaN / inf / finite mismatches by category (``{"NaN where the golden has +inf": n, ...}``)."""
+    """Counts of NaN / inf / finite mismatches by category (``{"NaN where the golden has +inf": n, ...}``).
+
+    Parameters
+    ----------
+    c : ndarray
+        Candidate array.
+    g : ndarray
+        Golden array, same shape.
+
+    Returns
+    -------
+    dict of str to int
+        Only the categories that occur; empty for non-float arrays.
+    """
     if c.dtype.kind not in "fc" or g.dtype.kind not in "fc":
         return {}
     names = FINITENESS
@@ -216,7 +259,23 @@ def nonfinite_mismatch(c, g):
 
 
 def informative(c, g, over):
-    """The elements a fraction counts over (``over``: all, nonzero, finite), per element of the judged array."""
+    """The elements a fraction counts over (``over``: all, nonzero, finite), per element of the judged array.
+
+    Parameters
+    ----------
+    c : ndarray
+        Candidate array.
+    g : ndarray
+        Golden array, same shape.
+    over : {'all', 'nonzero', 'finite'}
+        ``nonzero``: where either is nonzero (NaN counts); ``finite``: where
+        either is finite (for float arrays); otherwise every element.
+
+    Returns
+    -------
+    bool ndarray
+        Mask with the shape of ``g``.
+    """
     if over == "nonzero":
         with np.errstate(invalid="ignore"):
             m = (np.nan_to_num(c, nan=1.0) != 0) | (np.nan_to_num(g, nan=1.0) != 0)

@@ -47,6 +47,22 @@ def global_bounds(zmin, zmax):
 
     Uncovered pixels hold ``zmin = +inf`` and ``zmax = -inf``, so the plain
     extremes are the bounds of the covered ones.
+
+    Parameters
+    ----------
+    zmin, zmax : (H, W) float64
+        Local depth bounds from :func:`depth_bounds` (``+inf`` / ``-inf`` where
+        no fragment was drawn).
+
+    Returns
+    -------
+    lo, hi : float
+        Smallest ``zmin`` and largest ``zmax`` over the image, view-space depth;
+        ``(inf, -inf)`` when no pixel is covered.
+
+    References
+    ----------
+    Chaudhari (2008), §3.3 (global bounds of the voxelization's slicing).
     """
     if zmin.size == 0:
         return np.inf, -np.inf

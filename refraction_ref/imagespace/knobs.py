@@ -8,9 +8,12 @@ support logical OR blending, we employ additive blending"; the search ends
 at its last probe's texel, §3.6: "Surface normal of the point R3 is then
 calculated using the texture coordinate t_P3 of the point P3"; depth images
 sampled with hardware (bilinear) filtering, §3.4.2: "hardware filtering can
-be easily applied while sampling these textures"). The caustic knobs (``photons``, ``gather``, ``receiver_hit``,
-``caustic_map``) are read by the caustic stages (§4.1) that the image-space
-method adds when a scene has lights and receivers.
+be easily applied while sampling these textures"). The caustic knobs (``photons``, ``receiver_hit``)
+are read by the caustic stages (§4.1) that the image-space method adds when
+a scene has lights and receivers; the caustic maps' size and gathering window
+are the ``caustics`` block's (:mod:`refraction_ref.caustics.knobs`), and the
+old names ``imagespace.caustic_map`` and ``imagespace.gather`` are aliases of
+``caustics.map_size`` and ``caustics.gather``.
 
 Importing this module is cheap (no kernels): scene loading reads it.
 """
@@ -44,9 +47,7 @@ IMAGESPACE_DEFAULTS = {
     "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
     # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
     "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
-    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
     "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
-    "caustic_map": 512,       # texels per side of each receiver's caustic map (exact reference too)
 }
 
 CHOICES = {
@@ -64,33 +65,28 @@ CHOICES = {
 
 def validate_imagespace(data, base_dir="."):
     """Check ``data['imagespace']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
-    from ..scene import SceneError, _num
+    from ..validation import SceneError, check_number
 
     im = data["imagespace"]
     for key, choices in CHOICES.items():
         if im[key] not in choices:
             raise SceneError(f"scene: 'imagespace.{key}' is {im[key]!r}; choose one of {', '.join(choices)}")
-    _num(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
-    _num(im["layers"], "imagespace.layers", 1, 32, integer=True)
-    _num(im["slices"], "imagespace.slices", 32, 4096, integer=True)
+    check_number(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
+    check_number(im["layers"], "imagespace.layers", 1, 32, integer=True)
+    check_number(im["slices"], "imagespace.slices", 32, 4096, integer=True)
     if im["slices"] % 32:
         raise SceneError(f"scene: imagespace.slices is {im['slices']}; it must be a multiple of 32 "
                          "(slices are stored in 32-bit words)")
-    _num(im["mip_size"], "imagespace.mip_size", 1, integer=True)
-    _num(im["bound_margin"], "imagespace.bound_margin", 0.0)
-    _num(im["delta"], "imagespace.delta", 1, 8, integer=True)
-    _num(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
-    _num(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
-    _num(im["record"], "imagespace.record", 0, 64, integer=True)
+    check_number(im["mip_size"], "imagespace.mip_size", 1, integer=True)
+    check_number(im["bound_margin"], "imagespace.bound_margin", 0.0)
+    check_number(im["delta"], "imagespace.delta", 1, 8, integer=True)
+    check_number(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
+    check_number(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
+    check_number(im["record"], "imagespace.record", 0, 64, integer=True)
     for key in ("tir", "peel_all"):
         if not isinstance(im[key], bool):
             raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
-    _num(im["photons"], "imagespace.photons", 1, 8192, integer=True)
-    _num(im["gather"], "imagespace.gather", 1, 63, integer=True)
-    if im["gather"] % 2 == 0:
-        raise SceneError(f"scene: imagespace.gather is {im['gather']}; the gathering window must be odd "
-                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
-    _num(im["caustic_map"], "imagespace.caustic_map", 1, 8192, integer=True)
+    check_number(im["photons"], "imagespace.photons", 1, 8192, integer=True)
     return data
 
 
@@ -100,7 +96,7 @@ def check_memory(scene):
     Per pixel: S/8 bytes of bitmask, 8 bytes per layer of the LDI and the
     trace's outputs and temporaries (about 24 more 8-byte words).
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     im = scene.data["imagespace"]
     c = scene.data["camera"]
@@ -112,4 +108,8 @@ def check_memory(scene):
                          "or imagespace.layers")
 
 
-BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace"))
+#: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)
+ALIASES = {"caustic_map": "caustics.map_size", "gather": "caustics.gather"}
+
+BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace",
+                                 aliases=ALIASES))

@@ -38,6 +38,7 @@ blends those four texels' normals with the same weights.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -45,8 +46,8 @@ import numpy as np
 from ..camera import unproject_pixel
 from .peel import layer_depth_lut
 
-__all__ = ["NORMAL_METHODS", "FILTERS", "normal_at", "normal_filtered", "sample_depth", "layer_normals",
-           "layer_depth", "no_lut"]
+__all__ = ["NORMAL_METHODS", "FILTERS", "ViewGrid", "normal_at", "normal_filtered", "sample_depth",
+           "layer_normals", "layer_depth", "no_lut"]
 
 NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3}
 
@@ -58,6 +59,27 @@ def layer_depth(ldi, n, i, j, lut):
     ``lut`` is ``(use_lut, bits, zlo, zhi, slices, pop8, sel8)``: with
     ``use_lut`` the depth is found on the fly in the bitmask (§3.4.1), else
     it is read from the peeled LDI array ``ldi`` (§3.4.2).
+
+    Parameters
+    ----------
+    ldi : (L, H, W) float32 or float64
+        Peeled layered depth images, ``+inf`` where absent.
+    n : int
+        Layer index, 0 the nearest.
+    i, j : int
+        Pixel row and column (any integers: off screen gives ``+inf``).
+    lut : tuple
+        ``(use_lut, bits, zlo, zhi, slices, pop8, sel8)``, see above;
+        :func:`no_lut` makes one that reads ``ldi``.
+
+    Returns
+    -------
+    float
+        View-space depth of the layer at the pixel.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.1 (on the fly) and §3.4.2 (LDI array).
     """
     H = ldi.shape[1]
     W = ldi.shape[2]
@@ -247,6 +269,28 @@ def sample_depth(ldi, n, r, c, lut, filt):
     there). It is written as differences (``a + f (b - a)``, rows then the
     column), so four equal depths give that depth exactly, and at a texel
     centre the texel's own depth.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) float32 or float64
+        Peeled layered depth images, ``+inf`` where absent.
+    n : int
+        Layer index.
+    r, c : float
+        Screen position, row and column in pixel units.
+    lut : tuple
+        Depth source of :func:`layer_depth`.
+    filt : int
+        0 nearest, 1 bilinear.
+
+    Returns
+    -------
+    float64
+        View-space depth of the layer at the position.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (hardware filtering) and §3.6.
     """
     i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
     if k == 0:
@@ -261,8 +305,29 @@ def sample_depth(ldi, n, r, c, lut, filt):
     return out
 
 
+class ViewGrid(NamedTuple):
+    """The image a set of layers was rendered in: its size, half extents and projection.
+
+    Attributes
+    ----------
+    W, H : int
+        Width and height in pixels.
+    sx, sy : float
+        Half extents of the image plane at unit distance (perspective) or
+        of the window (orthographic), as :meth:`Camera.kernel_args` gives them.
+    ortho : bool
+        Orthographic projection (a directional light's view).
+    """
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+
+
 @nb.njit(cache=True, inline="always")
-def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt):
+def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
     """Unit view-space normal of layer ``n`` at screen position (row ``r``, column ``c``).
 
     ``filt`` 0: the normal of the texel under the position (:func:`normal_at`
@@ -273,7 +338,36 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt)
     so this is what a shader computing them from filtered depth reads at the
     probe's texture coordinate gets (§3.4.2, §3.6), up to the perspective
     scaling of the denominators; four equal normals give that normal exactly.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layer depths (``+inf`` where absent).
+    n : int64
+        The layer.
+    r, c : float
+        Screen position, pixel units (row, column).
+    lut : tuple
+        On-the-fly peeling inputs (:func:`no_lut` when unused).
+    method : int
+        :data:`NORMAL_METHODS` code.
+    delta : int
+        Texel offset of the differences.
+    grid : ViewGrid
+        The image the layers were rendered in.
+    filt : int
+        :data:`FILTERS` code.
+
+    Returns
+    -------
+    nx, ny, nz : float
+        The unit normal; ``(0, 0, 1)`` where the position lacks the layer.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (filtered reads), §3.5 (eq. 3.2), §3.6.
     """
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
     if k == 0:
         return 0.0, 0.0, 1.0
@@ -311,7 +405,24 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, W, H, sx, sy, ortho, filt)
 
 
 def no_lut(shape):
-    """The ``lut`` argument that makes :func:`layer_depth` read the LDI array."""
+    """The ``lut`` argument that makes :func:`layer_depth` read the LDI array.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Shape of the depth image (unused: the tuple's arrays are placeholders
+        of size one).
+
+    Returns
+    -------
+    tuple
+        ``(False, bits, zlo, zhi, 256, pop8, sel8)`` with placeholder arrays of
+        the types the kernels expect.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.2 (reading the separately peeled LDI array).
+    """
     z = np.zeros((1, 1))
     return (False, np.zeros((1, 1, 1), np.uint32), z, z, 256, np.zeros(256, np.int64), np.zeros((256, 8), np.int64))
 
@@ -332,6 +443,31 @@ def layer_normals(layer, camera, method="central", delta=1):
 
     The per-pixel kernel :func:`normal_at` is what the tracer calls at
     each intersection; this array version serves plots and tests.
+
+    Parameters
+    ----------
+    layer : (H, W) float
+        One layered depth image, view-space depth, ``+inf`` where absent.
+    camera : Camera
+        The view the depth image was rendered from (unprojection of pixels).
+    method : {'forward', 'central', 'mesh3x3', 'cross'}
+        Estimator (see the module docstring).
+    delta : int
+        Pixel step of the differences (``central`` and ``cross``).
+
+    Returns
+    -------
+    (H, W, 3) float64
+        Unit view-space normals, NaN where the layer is absent.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``method``.
+
+    References
+    ----------
+    Chaudhari (2008), §3.5, eqs. 3.1, 3.2 and Fig. 3.4.
     """
     if method not in NORMAL_METHODS:
         raise ValueError(f"normals: unknown method {method!r}; choose one of {sorted(NORMAL_METHODS)}")

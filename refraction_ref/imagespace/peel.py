@@ -43,7 +43,22 @@ POPCOUNT8, SELECT8 = _tables()
 
 @nb.njit(cache=True, inline="always")
 def lowest_set_bit(w):
-    """Index of the lowest set bit of a non-zero 32-bit word by binary search (5 steps)."""
+    """Index of the lowest set bit of a non-zero 32-bit word by binary search (5 steps).
+
+    Parameters
+    ----------
+    w : uint32
+        A non-zero 32-bit word of an occupancy mask.
+
+    Returns
+    -------
+    int
+        Bit position 0..31 of its lowest set bit (the nearest slice of the word).
+
+    References
+    ----------
+    Chaudhari (2008), §3.4 and Fig. 3.1 (binary search for each set bit).
+    """
     x = w & (~w + np.uint32(1))  # isolate the lowest set bit (two's complement)
     pos = 0
     if x & np.uint32(0xFFFF0000):
@@ -99,7 +114,22 @@ def _peel_kernel(bits, zlo, zhi, slices, L, ldi):
 
 
 def depth_complexity(bits):
-    """Set bits per pixel of an occupancy mask, (H, W) int32."""
+    """Set bits per pixel of an occupancy mask, (H, W) int32.
+
+    Parameters
+    ----------
+    bits : (H, W, S // 32) uint32
+        Occupancy masks from :func:`~refraction_ref.imagespace.voxelize.voxelize_bitmask`.
+
+    Returns
+    -------
+    (H, W) int32
+        Number of set bits (occupied slices) of each pixel.
+
+    References
+    ----------
+    Chaudhari (2008), §3.4 (number of layers to peel).
+    """
     total = np.zeros(bits.shape[:2], np.int32)
     _popcount_kernel(np.ascontiguousarray(bits), total)
     return total
@@ -159,6 +189,29 @@ def layer_depth_lut(bits, i, j, n, lo, hi, slices, pop8, sel8):
     """Depth of layer ``n`` at pixel (i, j) found on the fly with 8-bit look-up tables.
 
     Returns ``+inf`` when the pixel has ``n`` layers or fewer.
+
+    Parameters
+    ----------
+    bits : (H, W, S // 32) uint32
+        Occupancy masks.
+    i, j : int
+        Pixel row and column.
+    n : int
+        Layer index, 0 the nearest.
+    lo, hi : float
+        Depth range the pixel's slices span (view-space depth).
+    slices : int
+        S.
+    pop8 : (256,) int64
+        :data:`POPCOUNT8`, the population count of every byte.
+    sel8 : (256, 8) int64
+        :data:`SELECT8`, the index of the k-th set bit of every byte.
+
+    Returns
+    -------
+    float
+        View-space depth of the layer, ``lo + b / (S - 1) * (hi - lo)`` for
+        its bit index ``b``.
 
     References
     ----------

@@ -16,13 +16,14 @@ stage (``timings_ms``)  pass                                          section
 ======================  ===========================================  =========
 
 With lights and receivers the caustic stages of §4.1 follow
-(:func:`refraction_ref.caustics.pipeline.imagespace_caustic_stages`).
+(:func:`refraction_ref.imagespace.caustics.imagespace_caustic_stages`).
 The same passes in a light's view make the photon pass (:func:`layered_trace`).
 """
 
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,7 +33,8 @@ from ..graph import Method, Stage, register_method, run_graph
 from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
-from ..scene import SceneError
+from ..validation import SceneError
+from ..warm import warmer
 from .depth_bounds import depth_bounds, global_bounds
 from .knobs import check_memory
 from .normals import layer_normals
@@ -42,7 +44,8 @@ from .trace import exit_thresholds, trace_layers
 from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
 
 __all__ = ["render_imagespace", "check_materials", "layered_trace", "METHOD", "TRACE_KNOBS",
-           "pass_minmax", "pass_voxelize", "pass_peel", "pass_reduce", "pass_trace"]
+           "pass_minmax", "pass_voxelize", "pass_peel", "pass_reduce", "pass_trace",
+           "MinMax", "Voxels", "Layers", "Bounds"]
 
 #: the knobs each pass reads (the eye's stages and the light's photon pass declare the same)
 MINMAX_KNOBS = ("depth",)
@@ -54,7 +57,25 @@ TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layer
 
 
 def check_materials(geom):
-    """The bitmask cannot tell objects apart: all must share ior and absorption (§4.1)."""
+    """The bitmask cannot tell objects apart: all must share ior and absorption (§4.1).
+
+    Parameters
+    ----------
+    geom : Geometry
+        The objects' triangles and materials (:func:`~refraction_ref.meshes.scene_geometry`).
+
+    Returns
+    -------
+    ior : float
+        The objects' index (1 without objects).
+    absorption : (3,) float64
+        Their absorption coefficients.
+
+    Raises
+    ------
+    SceneError
+        When the objects' materials differ.
+    """
     if len(geom.ior) == 0:
         return 1.0, np.zeros(3)
     if np.ptp(geom.ior) > 0 or np.ptp(geom.absorption, axis=0).max() > 0:
@@ -65,104 +86,285 @@ def check_materials(geom):
 
 
 # --------------------------------------------------------------------- passes (any view)
-def pass_minmax(geom, cam, p):
-    """Per-pixel Zmin/Zmax of the objects in a view, and their global range (§3.3).
+class MinMax(NamedTuple):
+    """What the min/max pass makes (:func:`pass_minmax`).
+
+    Attributes
+    ----------
+    tri_view : object
+        The view's triangle set-up (:func:`~refraction_ref.raster.raster_setup`), or None.
+    zmin, zmax : (H, W) float64
+        Per-pixel nearest and farthest depth (``+inf`` / ``-inf`` where no object).
+    frags : object
+        The fragments, kept for the bitmask pass, or None.
+    gmin, gmax : float
+        The global depth range of the objects.
+    """
+
+    tri_view: object
+    zmin: np.ndarray
+    zmax: np.ndarray
+    frags: object
+    gmin: float
+    gmax: float
+
+
+class Voxels(NamedTuple):
+    """What the voxelization pass makes (:func:`pass_voxelize`).
+
+    Attributes
+    ----------
+    bits : (H, W, S/32) uint32 or None
+        Occupancy words (bit k of word w is slice 32 w + k, slice 0 nearest); None for ``depth='float'``.
+    zlo, zhi : (H, W) float64
+        The depth range the slices span.
+    ldi : (L, H, W) or None
+        ``depth='float'``: the A-buffer's exact depths, sorted into layers.
+    total : (H, W) int or None
+        ``depth='float'``: fragments per pixel.
+    """
+
+    bits: object
+    zlo: np.ndarray
+    zhi: np.ndarray
+    ldi: object
+    total: object
+
+
+class Layers(NamedTuple):
+    """What the peeling pass makes (:func:`pass_peel`).
+
+    Attributes
+    ----------
+    ldi : (L, H, W) float32
+        Layer depths (``+inf`` where a pixel has fewer layers).
+    total : (H, W) int32
+        Layers per pixel (set bits of the bitmask).
+    lut : tuple or None
+        On-the-fly peeling inputs (§3.4.1), or None when the layers were peeled.
+    ran : bool
+        Whether a peeling pass ran.
+    why : str
+        What was done, for the plan.
+    """
+
+    ldi: np.ndarray
+    total: np.ndarray
+    lut: object
+    ran: bool
+    why: str
+
+
+class Bounds(NamedTuple):
+    """What the reduction pass makes (:func:`pass_reduce`).
+
+    Attributes
+    ----------
+    bounds_hi, bounds_lo : (L,) float64
+        Forward and backward search bounds per layer.
+    why : str
+        What was done, for the plan.
+    """
+
+    bounds_hi: np.ndarray
+    bounds_lo: np.ndarray
+    why: str
+
+
+def from_buffers(cls, buf):
+    """The named tuple ``cls`` of a stage's buffer dict (its other keys ignored).
+
+    Parameters
+    ----------
+    cls : type
+        :class:`MinMax`, :class:`Voxels`, :class:`Layers` or :class:`Bounds`.
+    buf : dict
+        A stage's buffers (``ctx.buf[stage]``), made by ``cls._asdict()`` and more.
 
     Returns
     -------
-    dict
-        ``tri_view`` (the view's triangle set-up), ``zmin``, ``zmax`` (H, W)
-        float64 depth (``+inf`` / ``-inf`` where no object), ``frags`` (the
-        fragments, kept for the bitmask pass) or None, ``gmin``, ``gmax``.
+    cls
+    """
+    return cls(**{k: buf[k] for k in cls._fields})
+
+
+def pass_minmax(geom, cam, p):
+    """Per-pixel Zmin/Zmax of the objects in a view, and their global range (§3.3).
+
+    Parameters
+    ----------
+    geom : Geometry
+        The objects' triangles (:func:`~refraction_ref.meshes.scene_geometry`).
+    cam : Camera
+        The view.
+    p : dict
+        The ``imagespace`` knobs (reads :data:`MINMAX_KNOBS`).
+
+    Returns
+    -------
+    MinMax
+
+    References
+    ----------
+    Chaudhari (2008), §3.3.
     """
     tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
     mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
     zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
     gmin, gmax = global_bounds(zmin, zmax)
-    return {"tri_view": tri_view, "zmin": zmin, "zmax": zmax, "frags": frags, "gmin": gmin, "gmax": gmax}
+    return MinMax(tri_view, zmin, zmax, frags, gmin, gmax)
 
 
 def pass_voxelize(mm, cam, p):
     """Bitmask voxelization (§3.3), or, for ``depth='float'``, the A-buffer of exact depths.
 
+    Parameters
+    ----------
+    mm : MinMax
+        The min/max pass of this view.
+    cam : Camera
+        The view.
+    p : dict
+        The ``imagespace`` knobs (reads :data:`VOXELIZE_KNOBS`).
+
     Returns
     -------
-    dict
-        ``bits`` (H, W, S/32) uint32 occupancy words (bit k of word w is slice
-        32 w + k, slice 0 nearest) or None, ``zlo``, ``zhi`` (H, W) the depth
-        range the slices span, and for ``depth='float'`` ``ldi`` and ``total``.
+    Voxels
+        ``bits`` and the depth range ``zlo``, ``zhi`` the slices span; for
+        ``depth='float'`` no ``bits`` but the A-buffer's ``ldi`` and ``total``
+        (``zlo``, ``zhi`` then the per-pixel Zmin/Zmax).
+
+    References
+    ----------
+    Chaudhari (2008), §3.3 (bitmask voxelization, Eisemann and Décoret 2006).
     """
     if p["depth"] == "bitmask":
-        zlo, zhi = slice_bounds(mm["zmin"], mm["zmax"], p["slicing"])
-        src = mm["tri_view"] if mm["frags"] is None else mm["frags"]
+        zlo, zhi = slice_bounds(mm.zmin, mm.zmax, p["slicing"])
+        src = mm.tri_view if mm.frags is None else mm.frags
         bits = voxelize_bitmask(src, cam, zlo, zhi, int(p["slices"]), p["blend"])
-        return {"bits": bits, "zlo": zlo, "zhi": zhi, "ldi": None, "total": None}
-    ldi, total = collect_depths(mm["tri_view"], cam, int(p["layers"]))
+        return Voxels(bits, zlo, zhi, None, None)
+    ldi, total = collect_depths(mm.tri_view, cam, int(p["layers"]))
     Lr = int(min(int(p["layers"]), total.max(initial=0)))
     # the grid the early-termination threshold counts in
-    return {"bits": None, "zlo": mm["zmin"], "zhi": mm["zmax"], "ldi": np.ascontiguousarray(ldi[:Lr]),
-            "total": total}
+    return Voxels(None, mm.zmin, mm.zmax, np.ascontiguousarray(ldi[:Lr]), total)
 
 
 def pass_peel(vox, shape, p):
     """Layered depth images from the bitmask (§3.4.2), or the on-the-fly tables of §3.4.1.
 
+    Parameters
+    ----------
+    vox : Voxels
+        The voxelization pass of this view (only ``bits``, ``zlo``, ``zhi``
+        are read for the bitmask; ``ldi``, ``total`` for ``depth='float'``).
+    shape : (H, W)
+        The view's size.
+    p : dict
+        The ``imagespace`` knobs (reads :data:`PEEL_KNOBS`).
+
     Returns
     -------
-    dict
-        ``ldi`` (L, H, W) float32 (``+inf`` where a pixel has fewer layers),
-        ``total`` (H, W) int32 set bits per pixel, ``lut`` (on-the-fly
-        peeling inputs) or None, ``why``.
+    Layers
+
+    References
+    ----------
+    Chaudhari (2008), §3.4.1 (on-the-fly peeling), §3.4.2 (layered depth images).
     """
     H, W = shape
     L = int(p["layers"])
     peel_all = bool(p["peel_all"])
-    if vox["bits"] is None:
-        ldi = vox["ldi"]
+    if vox.bits is None:
+        ldi = vox.ldi
         why = "the A-buffer is already sorted into layers"
         if peel_all and ldi.shape[0] < L:  # the thesis's fixed layer count: pad with absent layers
             ldi = np.concatenate([ldi, np.full((L - ldi.shape[0], H, W), np.inf, ldi.dtype)])
             why += f"; padded to all {L} layers (peel_all)"
-        return {"ldi": ldi, "total": vox["total"], "lut": None, "ran": False, "why": why}
+        return Layers(ldi, vox.total, None, False, why)
     S = int(p["slices"])
-    total = depth_complexity(vox["bits"])
+    total = depth_complexity(vox.bits)
     if p["peeling"] == "separate":
-        ldi, total = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], S, L, total, peel_all=peel_all)
+        ldi, total = peel_layers(vox.bits, vox.zlo, vox.zhi, S, L, total, peel_all=peel_all)
         why = (f"all {L} layers peeled (peel_all, §3.4.2): the scene's depth complexity is "
                f"{int(total.max(initial=0))}" if peel_all else
                f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
                f"{int(total.max(initial=0))}, the limit {L} (§3.4.2)")
-        return {"ldi": ldi, "total": total, "lut": None, "ran": True, "why": why}
+        return Layers(ldi, total, None, True, why)
     Lr = L if peel_all else int(min(L, total.max(initial=0)))
     ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
-    lut = (True, vox["bits"], np.ascontiguousarray(vox["zlo"]), np.ascontiguousarray(vox["zhi"]), S,
-           POPCOUNT8, SELECT8)
-    return {"ldi": ldi, "total": total, "lut": lut, "ran": False,
-            "why": "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)"}
+    lut = (True, vox.bits, np.ascontiguousarray(vox.zlo), np.ascontiguousarray(vox.zhi), S, POPCOUNT8, SELECT8)
+    return Layers(ldi, total, lut, False, "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)")
 
 
 def pass_reduce(mm, peel, p):
-    """Search bounds per layer (§3.7): ``bounds_hi``, ``bounds_lo`` (L,) float64 and ``why``."""
-    L = peel["ldi"].shape[0]
-    if peel["lut"] is not None:
+    """Search bounds per layer (§3.7).
+
+    Parameters
+    ----------
+    mm : MinMax
+        The min/max pass of this view (only ``gmin``, ``gmax`` are read).
+    peel : Layers
+        The peeling pass of this view (only ``ldi``, ``lut`` are read).
+    p : dict
+        The ``imagespace`` knobs (reads :data:`REDUCE_KNOBS`).
+
+    Returns
+    -------
+    Bounds
+
+    References
+    ----------
+    Chaudhari (2008), §3.7 (the MIP max-reduction of each layer).
+    """
+    L = peel.ldi.shape[0]
+    if peel.lut is not None:
         # no LDI to reduce: the exact global bound serves every layer
-        return {"bounds_hi": np.full(L, mm["gmax"]), "bounds_lo": np.full(L, mm["gmin"]),
-                "why": "on-the-fly peeling has no LDI: the global Zmax bounds every layer"}
-    margin = float(p["bound_margin"]) * (mm["gmax"] - mm["gmin"]) if np.isfinite(mm["gmax"]) else 0.0
-    bhi, blo = search_bounds(peel["ldi"], p["bounds"], int(p["mip_size"]), margin)
+        return Bounds(np.full(L, mm.gmax), np.full(L, mm.gmin),
+                      "on-the-fly peeling has no LDI: the global Zmax bounds every layer")
+    margin = float(p["bound_margin"]) * (mm.gmax - mm.gmin) if np.isfinite(mm.gmax) else 0.0
+    bhi, blo = search_bounds(peel.ldi, p["bounds"], int(p["mip_size"]), margin)
     why = (f"max-reduction of the {p['mip_size']}x{p['mip_size']} MIP level + margin {margin:.3g} (§3.7)"
            if p["bounds"] == "mip" else "exact per-layer maxima")
-    return {"bounds_hi": bhi, "bounds_lo": blo, "why": why}
+    return Bounds(bhi, blo, why)
 
 
 def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
-    """Every pixel's ray through the layers (§3.6-3.7), world space (:func:`trace_layers`)."""
-    thr = exit_thresholds(vox["zlo"], vox["zhi"], int(p["slices"]), p["exit_threshold"])
+    """Every pixel's ray through the layers (§3.6-3.7), world space (:func:`trace_layers`).
+
+    Parameters
+    ----------
+    mm : MinMax
+        The min/max pass (``zmax``: the backmost depth of early termination).
+    vox : Voxels
+        The voxelization pass (``zlo``, ``zhi``: the grid the exit threshold counts slices in).
+    peel : Layers
+        The layers (``ldi``, ``total``, ``lut``).
+    red : Bounds
+        The search bounds per layer.
+    cam : Camera
+        The view.
+    p : dict
+        The ``imagespace`` knobs (reads :data:`TRACE_KNOBS`).
+    ior, outside : float
+        Object and surrounding indices.
+    record : int, default 0
+        Events kept per path (``path_pos``, ``path_dir``).
+
+    Returns
+    -------
+    dict
+        :func:`~refraction_ref.imagespace.trace.trace_layers`'s output, world space.
+
+    References
+    ----------
+    Chaudhari (2008), §3.6 (binary search, Snell at every interface), §3.7 (search bounds, early
+    termination), §3.8 (path length); Oliveira and Brauwers (2007).
+    """
+    thr = exit_thresholds(vox.zlo, vox.zhi, int(p["slices"]), p["exit_threshold"])
     kw = {"record": int(record)} if record else {}
-    return trace_layers(peel["ldi"], peel["total"], mm["zmax"], thr, red["bounds_hi"], red["bounds_lo"], None,
+    return trace_layers(peel.ldi, peel.total, mm.zmax, thr, red.bounds_hi, red.bounds_lo, None,
                         cam, ior=ior, outside_ior=outside, world=True, iterations=int(p["iterations"]),
                         normals=p["normals"], delta=int(p["delta"]), tir=bool(p["tir"]),
-                        max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel["lut"],
+                        max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel.lut,
                         endpoint=p["endpoint"], filter=p["filter"], **kw)
 
 
@@ -203,22 +405,22 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     vox = pass_voxelize(mm, cam, p)
     timings["voxelize"] = (tic() - t0) * 1e3
     plan.append({"stage": "voxelize", "ran": True, "why": "float depth: exact fragment depths (A-buffer)"
-                 if vox["bits"] is None else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending"})
+                 if vox.bits is None else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending"})
     t0 = tic()
     pl = pass_peel(vox, cam.shape, p)
     timings["peel"] = (tic() - t0) * 1e3
-    plan.append({"stage": "peel", "ran": pl["ran"], "why": pl["why"]})
+    plan.append({"stage": "peel", "ran": pl.ran, "why": pl.why})
     t0 = tic()
     red = pass_reduce(mm, pl, p)
     timings["reduce"] = (tic() - t0) * 1e3
-    plan.append({"stage": "reduce", "ran": pl["lut"] is None, "why": red["why"]})
+    plan.append({"stage": "reduce", "ran": pl.lut is None, "why": red.why})
     t0 = tic()
     tr = pass_trace(mm, vox, pl, red, cam, p, ior, outside)
     timings["trace"] = (tic() - t0) * 1e3
     plan.append({"stage": "trace", "ran": True, "why": f"{p['iterations']} binary-search iterations"})
-    total = pl["total"]
+    total = pl.total
     n_over = int(np.count_nonzero(total > int(p["layers"])))
-    return {"trace": tr, "total": total, "ldi": pl["ldi"], "zmin": mm["zmin"], "zmax": mm["zmax"],
+    return {"trace": tr, "total": total, "ldi": pl.ldi, "zmin": mm.zmin, "zmax": mm.zmax,
             "pixels_over_layer_limit": n_over}
 
 
@@ -251,33 +453,34 @@ def _st_minmax(ctx):
                          "outside the objects")
     mm = pass_minmax(g["geom"], cam, ctx.scene.data["imagespace"])
     ctx.note("per-pixel Zmin/Zmax (§3.3)")
-    return dict(mm, cam=cam)
+    return dict(mm._asdict(), cam=cam)
 
 
 def _st_voxelize(ctx):
     p = ctx.scene.data["imagespace"]
     mm = ctx.buf["minmax"]
-    vox = pass_voxelize(mm, mm["cam"], p)
-    ctx.note("float depth: exact fragment depths kept per pixel (A-buffer), no bitmask" if vox["bits"] is None
+    vox = pass_voxelize(from_buffers(MinMax, mm), mm["cam"], p)
+    ctx.note("float depth: exact fragment depths kept per pixel (A-buffer), no bitmask" if vox.bits is None
              else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)")
-    return vox
+    return vox._asdict()
 
 
 def _st_peel(ctx):
     p = ctx.scene.data["imagespace"]
-    pl = pass_peel(ctx.buf["voxelize"], ctx.buf["minmax"]["cam"].shape, p)
-    ctx.note(pl["why"])
-    total = pl["total"]
-    ctx.stats.update({"layers_used": int(pl["ldi"].shape[0]),
+    pl = pass_peel(from_buffers(Voxels, ctx.buf["voxelize"]), ctx.buf["minmax"]["cam"].shape, p)
+    ctx.note(pl.why)
+    total = pl.total
+    ctx.stats.update({"layers_used": int(pl.ldi.shape[0]),
                       "pixels_over_layer_limit": int(np.count_nonzero(total > int(p["layers"]))),
                       "depth_complexity_max": int(total.max(initial=0))})
-    return dict(pl, depth_complexity=total.astype(np.int16))
+    return dict(pl._asdict(), depth_complexity=total.astype(np.int16))
 
 
 def _st_reduce(ctx):
-    red = pass_reduce(ctx.buf["minmax"], ctx.buf["peel"], ctx.scene.data["imagespace"])
-    ctx.note(red["why"])
-    return red
+    red = pass_reduce(from_buffers(MinMax, ctx.buf["minmax"]), from_buffers(Layers, ctx.buf["peel"]),
+                      ctx.scene.data["imagespace"])
+    ctx.note(red.why)
+    return red._asdict()
 
 
 def _st_normals(ctx):
@@ -301,8 +504,9 @@ def _st_trace(ctx):
     p = ctx.scene.data["imagespace"]
     g = ctx.buf["geometry"]
     b = ctx.buf
-    tr = pass_trace(b["minmax"], b["voxelize"], b["peel"], b["reduce"], b["minmax"]["cam"], p, g["ior"],
-                    g["outside_ior"], record=int(p["record"]))
+    tr = pass_trace(from_buffers(MinMax, b["minmax"]), from_buffers(Voxels, b["voxelize"]),
+                    from_buffers(Layers, b["peel"]), from_buffers(Bounds, b["reduce"]), b["minmax"]["cam"], p,
+                    g["ior"], g["outside_ior"], record=int(p["record"]))
     ctx.note(f"{p['iterations']} binary-search iterations per interface ending at the "
              + ("last probe's texel (§3.6)" if p["endpoint"] == "probe" else "final bracket's midpoint")
              + f", {p['filter']} depth sampling, {p['normals']} normals"
@@ -364,10 +568,12 @@ def eye_stages():
 
 
 def _stages(scene):
-    from ..caustics.pipeline import has_caustics, imagespace_caustic_stages
+    from ..caustics.pipeline import has_caustics
+    from .caustics import imagespace_caustic_stages
 
     st = eye_stages()
-    return st + (imagespace_caustic_stages(scene) if has_caustics(scene) else ())
+    knobs = MINMAX_KNOBS + VOXELIZE_KNOBS + PEEL_KNOBS + REDUCE_KNOBS + TRACE_KNOBS
+    return st + (imagespace_caustic_stages(scene, layered_trace, knobs) if has_caustics(scene) else ())
 
 
 def _skipped(scene):
@@ -401,34 +607,35 @@ def _assemble(scene, bufs, stats):
     return arrays, info
 
 
-def _warm(scene=None):
-    """Compile (or load) the kernels this scene's plan needs, on a tiny copy of it (``_warmup.warm``)."""
-    from .. import _warmup
-
-    _warmup.warm("imagespace", scene)
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a few pixels and photons, same kernels."""
+    return {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "caustics.map_size": 8}
 
 
 METHOD = register_method(Method(
-    "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped, warm=_warm,
+    "imagespace", blocks=("imagespace",), stages=_stages, assemble=_assemble, skipped=_skipped,
+    warm=warmer("imagespace"), tiny=_tiny, label="Chaudhari 2008",
     results=("rays", "trace", "shade", "peel.depth_complexity", "receivers.rs", "gather", "caustic_final"),
     check=check_memory,
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 
-def render_imagespace(scene, warm=True, cache=None, keep=None):
+def render_imagespace(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Render a scene with the image-space method (runs :data:`METHOD`'s stage graph).
 
     Parameters
     ----------
     scene : Scene
         A validated scene (:func:`~refraction_ref.scene.load_scene`).
-    warm : bool
-        Compile (or load from the cache) every kernel on a tiny scene first,
-        so that ``timings_ms`` measure run time, not JIT time.
     cache : dict, optional
         Stage cache (:class:`~refraction_ref.session.Session` keeps one).
     keep : str or list, optional
         Stages whose buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool
+        Compile (or load from the cache) every kernel on a tiny scene first,
+        so that ``timings_ms`` measure run time, not JIT time.
+    progress : bool
+        Show a progress bar on long work.
 
     Returns
     -------
@@ -441,4 +648,4 @@ def render_imagespace(scene, warm=True, cache=None, keep=None):
     ----------
     Chaudhari (2008), chapter 3.
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)

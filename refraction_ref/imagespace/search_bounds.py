@@ -79,6 +79,22 @@ def mip_level(layer, size):
     Texels are averaged over ``f x f`` blocks, ``f = ceil(max(H, W) / size)``;
     absent (infinite) texels are excluded, and a block with none present is
     absent (NaN).
+
+    Parameters
+    ----------
+    layer : (H, W) float
+        One layered depth image, ``+inf`` where absent.
+    size : int
+        Most texels of the MIP level along its longer side.
+
+    Returns
+    -------
+    (ceil(H / f), ceil(W / f)) float64
+        Mean depth of the present texels of each block, NaN where none is.
+
+    References
+    ----------
+    Chaudhari (2008), §3.7 (MIP level of each layer, reduced to its maximum).
     """
     H, W = layer.shape
     f = max(1, int(np.ceil(max(H, W) / size)))

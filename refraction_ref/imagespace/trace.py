@@ -72,7 +72,7 @@ from ..camera import primary_dir, project_point, unproject_pixel
 from ..optics import refract3
 from ..schedule import coprime_stride, strided
 from ..status import EXITED, LIMIT, LOST, MISSED, TIR
-from .normals import layer_depth, normal_filtered, sample_depth
+from .normals import ViewGrid, layer_depth, normal_filtered, sample_depth
 
 __all__ = ["trace_layers", "exit_thresholds", "ENDPOINTS"]
 
@@ -94,9 +94,9 @@ def _screen(x, y, z, W, H, sx, sy, ortho=False):
 
 
 @nb.njit(cache=True, inline="always")
-def _behind(ldi, n, x, y, z, forward, lut, W, H, sx, sy, ortho, filt):
+def _behind(ldi, n, x, y, z, forward, lut, grid, filt):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
-    r, c = _screen(x, y, z, W, H, sx, sy, ortho)
+    r, c = _screen(x, y, z, grid.W, grid.H, grid.sx, grid.sy, grid.ortho)
     if r < 0.0:
         return False
     ls = sample_depth(ldi, n, r, c, lut, filt)
@@ -129,16 +129,6 @@ class _Layers(NamedTuple):
     bounds_hi: np.ndarray  # (L,) forward search bounds
     bounds_lo: np.ndarray  # (L,) backward search bounds
     lut: tuple  # on-the-fly peeling inputs (normals.no_lut when unused)
-
-
-class _Grid(NamedTuple):
-    """The image the layers were rendered in: size, half extents, projection."""
-
-    W: int
-    H: int
-    sx: float
-    sy: float
-    ortho: bool
 
 
 class _Knobs(NamedTuple):
@@ -176,6 +166,80 @@ class _Outputs(NamedTuple):
     status: np.ndarray
     path_pos: np.ndarray  # (H, W, K, 3); (1, 1, 1, 3) unused when record is 0
     path_dir: np.ndarray
+
+
+@nb.njit(cache=True, inline="always")
+def _bisect(ldi, t, p, e, forward, lut, grid, filt, iterations):
+    """The binary search between S = p and E = e (Oliveira & Brauwers 2007; Chaudhari 2008, §3.6).
+
+    Returns the final bracket ``(a, b)`` (fractions of the way from S to E),
+    the last probe ``m`` (1, E itself, when there are no iterations) and
+    whether any probe crossed layer ``t``.
+    """
+    px, py, pz = p
+    ex, ey, ez = e
+    a = 0.0
+    b = 1.0
+    m = 1.0  # the last probe (E itself when there are no iterations)
+    found = False
+    for _ in range(iterations):
+        m = 0.5 * (a + b)
+        if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
+                   forward, lut, grid, filt):
+            b = m
+            found = True
+        else:
+            a = m
+    return a, b, m, found
+
+
+@nb.njit(cache=True, inline="always")
+def _probe_hit(ldi, t, p, e, m, lut, grid, filt):
+    """``endpoint='probe'`` (§3.6): the surface point R_n of layer ``t`` at the last probe's texel.
+
+    The point of the line of sight through the last probe P_n (at ``m``
+    between S = p and E = e) at the layer's depth there, whichever side of
+    the layer P_n was. Returns ``(ok, qx, qy, qz, rq, cq)``: ``ok`` False
+    where that texel lacks the layer; ``(rq, cq)`` is the probe's screen
+    position.
+    """
+    px, py, pz = p
+    ex, ey, ez = e
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
+    qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
+    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+    dq = sample_depth(ldi, t, rq, cq, lut, filt) if rq >= 0.0 else np.inf
+    if not math.isfinite(dq):
+        return False, qx, qy, qz, rq, cq
+    qx, qy, qz = unproject_pixel(cq, rq, dq, W, H, sx, sy, ortho)
+    return True, qx, qy, qz, rq, cq
+
+
+@nb.njit(cache=True, inline="always")
+def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filt):
+    """``endpoint='bracket'``: the midpoint of the final bracket ``ab = (a, b)``, with two fallbacks.
+
+    ``E`` is tested when no probe crossed the layer; the bracket's far end
+    replaces a midpoint whose texel lacks the layer. Returns
+    ``(ok, qx, qy, qz, rq, cq)``, ``ok`` False when not even ``E`` crossed
+    layer ``t``.
+    """
+    px, py, pz = p
+    ex, ey, ez = e
+    a, b = ab
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
+    if not found:
+        found = _behind(ldi, t, ex, ey, ez, forward, lut, grid, filt)
+    if not found:
+        return False, 0.0, 0.0, 0.0, -1.0, -1.0
+    m = 0.5 * (a + b)
+    qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
+    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+    if rq < 0.0 or not math.isfinite(layer_depth(ldi, t, np.int64(rq), np.int64(cq), lut)):
+        # the midpoint fell where the layer is absent: use the bracket's far end
+        qx, qy, qz = px + b * (ex - px), py + b * (ey - py), pz + b * (ez - pz)
+        rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
+    return True, qx, qy, qz, rq, cq
 
 
 @nb.njit(cache=True, parallel=True)
@@ -242,7 +306,7 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 # nearest: the texel's own normal (at its centre); bilinear: filtered reads at the hit's
                 # texture coordinate
                 rn, cn = (ti + 0.5, tj + 0.5) if filt == 0 else (rq, cq)
-                nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, W, H, sx, sy, ortho, filt)
+                nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, grid, filt)
                 wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
                 if events < rec:  # event `events`: where, and the direction Snell gave
                     _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
@@ -290,43 +354,21 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                 k = (zb - depth_p) / dd
                 ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
                 # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
-                a = 0.0
-                b = 1.0
-                m = 1.0  # the last probe (E itself when there are no iterations)
-                found = False
-                for _ in range(iterations):
-                    m = 0.5 * (a + b)
-                    if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
-                               forward, lut, W, H, sx, sy, ortho, filt):
-                        b = m
-                        found = True
-                    else:
-                        a = m
+                a, b, m, found = _bisect(ldi, t, (px, py, pz), (ex, ey, ez), forward, lut, grid, filt,
+                                         iterations)
                 if endpoint == 0:
-                    # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there (on the line
-                    # of sight through P_n, at the layer's depth), whichever side of the layer P_n was
-                    qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
-                    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
-                    dq = sample_depth(ldi, t, rq, cq, lut, filt) if rq >= 0.0 else np.inf
-                    if not math.isfinite(dq):
+                    # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there
+                    ok, qx, qy, qz, rq, cq = _probe_hit(ldi, t, (px, py, pz), (ex, ey, ez), m, lut, grid, filt)
+                    if not ok:
                         st = EXITED if outside else LOST  # the last probe's texel lacks the layer
                         break
-                    qx, qy, qz = unproject_pixel(cq, rq, dq, W, H, sx, sy, ortho)
                     ti, tj = np.int64(math.floor(rq)), np.int64(math.floor(cq))
                     continue
-                # 'bracket': the midpoint of the final bracket, with two fallbacks
-                if not found:
-                    found = _behind(ldi, t, ex, ey, ez, forward, lut, W, H, sx, sy, ortho, filt)
-                if not found:
+                ok, qx, qy, qz, rq, cq = _bracket_hit(ldi, t, (px, py, pz), (ex, ey, ez), (a, b), found, forward,
+                                                      lut, grid, filt)
+                if not ok:
                     st = EXITED if outside else LOST
                     break
-                m = 0.5 * (a + b)
-                qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
-                rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
-                if rq < 0.0 or not math.isfinite(layer_depth(ldi, t, np.int64(rq), np.int64(cq), lut)):
-                    # the midpoint fell where the layer is absent: use the bracket's far end
-                    qx, qy, qz = px + b * (ex - px), py + b * (ey - py), pz + b * (ez - pz)
-                    rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
                 ti, tj = np.int64(rq), np.int64(cq)
             status[i, j] = st
             interfaces[i, j] = nint
@@ -357,6 +399,27 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
     A ray closer than this to the pixel's backmost depth stops there
     (§3.7). One slice spans ``(zhi - zlo) / (S - 1)`` (§3.3); the threshold
     is 0 where the pixel has no fragment.
+
+    Parameters
+    ----------
+    zlo, zhi : (H, W) array_like of float
+        Frontmost and backmost depth per pixel (the min/max pass; ``inf``
+        where the pixel has no fragment).
+    slices : int
+        Slices ``S`` of each pixel's depth grid (>= 2).
+    exit_threshold : float
+        Threshold in slices.
+
+    Returns
+    -------
+    (H, W) float64 ndarray
+        Threshold in depth units, 0 where it is not finite.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §3.3 (the depth slices) and §3.7
+       (early termination near the backmost surface).
     """
     zlo = np.ascontiguousarray(zlo, dtype=np.float64)
     zhi = np.ascontiguousarray(zhi, dtype=np.float64)
@@ -491,7 +554,7 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
                      np.ascontiguousarray(bounds_hi, dtype=np.float64),
                      np.ascontiguousarray(bounds_lo, dtype=np.float64),
                      no_lut(None) if lut is None else lut)
-    grid = _Grid(Wc, Hc, sx, sy, bool(camera.ortho))
+    grid = ViewGrid(Wc, Hc, sx, sy, bool(camera.ortho))
     knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
                    int(max_interfaces), int(L if layer_limit is None else layer_limit), record,
                    ENDPOINTS[endpoint], FILTERS[filter])

@@ -28,9 +28,23 @@ __all__ = ["voxelize_bitmask", "collect_depths", "slice_bounds"]
 def slice_bounds(zmin, zmax, slicing="local"):
     """The depth range each pixel's slices span: local bounds or the global ones.
 
+    Parameters
+    ----------
+    zmin, zmax : (H, W) float64
+        Local depth bounds of the min/max pass (``+inf`` / ``-inf`` where
+        uncovered).
+    slicing : {'local', 'global'}
+        ``'local'`` returns the per-pixel bounds as they are (the thesis's
+        choice); anything else fills the image with the extremes over the
+        covered pixels (0 for an empty view).
+
     Returns
     -------
     zlo, zhi : (H, W) float64
+
+    References
+    ----------
+    Chaudhari (2008), §3.3 (slicing between local or global bounds).
     """
     if slicing == "local":
         return zmin, zmax
@@ -72,6 +86,15 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
 def collect_depths(tri_view, camera, capacity=32):
     """Exact fragment depths per pixel, sorted front to back (an A-buffer).
 
+    Parameters
+    ----------
+    tri_view : (T, 3, 3) ndarray or RasterSetup
+        Triangles in view space (clipped to the near plane by
+        :func:`~refraction_ref.raster.raster_setup` when given raw).
+    camera : Camera
+    capacity : int
+        Most fragment depths kept per pixel.
+
     Returns
     -------
     depths : (L, H, W) float32
@@ -79,6 +102,11 @@ def collect_depths(tri_view, camera, capacity=32):
         array); ``L = min(capacity, max(total))``.
     total : (H, W) int32
         All fragments of the pixel, including those beyond ``capacity``.
+
+    References
+    ----------
+    Chaudhari (2008), §3.3 (the float-depth variant keeps the fragment depths
+    the bitmask of §3.3 quantises).
     """
     total = rasterize(tri_view, camera, "count", clip=True)
     cap = int(min(capacity, total.max(initial=0)))  # never more than the depth complexity

@@ -61,7 +61,23 @@ _INSTALL = 'pip install -e ".[crosscheck]"  (or: pip install "mitsuba>=3.5")'
 
 
 def require(variant="scalar_rgb"):
-    """Import Mitsuba 3 and set ``variant``; a clear ImportError when it is absent."""
+    """Import Mitsuba 3 and set ``variant``; a clear ImportError when it is absent.
+
+    Parameters
+    ----------
+    variant : str
+        Mitsuba variant to set (``"scalar_rgb"``, ``"llvm_ad_rgb"``, ...).
+
+    Returns
+    -------
+    module
+        The ``mitsuba`` module with ``variant`` active.
+
+    Raises
+    ------
+    ImportError
+        Mitsuba is not installed, or the variant is not available.
+    """
     try:
         import mitsuba as mi
     except ImportError as e:
@@ -76,7 +92,23 @@ def require(variant="scalar_rgb"):
 # --------------------------------------------------------------------------- files
 def write_ply(path, vertices, faces, normals=None):
     """A binary little-endian PLY (trimesh's writer): float32 ``x y z`` (and ``nx ny nz``), ``uchar``/``int``
-    face lists, the vertices and normals as given (no processing)."""
+    face lists, the vertices and normals as given (no processing).
+
+    Parameters
+    ----------
+    path : str
+        The file to write.
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles (vertex indices).
+    normals : (V, 3) array_like of float, optional
+        Vertex normals; none written when None.
+
+    Returns
+    -------
+    None
+    """
     import trimesh
     from trimesh.exchange.ply import export_ply
 
@@ -99,13 +131,19 @@ def _split_corners(faces, corner_normals):
 def object_meshes(scene):
     """Each refractive object's world triangles with the exact reference's shading normals.
 
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene (its ``exact.normals`` and ``exact.crease_deg`` choose
+        the normals).
+
     Returns
     -------
     list of dict
         ``vertices`` (V, 3), ``faces`` (F, 3), ``normals`` (V, 3) or None (face
         normals), ``ior``, ``absorption`` (3,), ``rule`` (the normals rule).
     """
-    from ..exact_render import shading_normals
+    from ..exact.pipeline import shading_normals
     from ..meshes import scene_geometry
 
     geom = scene_geometry(scene)
@@ -142,6 +180,20 @@ def envmap_bitmap(env, width=ENV_WIDTH, base_dir="."):
     those directions, so every texel is exact and only Mitsuba's bilinear
     blend between texels differs from ours: within one texel of a sharp
     edge (a checker's), i.e. ``width`` sets the error.
+
+    Parameters
+    ----------
+    env : dict
+        The scene's ``environment`` block.
+    width : int
+        Bitmap width ``W``; the height is ``W // 2 + 1``.
+    base_dir : str
+        Folder for a relative ``latlong`` image path.
+
+    Returns
+    -------
+    (W // 2 + 1, W, 3) float32 ndarray
+        Linear RGB.
     """
     from ..environment import environment_lookup
 
@@ -304,6 +356,18 @@ def to_dict(spec, folder):
     File entries become absolute ``filename`` s in ``folder``; look-at entries
     ``mi.ScalarTransform4f`` s. A ``refraction_ref_refract`` BSDF needs
     :func:`register_refract_bsdf` first.
+
+    Parameters
+    ----------
+    spec : dict
+        The spec of :func:`export`.
+    folder : str
+        The folder the spec's files were written into.
+
+    Returns
+    -------
+    dict
+        Nested dictionary for ``mi.load_dict`` (``resolution`` entries dropped).
     """
     import mitsuba as mi
 
@@ -378,7 +442,18 @@ def _xml_node(d, name=None, indent="    "):
 
 
 def to_xml(spec):
-    """The spec as Mitsuba 3 XML (``<scene version="3.0.0">``; file names relative to the XML file)."""
+    """The spec as Mitsuba 3 XML (``<scene version="3.0.0">``; file names relative to the XML file).
+
+    Parameters
+    ----------
+    spec : dict
+        The spec of :func:`export`.
+
+    Returns
+    -------
+    str
+        The XML document.
+    """
     body = [_xml_node(v, k) for k, v in spec.items() if k != "type"]
     return '<?xml version="1.0" encoding="utf-8"?>\n<!-- written by refraction-ref (refraction_ref.interop.mitsuba) -->\n' \
            '<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
@@ -388,6 +463,20 @@ def write_xml(scene, path, **kw):
     """Export ``scene`` as ``path`` (Mitsuba XML) with its mesh and bitmap files beside it; the spec.
 
     Keyword arguments are those of :func:`export`.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to export.
+    path : str
+        The XML file; the mesh and bitmap files go into its folder.
+    **kw
+        Passed to :func:`export` (``bsdf``, ``env_width``, ...).
+
+    Returns
+    -------
+    dict
+        The spec (:func:`export`).
     """
     folder = os.path.dirname(os.path.abspath(path))
     spec = export(scene, folder, **kw)
@@ -397,7 +486,27 @@ def write_xml(scene, path, **kw):
 
 
 def load(scene, folder, variant="scalar_rgb", **kw):
-    """The scene as a loaded ``mi.Scene`` (files written into ``folder``); (mi.Scene, spec)."""
+    """The scene as a loaded ``mi.Scene`` (files written into ``folder``); (mi.Scene, spec).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to export.
+    folder : str
+        Folder for the mesh and bitmap files.
+    variant : str
+        Mitsuba variant to set (:func:`require`).
+    **kw
+        Passed to :func:`export`; ``bsdf="refract"`` also registers the
+        Fresnel-free BSDF.
+
+    Returns
+    -------
+    mi_scene : mitsuba.Scene
+        The loaded scene.
+    spec : dict
+        The spec (:func:`export`).
+    """
     mi = require(variant)
     spec = export(scene, folder, **kw)
     if kw.get("bsdf") == "refract":

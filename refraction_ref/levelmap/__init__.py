@@ -11,7 +11,9 @@ References
    University, 2006.
 """
 
-__all__ = ["render_levelmap", "render_water_exact", "default_scene"]
+# the exact water reference (render_water_exact) lives in refraction_ref.exact, which reuses this
+# package's passes: it is not re-exported here, so the level map imports nothing of the exact package
+__all__ = ["render_levelmap", "default_scene"]
 
 
 def __getattr__(name):  # lazy: scene validation imports .knobs without the kernels
@@ -19,8 +21,4 @@ def __getattr__(name):  # lazy: scene validation imports .knobs without the kern
         from . import pipeline
 
         return getattr(pipeline, name)
-    if name == "render_water_exact":
-        from .exact_water import render_water_exact
-
-        return render_water_exact
     raise AttributeError(name)

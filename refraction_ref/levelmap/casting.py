@@ -37,10 +37,30 @@ __all__ = ["cast_between", "shade_image"]
 def cast_between(E_l, box_l, lm_l, box_0, lm_0, out):
     """Add light ``l``'s caustics map, cast onto the surface seen in frame 0, to ``out``.
 
+    Parameters
+    ----------
+    E_l : (Hc_l, Wc_l) float
+        Light ``l``'s caustics map (irradiance per texel of its box).
+    box_l : Box
+        Light ``l``'s reference box of the receiver.
+    lm_l : LevelMap
+        The receiver's level map in ``box_l`` (position map and ownership).
+    box_0 : Box
+        The first light's reference box, the frame of ``out``.
+    lm_0 : LevelMap
+        The receiver's level map in ``box_0``.
+    out : (Hc_0, Wc_0) float
+        Caustics map in frame 0, added to in place.
+
     Returns
     -------
     int
         Texels that received light ``l``'s value.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.1 (eq. 4-20, Fig. 4-17), §2.5 (projective texture
+    mapping).
     """
     ii, jj = np.nonzero(lm_0.own & np.isfinite(lm_0.depth))
     if len(ii) == 0:
@@ -78,6 +98,10 @@ def shade_image(camera, receivers, boxes, maps, albedo, ambient):
     image : (H, W, 3) float32
     mask : (H, W) bool
         Pixels showing a receiver (the object pixels of eq. 2-9).
+
+    References
+    ----------
+    Tipprasert (2006), §4.6, eq. 4-19.
     """
     H, W = camera.shape
     best = np.full((H, W), np.inf)

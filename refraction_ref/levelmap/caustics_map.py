@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values, oriented_triangle, pixel_span
+from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, pixel_span, row_span
 
 __all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane", "splat_planes", "GROUP_SECTIONS"]
 
@@ -171,7 +171,26 @@ def _to_map(org, dirs, tbar, frame, O, D, tdz, inv_tv):
 
 
 def beams_in_map(vols, box):
-    """Express illumination volumes in the map coordinates of ``box``."""
+    """Express illumination volumes in the map coordinates of ``box``.
+
+    Parameters
+    ----------
+    vols : IlluminationVolumes
+        The beams under the water surface (:func:`~.illumination.illumination_volumes`).
+    box : Box
+        A receiver's level-map box (:class:`~.planes.Box`).
+
+    Returns
+    -------
+    BeamSet
+        Edge-ray origins and rates in ``(col, row, zeta)``, each beam's flux,
+        axis, ``T . T0`` and ``1 / |T . V|``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5 (the illumination volumes intersected with the
+    reference planes, Fig. 4-15).
+    """
     return BeamSet(vols, box)
 
 
@@ -182,10 +201,23 @@ def cull_beams(beams, box, zmin, zmax):
     rectangle over ``[zmin, zmax]`` is that of the two end sections (the
     bounding-volume test of §6.1). Changes no texel.
 
+    Parameters
+    ----------
+    beams : BeamSet
+        Beams in the map coordinates of ``box`` (:func:`beams_in_map`).
+    box : Box
+        The receiver's box; its map is ``box.size`` texels.
+    zmin, zmax : float
+        Depth range of the planes to draw (map depth ``zeta``).
+
     Returns
     -------
     (M,) int64
         Indices of the candidate beams, increasing.
+
+    References
+    ----------
+    Tipprasert (2006), §6.1 (culling by bounding volumes, further work).
     """
     Hc, Wc = box.size
     O = beams.O
@@ -332,23 +364,23 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
             j0, j1 = pixel_span(min(x0, min(x1, x2)), max(x0, max(x1, x2)), rects[g, 2], rects[g, 3])
             if j0 > j1 or i0 > i1:
                 continue
-            a0, a1, a2, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
+            e = edge_setup(x0, y0, x1, y1, x2, y2)
+            a0, a1, a2 = e[0], e[1], e[2]
+            v = (x0, y0, x1, y1, x2, y2)
             inv_area = 1.0 / area
             tx = tbar[t, 0]
             ty = tbar[t, 1]
             tz = tbar[t, 2]
             kk = K / tdz[t] if K > 0.0 else 0.0
             base = B[s]
-            px0 = 256 * j0 + 128
             for i in range(i0, i1 + 1):
-                w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, px0, 256 * i + 128)
-                for j in range(j0, j1 + 1):
-                    if j > j0:
+                # the rasterizer's scanline step: the row's covered run, edge functions stepped along it
+                ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
+                for j in range(ja, jb + 1):
+                    if j > ja:
                         w0 -= 256 * a0
                         w1 -= 256 * a1
                         w2 -= 256 * a2
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
-                        continue
                     if accept[i, j] != key:  # depth test against the position map (eq. 4-15)
                         continue
                     g_ = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
@@ -429,6 +461,36 @@ def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, ou
 
 
 def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
-    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``."""
+    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``.
+
+    Parameters
+    ----------
+    beams : BeamSet
+    cand : (M,) int64
+        Candidate beams.
+    box : Box
+    zp : float
+        Plane depth.
+    K : float
+        Absorption coefficient of the water.
+    rect : (4,) int64
+        Scissor rectangle (row0, row1, col0, col1).
+    accept : (Hc, Wc) int32
+        Depth-test map: a fragment is kept where ``accept == key``.
+    key : int
+    zeta, normal : (Hc, Wc), (Hc, Wc, 3)
+        Depth and unit normal of the receiver at each texel.
+    out : (Hc, Wc) float64
+        Accumulated irradiance (additive blending).
+
+    Returns
+    -------
+    int
+        Number of intersection triangles drawn.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eqs. 4-15 to 4-18, Fig. 4-15.
+    """
     return splat_planes(beams, cand, box, [zp], K, np.asarray(rect, np.int64).reshape(1, 4), accept, [key], zeta,
                         normal, out)

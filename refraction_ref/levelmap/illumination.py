@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from ..optics import refract3
-from ..scene import SceneError
+from ..validation import SceneError
 from .water import light_weight
 
 __all__ = ["IlluminationVolumes", "illumination_volumes"]

@@ -58,6 +58,10 @@ def plane_index_map(lm, box, n, placement="tight"):
     (Hc, Wc) int32
         Texels whose first surface is another receiver, or lies outside the
         planes' acceptance slabs, get ``-1``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.4, eq. 4-15.
     """
     from .planes import plane_lattice
 
@@ -102,6 +106,22 @@ def plane_rects(pidx, n):
 
     Empty planes get ``row0 > row1``. Fragments outside the rectangle would
     fail the depth test anyway; it is the bounding-volume test of §6.1.
+
+    Parameters
+    ----------
+    pidx : (Hc, Wc) int
+        Plane accepting each texel, ``-1`` for none (:func:`plane_index_map`).
+    n : int
+        Number of planes.
+
+    Returns
+    -------
+    (n, 4) int64
+        ``row0, row1, col0, col1`` of each plane, inclusive texel indices.
+
+    References
+    ----------
+    Tipprasert (2006), §4.4 (eq. 4-15) and §6.1 (bounding-volume test).
     """
     out = np.empty((int(n), 4), np.int64)
     _rects(np.ascontiguousarray(pidx, dtype=np.int32), int(n), out)
@@ -123,6 +143,10 @@ def section_points(origins, dirs, zeta_p):
     points : (..., 2) float64 and lam : (...) float64
         ``(col, row)`` on the plane and the distance travelled; ``lam`` is
         ``+inf`` for rays that never go deeper (``dzeta <= 0``).
+
+    References
+    ----------
+    Tipprasert (2006), §4.4, Fig. 4-14.
     """
     o = np.asarray(origins, dtype=np.float64)
     d = np.asarray(dirs, dtype=np.float64)

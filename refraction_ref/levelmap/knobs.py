@@ -11,17 +11,17 @@ outside's for light to enter), ``absorption`` K (>= 0, per unit length),
 
 Level-map knobs: ``planes`` (1..4096), ``smart_slicing`` (bool),
 ``depth_levels`` (1..65536), ``variant`` (``levelmap`` | ``volumetric`` |
-``per_ray``), ``map_size`` (texels per side, 1..8192), ``shadows`` (bool:
-receivers occlude each other), ``ambient`` (>= 0, eq. 4-19's ``I_a`` as a
-fraction of the albedo), ``exact_samples`` (water samples per side for the
-exact reference, 2..16384), ``exact_seed`` (jitter of those samples),
-``placement`` (``thesis`` | ``tight``: the reference box and planes of
-eqs. 4-2/4-3, 4-7 to 4-9, or the tight box with planes at slab centres),
-``smart_spacing`` (``lattice`` | ``respace``: smart slicing drops the normal
+``per_ray``), ``smart_spacing`` (``lattice`` | ``respace``: smart slicing drops the normal
 slicing's empty planes, or re-spaces ``n_i`` planes in each sub-box by
 eq. 4-22), ``culling`` (``none`` | ``bounds``: every intersection triangle over
 the whole map on every plane, the thesis's cost, or §6.1's bounding-volume
 test and a scissor per plane; the same maps).
+
+Moved keys (old names keep working as aliases): ``map_size``, ``placement``,
+``shadows`` and ``ambient`` are the ``caustics`` block's
+(:mod:`refraction_ref.caustics.knobs`: ``caustics.map_size``, ...);
+``exact_samples`` and ``exact_seed`` the exact reference's
+(``exact.water_samples``, ``exact.photon_seed``).
 """
 
 from __future__ import annotations
@@ -34,14 +34,12 @@ __all__ = ["merge_water", "validate_levelmap", "VARIANTS", "LEVELMAP_DEFAULTS", 
            "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE"]
 
 VARIANTS = ("levelmap", "volumetric", "per_ray")
-PLACEMENTS = ("thesis", "tight")
 SPACINGS = ("lattice", "respace")
 CULLINGS = ("none", "bounds")
 
 LEVELMAP_DEFAULTS = {
     "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
-    "map_size": 512, "shadows": True, "ambient": 0.1, "exact_samples": 2048, "exact_seed": 0,
-    "placement": "thesis", "smart_spacing": "lattice", "culling": "none",
+    "smart_spacing": "lattice", "culling": "none",
 }
 
 #: Water block (merged only when a scene has one; "water": null means no water).
@@ -52,60 +50,55 @@ WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], 
 
 def merge_water(data, water_defaults=WATER_DEFAULTS, wave_defaults=WAVE_DEFAULTS):
     """Fill a present ``water`` block (and each wave) with the defaults; idempotent."""
-    from ..scene import SceneError, _merge
+    from ..validation import SceneError, merge_defaults
 
     w = data.get("water")
     if w is None:
         return data
-    w = _merge(water_defaults, w, "water")
+    w = merge_defaults(water_defaults, w, "water")
     waves = w.get("waves")
     if waves is None:
         waves = []
     if not isinstance(waves, list):
         raise SceneError(f"scene: 'water.waves' must be a list of waves, got {type(waves).__name__}")
-    w["waves"] = [_merge(wave_defaults, x, f"water.waves[{k}]") for k, x in enumerate(waves)]
+    w["waves"] = [merge_defaults(wave_defaults, x, f"water.waves[{k}]") for k, x in enumerate(waves)]
     data["water"] = w
     return data
 
 
 def validate_levelmap(data, base_dir="."):
     """Check the ``levelmap`` knobs and the ``water`` block (merged with its defaults first)."""
-    from ..scene import SceneError, _num, _vec
+    from ..validation import SceneError, check_number, check_vector
 
     merge_water(data)
     p = data["levelmap"]
-    _num(p["planes"], "levelmap.planes", 1, 4096, integer=True)
-    _num(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
-    _num(p["map_size"], "levelmap.map_size", 1, 8192, integer=True)
-    _num(p["ambient"], "levelmap.ambient", 0.0)
-    _num(p["exact_samples"], "levelmap.exact_samples", 2, 16384, integer=True)
-    _num(p["exact_seed"], "levelmap.exact_seed", 0, integer=True)
-    for k in ("smart_slicing", "shadows"):
-        if not isinstance(p[k], bool):
-            raise SceneError(f"scene: levelmap.{k} must be true or false, got {p[k]!r}")
+    check_number(p["planes"], "levelmap.planes", 1, 4096, integer=True)
+    check_number(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
+    if not isinstance(p["smart_slicing"], bool):
+        raise SceneError(f"scene: levelmap.smart_slicing must be true or false, got {p['smart_slicing']!r}")
     if p["variant"] not in VARIANTS:
         raise SceneError(f"scene: 'levelmap.variant' is {p['variant']!r}; choose one of {', '.join(VARIANTS)}")
-    for k, allowed in (("placement", PLACEMENTS), ("smart_spacing", SPACINGS), ("culling", CULLINGS)):
+    for k, allowed in (("smart_spacing", SPACINGS), ("culling", CULLINGS)):
         if p[k] not in allowed:
             raise SceneError(f"scene: 'levelmap.{k}' is {p[k]!r}; choose one of {', '.join(allowed)}")
     w = data.get("water")
     if w is None:
         return data
-    size = _vec(w["size"], 2, "water.size")
+    size = check_vector(w["size"], 2, "water.size")
     if np.any(size <= 0):
         raise SceneError(f"scene: 'water.size' is {w['size']}; both extents must be > 0")
-    _num(w["height"], "water.height")
-    _num(w["resolution"], "water.resolution", 1, 4096, integer=True)
-    _num(w["ior"], "water.ior", 0.0, lo_open=True)
-    _num(w["absorption"], "water.absorption", 0.0)
+    check_number(w["height"], "water.height")
+    check_number(w["resolution"], "water.resolution", 1, 4096, integer=True)
+    check_number(w["ior"], "water.ior", 0.0, lo_open=True)
+    check_number(w["absorption"], "water.absorption", 0.0)
     amp = 0.0
     for k, wave in enumerate(w["waves"]):
-        amp += abs(_num(wave["amplitude"], f"water.waves[{k}].amplitude"))
-        _num(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
-        d = _vec(wave["direction"], 2, f"water.waves[{k}].direction")
+        amp += abs(check_number(wave["amplitude"], f"water.waves[{k}].amplitude"))
+        check_number(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
+        d = check_vector(wave["direction"], 2, f"water.waves[{k}].direction")
         if not np.any(d != 0):
             raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
-        _num(wave["phase"], f"water.waves[{k}].phase")
+        check_number(wave["phase"], f"water.waves[{k}].phase")
     slope = max_slope(w)
     if slope >= 1.0:
         raise SceneError(f"scene: the water's waves are too steep: the sum of 2 pi amplitude / wavelength is "
@@ -140,7 +133,7 @@ def check_water_depth(water, receiver_vertices):
         When the sum of the amplitudes is at least the depth from the water
         plane to the highest receiver point below it.
     """
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     h = float(water["height"])
     amp = sum(abs(float(x["amplitude"])) for x in water["waves"])
@@ -151,6 +144,12 @@ def check_water_depth(water, receiver_vertices):
                          f"= {h:g}); lower water.waves[k].amplitude or the receivers")
 
 
-BLOCK = register_block(KnobBlock("levelmap", LEVELMAP_DEFAULTS, validate_levelmap, owner="levelmap"))
+#: keys that moved: the receivers' caustic maps' settings to the ``caustics`` block, the exact water
+#: reference's to the ``exact`` block
+ALIASES = {"map_size": "caustics.map_size", "placement": "caustics.placement", "shadows": "caustics.shadows",
+           "ambient": "caustics.ambient", "exact_samples": "exact.water_samples", "exact_seed": "exact.photon_seed"}
+
+BLOCK = register_block(KnobBlock("levelmap", LEVELMAP_DEFAULTS, validate_levelmap, owner="levelmap",
+                                 aliases=ALIASES))
 WATER_BLOCK = register_block(KnobBlock("water", None, lambda data, base_dir=".": data, owner="levelmap",
                                        merge=merge_water))

@@ -29,7 +29,7 @@ import numba as nb
 import numpy as np
 
 from ..raster import ortho_setup, rasterize_ortho
-from ..receivers import Receivers  # the receivers' triangle soup, shared with the caustics
+from ..caustics.receivers import Receivers  # the receivers' triangle soup, shared with the caustics
 
 __all__ = ["Receivers", "LevelMap", "level_map", "receiver_selection", "map_setup"]
 
@@ -115,6 +115,10 @@ def level_map(receivers, r, box, shadows=True, setup=None):
     setup : RasterSetup
         Their snapped, binned map-space triangles (reused by the slices of
         the volumetric baseline).
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.2, eqs. 4-10 to 4-13.
     """
     sel = receiver_selection(receivers, r, shadows)
     if setup is None:
@@ -132,7 +136,26 @@ def level_map(receivers, r, box, shadows=True, setup=None):
 
 
 def receiver_selection(receivers, r, shadows=True):
-    """Triangles drawn into receiver ``r``'s maps: all receivers (shadows) or ``r``'s own."""
+    """Triangles drawn into receiver ``r``'s maps: all receivers (shadows) or ``r``'s own.
+
+    Parameters
+    ----------
+    receivers : Receivers
+        The receivers' triangle soup (``tris``, ``owner``).
+    r : int
+        The receiver whose maps these are.
+    shadows : bool
+        Draw every receiver (so others occlude ``r``), else only ``r``'s own.
+
+    Returns
+    -------
+    (T',) int64
+        Indices into ``receivers.tris``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.2 (position and diffuse maps).
+    """
     return np.arange(len(receivers.tris)) if shadows else np.flatnonzero(receivers.owner == r)
 
 
@@ -158,7 +181,28 @@ def _tris_to_map(tris, sel, frame, out):
 
 
 def map_setup(receivers, sel, box):
-    """Snap and bin the selected receiver triangles in ``box``'s map coordinates."""
+    """Snap and bin the selected receiver triangles in ``box``'s map coordinates.
+
+    Parameters
+    ----------
+    receivers : Receivers
+        The receivers' triangle soup.
+    sel : (T',) int
+        Triangles to draw (:func:`receiver_selection`).
+    box : Box
+        The reference box whose map coordinates (col, row, zeta) they are put in.
+
+    Returns
+    -------
+    RasterSetup
+        The triangles in map space, snapped and binned for
+        :func:`~refraction_ref.raster.rasterize_ortho`.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.2, eqs. 4-10 to 4-13 (orthographic view volume of
+    the box).
+    """
     Hc, Wc = box.size
     frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0], [Wc, Hc, 0.0]], np.float64)
     tri = np.empty((len(sel), 3, 3))

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, edge_values
+from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, row_span
 
 __all__ = ["search_hits", "per_ray_caustics"]
 
@@ -176,9 +176,10 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
     texel_area = knobs.texel_area
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
-        X = np.empty(3, np.int64)
-        Y = np.empty(3, np.int64)
-        L = np.empty(3)
+        # this texel's triangle as triangle 0 of (1, 3) arrays, the rasterizer's layout
+        X = np.empty((1, 3), np.int64)
+        Y = np.empty((1, 3), np.int64)
+        L = np.empty((1, 3))
         FC = np.empty(3)
         FR = np.empty(3)
         r0b = b * band
@@ -192,7 +193,6 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
             ty = tbar[t, 1]
             tz = tbar[t, 2]
             for i in range(i0, i1 + 1):
-                py = 256 * i + 128
                 for j in range(cols[m, 0], cols[m, 1] + 1):
                     if not accept[i, j]:
                         continue
@@ -203,38 +203,25 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
                         if not (lam >= 0.0):
                             ok = False
                             break
-                        L[k] = lam
+                        L[0, k] = lam
                         c = O[t, k, 0] + lam * D[t, k, 0]
                         r = O[t, k, 1] + lam * D[t, k, 1]
                         if not (abs(c) < MAX_COORD and abs(r) < MAX_COORD):
                             ok = False
                             break
-                        X[k] = np.int64(np.round(c * 256.0))
-                        Y[k] = np.int64(np.round(r * 256.0))
+                        X[0, k] = np.int64(np.round(c * 256.0))
+                        Y[0, k] = np.int64(np.round(r * 256.0))
                         FC[k] = c
                         FR[k] = r
                     if not ok:
                         continue
-                    x0 = X[0]
-                    y0 = Y[0]
-                    x1 = X[1]
-                    y1 = Y[1]
-                    x2 = X[2]
-                    y2 = Y[2]
-                    l0 = L[0]
-                    l1 = L[1]
-                    l2 = L[2]
-                    area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+                    # re-oriented (a folded beam) and tested as the rasterizer does: a run of one pixel
+                    x0, y0, x1, y1, x2, y2, l0, l1, l2, area, _ = oriented_triangle(X, Y, L, 0)
                     if area == 0:
                         continue
-                    if area < 0:
-                        x1, x2 = x2, x1
-                        y1, y2 = y2, y1
-                        l1, l2 = l2, l1
-                        area = -area
-                    w0, w1, w2 = edge_values(x0, y0, x1, y1, x2, y2, 256 * j + 128, py)
-                    _, _, _, b0, b1, b2 = edge_setup(x0, y0, x1, y1, x2, y2)
-                    if w0 + b0 < 0 or w1 + b1 < 0 or w2 + b2 < 0:
+                    ja, jb, w0, w1, w2 = row_span((x0, y0, x1, y1, x2, y2), edge_setup(x0, y0, x1, y1, x2, y2),
+                                                  i, j, j)
+                    if ja > jb:
                         continue
                     af = (FC[1] - FC[0]) * (FR[2] - FR[0]) - (FR[1] - FR[0]) * (FC[2] - FC[0])
                     a_tex = max(0.5 * abs(af), 1.0)  # unsnapped area in texels, >= one texel
@@ -248,10 +235,29 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
 def search_hits(beams, cand, lm, box):
     """Depth at which each edge ray of each candidate beam hits this receiver (step 1).
 
+    Each ray is marched in depth with steps that move it at most half a
+    texel sideways, and stops at the first texel whose position-map depth
+    it has reached.
+
+    Parameters
+    ----------
+    beams : BeamSet
+        Beams in the map coordinates of ``box``.
+    cand : (M,) int64
+        Candidate beams.
+    lm : LevelMap
+        The receiver's maps (``depth``, ``own``).
+    box : Box
+        Its box; the march spans depths ``[-h/2, h/2]``.
+
     Returns
     -------
     (M, 3) float64
         ``NaN`` where the ray misses the receiver or another receiver blocks it.
+
+    References
+    ----------
+    Tipprasert (2006), §6.3 ("placing the intersection triangle on actual hit").
     """
     hit = np.empty((len(cand), 3))
     _search(beams.O, beams.D, cand, lm.depth, lm.own, -box.h / 2.0, box.h / 2.0 * (1 + 1e-9), hit)
@@ -264,16 +270,28 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
     Parameters
     ----------
     beams : BeamSet
+        Beams in the map coordinates of ``box``.
     cand : (M,) int64
+        Candidate beams.
     lm : LevelMap
+        The receiver's maps (``depth``, ``own``, ``normal``).
     box : Box
     K : float
+        Absorption coefficient of the water.
     out : (Hc, Wc) float64
+        Accumulated irradiance; each texel tests every beam's cross-section
+        at its own depth (the rasterizer's coverage rule, :func:`~refraction_ref.raster.row_span`
+        over one pixel) and adds eq. 4-18's intensity.
 
     Returns
     -------
     dict
         ``rays_hit`` and ``beams_drawn`` counts.
+
+    References
+    ----------
+    Tipprasert (2006), §6.3 (intersection triangles at the actual hits), §4.5
+    (eq. 4-18).
     """
     Hc, Wc = box.size
     if len(cand) == 0:

@@ -21,7 +21,7 @@ stage (``timings_ms``)  pass                                             section
 A registered stage graph (:data:`METHOD`): a camera change re-runs
 ``image`` only; a level-map knob the stages from ``caustics`` on; a light
 or water change everything but nothing of the camera. The exact water
-reference (:mod:`.exact_water`) shares ``water``, ``planes`` and
+reference (:mod:`refraction_ref.exact.water`) shares ``water``, ``planes`` and
 ``level_map``.
 
 One set of planes, one box and one level map per (receiver, light) pair.
@@ -38,8 +38,10 @@ import numpy as np
 
 from ..camera import Camera
 from ..graph import Method, Stage, register_method, run_graph
-from ..receivers import receiver_soup
-from ..scene import SceneError, load_scene
+from ..caustics.receivers import receiver_soup
+from ..validation import SceneError
+from ..scene import load_scene
+from ..warm import warmer
 from .caustics_map import beams_in_map, cull_beams, splat_plane, splat_planes
 from .casting import cast_between
 from .illumination import illumination_volumes
@@ -52,8 +54,8 @@ from .volumetric import volumetric_caustics
 from .water import water_mesh
 
 __all__ = ["render_levelmap", "default_scene", "receivers_of", "prepare", "DEFAULT_SCENE_PATH", "METHOD",
-           "water_pass", "planes_pass", "level_map_pass", "shared_stages", "shade_stage", "water_arrays",
-           "IMAGE_BUFFERS"]
+           "water_pass", "planes_pass", "level_map_pass", "check_water_scene", "shared_stages", "shade_stage",
+           "water_arrays", "IMAGE_BUFFERS"]
 
 DEFAULT_SCENE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "levelmap_default.json")
 
@@ -64,7 +66,7 @@ def default_scene(overrides=None):
 
 
 def receivers_of(scene):
-    """All receiver triangles of a scene (:class:`~refraction_ref.receivers.Receivers`)."""
+    """All receiver triangles of a scene (:class:`~refraction_ref.caustics.receivers.Receivers`)."""
     return receiver_soup(scene, "levelmap")
 
 
@@ -75,7 +77,15 @@ class _Pair:
         self.box, self.sel, self.setup, self.lm = box, sel, setup, lm
 
 
-def _check(scene):
+def check_water_scene(scene):
+    """Refuse a water scene the level map (and the exact water reference) cannot render.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene; raises :class:`~refraction_ref.validation.SceneError` when it has no
+        ``water`` block or no lights.
+    """
     w = scene.data["water"]
     if w is None:
         raise SceneError("levelmap: the scene has no 'water' block; add one, e.g. "
@@ -94,9 +104,9 @@ def prepare(scene, timings=None):
     -------
     dict
         ``mesh``, ``vols`` (per light), ``receivers``, ``pairs[r][l]``,
-        ``eta``, ``K``.
+        ``eta``, ``K``, ``placement`` (``caustics.placement``).
     """
-    _check(scene)
+    check_water_scene(scene)
     timings = {} if timings is None else timings
     tic = time.perf_counter()
     w = water_pass(scene)
@@ -105,10 +115,10 @@ def prepare(scene, timings=None):
     pl = planes_pass(scene)
     timings["planes"] = timings.get("planes", 0.0) + (time.perf_counter() - tic) * 1e3
     tic = time.perf_counter()
-    pairs = level_map_pass(pl["receivers"], pl["boxes"], bool(scene.data["levelmap"]["shadows"]))
+    pairs = level_map_pass(pl["receivers"], pl["boxes"], bool(scene.data["caustics"]["shadows"]))
     timings["level_map"] = timings.get("level_map", 0.0) + (time.perf_counter() - tic) * 1e3
     return {"mesh": w["mesh"], "vols": w["vols"], "receivers": pl["receivers"], "pairs": pairs,
-            "eta": w["eta"], "K": w["K"]}
+            "eta": w["eta"], "K": w["K"], "placement": scene.data["caustics"]["placement"]}
 
 
 def water_pass(scene):
@@ -124,12 +134,12 @@ def water_pass(scene):
 def planes_pass(scene):
     """Receivers and one reference box per (receiver, light) (eqs. 4-1 to 4-9).
 
-    With ``levelmap.placement = "thesis"`` each box is centred on the
+    With ``caustics.placement = "thesis"`` each box is centred on the
     receiver's origin (eqs. 4-2, 4-3), and a point light's axis aims at that
     origin (Fig. 4-7); with ``"tight"`` on the tight box's centre.
     """
     water = scene.data["water"]
-    p = scene.data["levelmap"]
+    p = scene.data["caustics"]
     placement = p["placement"]
     eta = float(scene.data["outside_ior"]) / float(water["ior"])
     rec = receivers_of(scene)
@@ -170,7 +180,7 @@ def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=
     box, lm = pair.box, pair.lm
     n = int(p["planes"])
     K = ctx["K"]
-    placement, culling = p["placement"], p["culling"]
+    placement, culling = ctx["placement"], p["culling"]
     Hc, Wc = box.size
     out = np.zeros(box.size)
     tic = time.perf_counter()
@@ -228,21 +238,19 @@ def _caustics_pair(ctx, r, l, p, variant, timings, stats, extra=None, per_plane=
     return out
 
 
-def warm_up(scene=None):
-    """Compile (or load from Numba's cache) the kernels this scene's plan needs, on a tiny copy of it.
-
-    ``scene`` None warms the bundled ``levelmap_default.json``; see ``refraction_ref._warmup.warm``.
-    """
-    from .. import _warmup
-
-    _warmup.warm("levelmap", scene)
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a coarse water mesh, small maps, few pixels."""
+    over = {"camera.width": 8, "camera.height": 8, "caustics.map_size": 8, "exact.water_samples": 16}
+    if scene.data.get("water") is not None:  # else the render refuses the scene, naming what is missing
+        over["water.resolution"] = 4
+    return over
 
 
 # --------------------------------------------------------------------- stages
 def _st_water(ctx):
     from .knobs import STEEP_SLOPE, max_slope
 
-    _check(ctx.scene)
+    check_water_scene(ctx.scene)
     w = water_pass(ctx.scene)
     n = int(ctx.scene.data["water"]["resolution"])
     ctx.note(f"{n}x{n} quads, {len(w['mesh'].faces)} beams per light, {len(ctx.scene.data['lights'])} light(s)")
@@ -264,12 +272,12 @@ def _st_planes(ctx):
     for r, row in enumerate(pl["boxes"]):
         for l, box in enumerate(row):
             out[f"box_{r}_{l}"] = np.array([box.center, box.U, box.V, box.W, [box.w, box.h, box.d]])
-    ctx.note(f"one reference box per (receiver, light), {ctx.scene.data['levelmap']['map_size']}^2 maps")
+    ctx.note(f"one reference box per (receiver, light), {ctx.scene.data['caustics']['map_size']}^2 maps")
     return out
 
 
 def _st_level_map(ctx):
-    shadows = bool(ctx.scene.data["levelmap"]["shadows"])
+    shadows = bool(ctx.scene.data["caustics"]["shadows"])
     pl = ctx.buf["planes"]
     pairs = level_map_pass(pl["receivers"], pl["boxes"], shadows)
     out = {"pairs": pairs}
@@ -287,7 +295,7 @@ def _st_caustics(ctx):
     p = d["levelmap"]
     variant = p["variant"]
     ctx_ = {"vols": ctx.buf["water"]["vols"], "K": ctx.buf["water"]["K"], "pairs": ctx.buf["level_map"]["pairs"],
-            "receivers": ctx.buf["planes"]["receivers"]}
+            "receivers": ctx.buf["planes"]["receivers"], "placement": d["caustics"]["placement"]}
     stats, sub = [], {}
     maps, extras = [], {}
     for r in range(len(ctx_["pairs"])):
@@ -305,7 +313,7 @@ def _st_caustics(ctx):
     ctx.note({"levelmap": "intersection triangles on every plane, depth-tested against the position map"
               + (f"; smart slicing over {p['depth_levels']} depth levels ({p['smart_spacing']})" if smart
                  else "; smart slicing off")
-              + f"; {p['placement']} plane placement, culling {p['culling']}",
+              + f"; {ctx_['placement']} plane placement, culling {p['culling']}",
               "volumetric": "one slice image per sample plane (Iwasaki et al.), composited front to back",
               "per_ray": "each beam drawn once where its rays hit (§6.3); planes replaced by a per-ray search"}[variant])
     out = {"maps": maps}
@@ -322,7 +330,7 @@ def _st_plane_maps(ctx):
     d = ctx.scene.data
     p = d["levelmap"]
     ctx_ = {"vols": ctx.buf["water"]["vols"], "K": ctx.buf["water"]["K"], "pairs": ctx.buf["level_map"]["pairs"],
-            "receivers": ctx.buf["planes"]["receivers"]}
+            "receivers": ctx.buf["planes"]["receivers"], "placement": d["caustics"]["placement"]}
     R, L = len(ctx_["pairs"]), len(ctx_["vols"])
     out = {f"{k}_{r}_{l}": None for r in range(R) for l in range(L) for k in ("plane_maps", "plane_index")}
     for r in range(R):
@@ -365,7 +373,7 @@ def shade_stage(ctx, casting):
     """
     from .view import direct_view, view_through_water
 
-    p = ctx.scene.data["levelmap"]
+    p = ctx.scene.data["caustics"]
     pairs = ctx.buf["level_map"]["pairs"]
     pl = ctx.buf["planes"]
     R = len(pairs)
@@ -396,10 +404,10 @@ def shared_stages(scene):
     return (
         Stage("water", _st_water, reads=("water", "lights", "outside_ior"),
               makes=("water_vertices", "water_normals"), doc="water mesh and illumination volumes (eqs. 2-8, 4-14)"),
-        Stage("planes", _st_planes, reads=("receivers", "lights", "water", "outside_ior", "levelmap.map_size",
-                                           "levelmap.placement"),
+        Stage("planes", _st_planes, reads=("receivers", "lights", "water", "outside_ior", "caustics.map_size",
+                                           "caustics.placement"),
               makes=tuple(f"box_{r}_{l}" for r, l in rl), doc="reference boxes (eqs. 4-1 to 4-9)"),
-        Stage("level_map", _st_level_map, reads=("levelmap.shadows",), after=("planes",),
+        Stage("level_map", _st_level_map, reads=("caustics.shadows",), after=("planes",),
               makes=tuple(f"{k}_{r}_{l}" for r, l in rl for k in ("position", "diffuse", "normal")),
               doc="position and diffuse maps (eqs. 4-10 to 4-13)"),
     )
@@ -410,7 +418,7 @@ IMAGE_BUFFERS = ("image", "object_mask", "image_direct", "object_mask_direct", "
                  "water_dir", "receiver_pos", "water_length")
 
 _CAUSTICS_READS = ("levelmap.planes", "levelmap.smart_slicing", "levelmap.depth_levels", "levelmap.variant",
-                   "levelmap.placement", "levelmap.smart_spacing", "levelmap.culling")
+                   "caustics.placement", "levelmap.smart_spacing", "levelmap.culling")
 
 
 def _stages(scene):
@@ -430,7 +438,7 @@ def _stages(scene):
         Stage("casting", _st_casting, reads=("lights",), after=("level_map", "caustics"),
               makes=tuple(f"{k}_{r}" for r in range(R) for k in ("caustic_map", "caustic_frame")),
               doc="lights cast into one map (eq. 4-20)"),
-        Stage("image", lambda ctx: shade_stage(ctx, "casting"), reads=("camera", "levelmap.ambient"),
+        Stage("image", lambda ctx: shade_stage(ctx, "casting"), reads=("camera", "caustics.ambient"),
               after=("water", "planes", "level_map", "casting"), makes=IMAGE_BUFFERS,
               doc="camera view through the water and directly, shaded with caustics (eq. 4-19)"),
     )
@@ -460,22 +468,27 @@ def _assemble(scene, bufs, stats):
 
 
 METHOD = register_method(Method(
-    "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble, warm=warm_up,
+    "levelmap", blocks=("levelmap", "water"), stages=_stages, assemble=_assemble,
+    warm=warmer("levelmap"), tiny=_tiny, default_scene=DEFAULT_SCENE_PATH, label="Tipprasert 2006",
     results=("level_map.pairs", "casting", "image"),
     doc="Tipprasert (2006): water caustics by reference planes, position maps and a caustics map"))
 
 
-def render_levelmap(scene, warm=True, cache=None, keep=None):
+def render_levelmap(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Render water caustics with the level-map method (or its baseline / per-ray variant).
 
     Parameters
     ----------
     scene : Scene
         With a ``water`` block, receivers and lights above the water.
+    cache : dict, optional
+        Stage cache (:class:`~refraction_ref.session.Session` keeps one).
+    keep : str or list, optional
+        Stages whose buffers to return as ``stage.<stage>.<buffer>``.
     warm : bool
         Load every kernel first so that ``timings_ms`` exclude JIT time.
-    cache, keep :
-        As :func:`refraction_ref.graph.run_graph`.
+    progress : bool
+        Show a progress bar on long work.
 
     Returns
     -------
@@ -492,5 +505,5 @@ def render_levelmap(scene, warm=True, cache=None, keep=None):
     ----------
     Tipprasert (2006), chapter 4; Figs. 4-15 and 4-17.
     """
-    _check(scene)
-    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
+    check_water_scene(scene)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)

@@ -59,48 +59,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..caustics.boxes import PLACEMENTS, Box, dir_to_map, frame_of, from_map, reference_box, to_map
 from ..optics import refract
-from ..scene import SceneError
-from ..vec3 import affine, dot
+from ..validation import SceneError
 
 __all__ = ["Box", "Lattice", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
-           "plane_lattice", "to_map", "dir_to_map", "frame_of"]
-
-PLACEMENTS = ("thesis", "tight")
-
-
-class Box(NamedTuple):
-    """An oriented bounding box and its map resolution.
-
-    Attributes
-    ----------
-    center : (3,) ; U, V, W : (3,) unit axes ; T0 = -V
-    w, h, d : float, extents along U, V, W
-    size : (Hc, Wc) texels of the maps laid over the U x W face
-    """
-
-    center: np.ndarray
-    U: np.ndarray
-    V: np.ndarray
-    W: np.ndarray
-    w: float
-    h: float
-    d: float
-    size: tuple
-
-    @property
-    def T0(self):
-        return -self.V
-
-    @property
-    def texel_area(self):
-        """World area of one texel of the map plane (perpendicular to V)."""
-        return (self.w / self.size[1]) * (self.d / self.size[0])
-
-    @property
-    def texel_size(self):
-        return max(self.w / self.size[1], self.d / self.size[0])
-
+           "plane_lattice", "to_map", "dir_to_map", "from_map", "frame_of"]
+# Box, PLACEMENTS, reference_box and the map frame (to_map, dir_to_map, from_map, frame_of) live in
+# caustics.boxes: every receiver's caustic map uses them, the level map's planes are laid in them.
 
 def refracted_axis(light, water, eta, target):
     """``T0``: the light refracted at the flat water plane (§4.2.1, Figs. 4-5, 4-7).
@@ -114,10 +80,19 @@ def refracted_axis(light, water, eta, target):
     target : (3,) array_like
         The receiver's origin (used for point lights only).
 
+    Returns
+    -------
+    (3,) float64
+        Unit refracted direction ``T0`` (pointing down into the water).
+
     Raises
     ------
     SceneError
         When the light cannot enter the water from above.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, Figs. 4-5 and 4-7; §2.6 (Snell's law).
     """
     up = np.array([0.0, 1.0, 0.0])
     if light["type"] == "directional":
@@ -142,71 +117,27 @@ def refracted_axis(light, water, eta, target):
     return t / np.linalg.norm(t)
 
 
-def _axes(T0):
-    V = -np.asarray(T0, dtype=np.float64)
-    V = V / np.linalg.norm(V)
-    N = np.array([0.0, 0.0, 1.0]) if abs(V[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    U = np.cross(V, N)
-    U /= np.linalg.norm(U)
-    W = np.cross(U, V)
-    W /= np.linalg.norm(W)
-    return U, V, W
-
-
 def receiver_origin(receiver):
     """``P_0`` of eq. 4-2: where a receiver's local origin lands in the world (its ``transform.translate``).
 
     ``p' = R (scale p) + translate`` maps the mesh's origin (after ``fit``'s
     centring on the bounding-box centre) to ``translate``.
-    """
-    return np.asarray(receiver.get("transform", {}).get("translate", [0.0, 0.0, 0.0]), dtype=np.float64)
-
-
-def reference_box(vertices, T0, size, placement="tight", origin=None):
-    """Bounding box of a receiver aligned with ``V = -T0`` (eqs. 4-1 to 4-3).
 
     Parameters
     ----------
-    vertices : (N, 3) array_like
-        The receiver's world-space vertices.
-    T0 : (3,) array_like
-        Refracted light direction (:func:`refracted_axis`).
-    size : int or (Hc, Wc)
-        Texels of the maps.
-    placement : {"tight", "thesis"}
-        ``"tight"``: the tight box of the vertices; ``"thesis"``: centred on
-        ``origin`` with extents ``2 |P_a|`` (eq. 4-3; module docstring).
-    origin : (3,) array_like, optional
-        ``P_0`` (``"thesis"`` only; default the vertices' bounding-box centre).
+    receiver : dict
+        A receiver of the scene (its optional ``transform.translate``).
 
     Returns
     -------
-    Box
-        Degenerate extents (a flat receiver seen edge-on or face-on) are
-        widened to ``1e-6`` of the largest extent so every division is finite.
+    (3,) float64
+        ``P_0`` in world space (the origin when there is no translation).
 
     References
     ----------
-    Tipprasert (2006), §4.2.1, eqs. 4-1 to 4-3.
+    Tipprasert (2006), §4.2.1, eq. 4-2.
     """
-    v = np.asarray(vertices, dtype=np.float64)
-    U, V, W = _axes(T0)
-    R = np.stack([U, V, W])
-    if placement == "thesis":
-        o = (v.min(axis=0) + v.max(axis=0)) / 2.0 if origin is None else np.asarray(origin, dtype=np.float64)
-        loc = affine(v - o, R.T)
-        far = np.argmax(np.abs(loc), axis=0)  # v_x, v_y, v_z: farthest along each local axis
-        ext = 2.0 * np.linalg.norm(loc[far], axis=1)  # w, h, d = 2 |P_x|, 2 |P_y|, 2 |P_z| (eq. 4-3)
-        centre = o
-    else:
-        loc = affine(v, R.T)
-        lo, hi = loc.min(axis=0), loc.max(axis=0)
-        centre = ((lo + hi) / 2.0) @ R
-        ext = hi - lo
-    floor = 1e-6 * max(float(ext.max()), 1e-12)
-    ext = np.maximum(ext, floor)
-    sz = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
-    return Box(np.asarray(centre, dtype=np.float64), U, V, W, float(ext[0]), float(ext[1]), float(ext[2]), sz)
+    return np.asarray(receiver.get("transform", {}).get("translate", [0.0, 0.0, 0.0]), dtype=np.float64)
 
 
 class Lattice(NamedTuple):
@@ -227,6 +158,21 @@ class Lattice(NamedTuple):
 def plane_lattice(box, n, placement="tight"):
     """The ``n`` reference planes of ``box`` (eqs. 4-6 to 4-9; module docstring).
 
+    Parameters
+    ----------
+    box : Box
+        The reference box (its extent ``h`` along ``V``).
+    n : int
+        Number of planes.
+    placement : {"tight", "thesis"}
+        Planes at slab centres of the tight box, or the thesis's ``n - 1``
+        slices with planes on the box faces (module docstring).
+
+    Returns
+    -------
+    Lattice
+        Plane depths, spacing and the start of the first acceptance slab.
+
     References
     ----------
     Tipprasert (2006), eqs. 4-6 to 4-9, 4-15.
@@ -245,6 +191,15 @@ def plane_lattice(box, n, placement="tight"):
 def slice_planes(box, n, placement="tight"):
     """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
 
+    Parameters
+    ----------
+    box : Box
+        The reference box.
+    n : int
+        Number of planes.
+    placement : {"tight", "thesis"}
+        The lattice (:func:`plane_lattice`).
+
     Returns
     -------
     zeta : (n,) float64
@@ -253,43 +208,10 @@ def slice_planes(box, n, placement="tight"):
         Spacing (eq. 4-8).
     eps : float
         Acceptance threshold ``s / 2`` (eq. 4-15).
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, eqs. 4-6 to 4-9; §4.4, eq. 4-15.
     """
     lat = plane_lattice(box, n, placement)
     return lat.zeta, lat.s, lat.s / 2.0
-
-
-def to_map(box, p):
-    """World points (..., 3) to map coordinates (col, row, zeta), (..., 3)."""
-    q = np.asarray(p, dtype=np.float64) - box.center
-    Hc, Wc = box.size
-    col = (dot(q, box.U) / box.w + 0.5) * Wc
-    row = (dot(q, box.W) / box.d + 0.5) * Hc
-    zeta = -dot(q, box.V)
-    return np.stack([col, row, zeta], axis=-1)
-
-
-def dir_to_map(box, t):
-    """World directions (..., 3) to map-space rates (dcol, drow, dzeta) per unit length."""
-    t = np.asarray(t, dtype=np.float64)
-    Hc, Wc = box.size
-    return np.stack([dot(t, box.U) * (Wc / box.w), dot(t, box.W) * (Hc / box.d), -dot(t, box.V)], axis=-1)
-
-
-def from_map(box, col, row, zeta):
-    """Map coordinates back to world points (..., 3)."""
-    Hc, Wc = box.size
-    a = (np.asarray(col) / Wc - 0.5) * box.w
-    b = (np.asarray(row) / Hc - 0.5) * box.d
-    return (box.center + a[..., None] * box.U + b[..., None] * box.W
-            - np.asarray(zeta)[..., None] * box.V)
-
-
-def frame_of(box):
-    """``caustic_frame`` (4, 3): origin, u axis, v axis (full edges), normal (docs/oracle.md).
-
-    The rectangle is the box face nearest the light; the normal is ``V``
-    (towards the light); texel (a, b) holds the first receiver surface seen
-    from ``origin + (b + .5)/Wc u + (a + .5)/Hc v`` looking along ``-V``.
-    """
-    origin = box.center - box.w / 2.0 * box.U - box.d / 2.0 * box.W + box.h / 2.0 * box.V
-    return np.stack([origin, box.w * box.U, box.d * box.W, box.V]).astype(np.float64)

@@ -90,9 +90,22 @@ def depth_profile(lm, box, levels):
 
     Level ``k`` holds the depths ``[-h/2 + k h / levels, -h/2 + (k + 1) h / levels)``.
 
+    Parameters
+    ----------
+    lm : LevelMap
+        The receiver's level map (position-map depth ``zeta`` and ownership).
+    box : Box
+        Its reference box (extent ``h`` along ``T0``).
+    levels : int
+        Number of equal depth levels.
+
     Returns
     -------
     (levels,) int64
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, Figs. 4-19 and 5-9.
     """
     nbands = max(1, min(lm.depth.shape[0], 32))
     counts = np.zeros((nbands, int(levels)), np.int64)
@@ -101,7 +114,23 @@ def depth_profile(lm, box, levels):
 
 
 def sub_boxes(profile):
-    """Runs of consecutive valid levels: list of (first, last + 1) level indices (eq. 4-21)."""
+    """Runs of consecutive valid levels: list of (first, last + 1) level indices (eq. 4-21).
+
+    Parameters
+    ----------
+    profile : (levels,) array_like of int
+        Texel count per depth level (:func:`depth_profile`).
+
+    Returns
+    -------
+    list of (int, int)
+        Half-open level ranges ``(first, last + 1)`` of the runs of non-empty
+        levels, in depth order.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, eq. 4-21.
+    """
     valid = np.asarray(profile) > 0
     out = []
     k = 0

@@ -22,18 +22,20 @@ Moller-Trumbore on each cell's two triangles); both find the receivers with
 Embree's first hit and recompute the hit in float64 on the triangle found, so the view is exact up to float64 rounding
 and the same whatever the thread count (every ray is independent).
 
-Status of each pixel (``stage.image.view_status``):
+Status of each pixel (``stage.image.view_status``), the ``VIEW_*`` codes of
+:mod:`refraction_ref.status` (not the per-pixel ``status`` of the other methods:
+the same integers mean other things there):
 
-====  ==========  ==============================================================
-code  name        meaning
-====  ==========  ==============================================================
-0     missed      no water and no receiver along the ray: black
-1     through     refracted by the water onto a receiver (the thesis's view)
-2     lost        refracted by the water, then met no receiver: black
-3     direct      missed the water rectangle, met a receiver directly
-4     tir         total internal reflection at the water (only when
-                  ``outside_ior > water.ior``): black, not followed
-====  ==========  ==============================================================
+====  =================  ==============================================================
+code  name               meaning
+====  =================  ==============================================================
+0     ``VIEW_MISSED``    no water and no receiver along the ray: black
+1     ``VIEW_THROUGH``   refracted by the water onto a receiver (the thesis's view)
+2     ``VIEW_LOST``      refracted by the water, then met no receiver: black
+3     ``VIEW_DIRECT``    missed the water rectangle, met a receiver directly
+4     ``VIEW_TIR``       total internal reflection at the water (only when
+                         ``outside_ior > water.ior``): black, not followed
+====  =================  ==============================================================
 
 References
 ----------
@@ -55,11 +57,9 @@ import numpy as np
 
 from ..embree import nearest_hits, soup_scene
 from ..optics import refract3
+from ..status import VIEW_DIRECT, VIEW_LOST, VIEW_MISSED, VIEW_STATUS, VIEW_THROUGH, VIEW_TIR
 
 __all__ = ["VIEW_STATUS", "view_through_water", "direct_view", "water_surface_hits_mesh", "water_surface_hits_analytic"]
-
-MISSED, THROUGH, LOST, DIRECT, TIR = 0, 1, 2, 3, 4
-VIEW_STATUS = {MISSED: "missed", THROUGH: "through", LOST: "lost", DIRECT: "direct", TIR: "tir"}
 
 
 class _Waves(NamedTuple):
@@ -84,7 +84,7 @@ class _Rays(NamedTuple):
     prim: np.ndarray  # unused (kept empty)
     P: np.ndarray  # (N, 3) out: where the ray meets the water, NaN where not
     T: np.ndarray  # (N, 3) out: refracted direction
-    status: np.ndarray  # (N,) int8 out: THROUGH (so far), DIRECT or TIR
+    status: np.ndarray  # (N,) int8 out: VIEW_THROUGH (so far), VIEW_DIRECT or VIEW_TIR
 
 
 class _Look(NamedTuple):
@@ -166,7 +166,7 @@ def _mesh_surface(grid, rays, eta):
     T = rays.T
     status = rays.status
     for q in nb.prange(O.shape[0]):
-        status[q] = DIRECT
+        status[q] = VIEW_DIRECT
         for c in range(3):
             P[q, c] = np.nan
             T[q, c] = np.nan
@@ -254,7 +254,7 @@ def _mesh_surface(grid, rays, eta):
         T[q, 0] = tx
         T[q, 1] = ty
         T[q, 2] = tz
-        status[q] = TIR if tir else THROUGH
+        status[q] = VIEW_TIR if tir else VIEW_THROUGH
 
 
 @nb.njit(cache=True, inline="always")
@@ -288,7 +288,7 @@ def _analytic_surface(waves, rays, eta):
     for q in nb.prange(O.shape[0]):
         ox, oy, oz = O[q, 0], O[q, 1], O[q, 2]
         dx, dy, dz = D[q, 0], D[q, 1], D[q, 2]
-        status[q] = DIRECT
+        status[q] = VIEW_DIRECT
         for c in range(3):
             P[q, c] = np.nan
             T[q, c] = np.nan
@@ -340,7 +340,7 @@ def _analytic_surface(waves, rays, eta):
         T[q, 0] = tx
         T[q, 1] = ty
         T[q, 2] = tz
-        status[q] = TIR if tir else THROUGH
+        status[q] = VIEW_TIR if tir else VIEW_THROUGH
 
 
 @nb.njit(cache=True, parallel=True)
@@ -348,7 +348,7 @@ def _second_rays(idx, O, D, P, T, status, O2, D2):
     """float32 rays to the receivers: from the water along T (status 1), from the eye along D (status 3)."""
     for k in nb.prange(idx.shape[0]):
         q = idx[k]
-        through = status[q] == THROUGH
+        through = status[q] == VIEW_THROUGH
         for c in range(3):
             O2[k, c] = np.float32(P[q, c] if through else O[q, c])
             D2[k, c] = np.float32(T[q, c] if through else D[q, c])
@@ -374,14 +374,6 @@ class _Hits(NamedTuple):
 def _receiver_points(h, look, img):
     """Float64 hit of each ray on the plane of the receiver triangle Embree found; final status per ray;
     the pixel's colour (eq. 4-19 times exp(-K d), eq. 4-17)."""
-    albedo = look.albedo
-    centre = look.centre
-    U = look.U
-    W = look.W
-    ext = look.ext
-    maps = look.maps
-    ambient = look.ambient
-    K = look.K
     O = h.O
     D = h.D
     P = h.P
@@ -396,12 +388,12 @@ def _receiver_points(h, look, img):
     for q in nb.prange(O.shape[0]):
         f = prim[q]
         st = status[q]
-        through = st == THROUGH
+        through = st == VIEW_THROUGH
         if f < 0:
-            if st == THROUGH:
-                status[q] = LOST
-            elif st == DIRECT:
-                status[q] = MISSED
+            if st == VIEW_THROUGH:
+                status[q] = VIEW_LOST
+            elif st == VIEW_DIRECT:
+                status[q] = VIEW_MISSED
             st = status[q]
             Q[q, 0] = np.nan
             Q[q, 1] = np.nan
@@ -432,19 +424,23 @@ def _receiver_points(h, look, img):
             Q[q, 2] = oz + t * dz
             length[q] = t if through else 0.0
             rid[q] = owner[f]
-        if st == MISSED or st == DIRECT:  # never reached the water
+        if st == VIEW_MISSED or st == VIEW_DIRECT:  # never reached the water
             for c in range(3):
                 P[q, c] = np.nan
-        if not (st == THROUGH or st == LOST):
+        if not (st == VIEW_THROUGH or st == VIEW_LOST):
             for c in range(3):
                 T[q, c] = np.nan
-        _shade_one(albedo, centre, U, W, ext, maps, ambient, K, rid[q], Q[q, 0], Q[q, 1], Q[q, 2],
-                   length[q] if rid[q] >= 0 else 0.0, img, q)
+        _shade_one(look, rid[q], Q[q, 0], Q[q, 1], Q[q, 2], length[q] if rid[q] >= 0 else 0.0, img, q)
 
 
 @nb.njit(cache=True, inline="always")
-def _shade_one(albedo, centre, U, W, ext, maps, ambient, K, r, qx, qy, qz, length, out, q):
-    """Eq. 4-19 at one receiver point, nearest texel of its caustics map, times exp(-K d) (eq. 4-17)."""
+def _shade_one(look, r, qx, qy, qz, length, out, q):
+    """Eq. 4-19 at one receiver point, nearest texel of its caustics map, times exp(-K d) (eq. 4-17).
+
+    ``look`` (:class:`_Look`) is only read; the colour is written to ``out[q]`` (0 where ``r`` < 0).
+    """
+    albedo, centre, U, W, ext = look.albedo, look.centre, look.U, look.W, look.ext
+    maps, ambient, K = look.maps, look.ambient, look.K
     if r < 0:
         out[q, 0] = 0.0
         out[q, 1] = 0.0
@@ -476,14 +472,6 @@ def _look(receivers, boxes, maps, ambient, K):
 @nb.njit(cache=True, parallel=True)
 def _direct_shade(eye, D, fwd, depths, look, out):
     """Per pixel: the nearest receiver over the depth images (R, H, W), its point at that view depth, eq. 4-19."""
-    albedo = look.albedo
-    centre = look.centre
-    U = look.U
-    W = look.W
-    ext = look.ext
-    maps = look.maps
-    ambient = look.ambient
-    K = look.K
     R, H, Wd = depths.shape
     for i in nb.prange(H):
         for j in range(Wd):
@@ -495,21 +483,38 @@ def _direct_shade(eye, D, fwd, depths, look, out):
                     k = r
             q = i * Wd + j
             if k < 0:
-                _shade_one(albedo, centre, U, W, ext, maps, ambient, K, -1, 0.0, 0.0, 0.0, 0.0, out, q)
+                _shade_one(look, -1, 0.0, 0.0, 0.0, 0.0, out, q)
                 continue
             t = b / (D[q, 0] * fwd[0] + D[q, 1] * fwd[1] + D[q, 2] * fwd[2])
-            _shade_one(albedo, centre, U, W, ext, maps, ambient, K, k, eye[0] + D[q, 0] * t, eye[1] + D[q, 1] * t,
-                       eye[2] + D[q, 2] * t, 0.0, out, q)
+            _shade_one(look, k, eye[0] + D[q, 0] * t, eye[1] + D[q, 1] * t, eye[2] + D[q, 2] * t, 0.0, out, q)
 
 
 def direct_view(camera, receivers, boxes, maps, ambient, rays=None):
     """The receivers seen directly, without the water (eq. 4-19; the level map's ``image`` before contract 4).
+
+    Parameters
+    ----------
+    camera : Camera
+    receivers : Receivers
+        The receivers' triangle soup.
+    boxes : list of Box
+        Frame (first light's box) of each receiver's caustics map.
+    maps : list of (Hc, Wc) arrays
+        ``caustic_map_r`` of each receiver.
+    ambient : float
+        Ambient term of eq. 4-19, a fraction of the albedo.
+    rays : (origins, directions), optional
+        ``camera.primary_rays()``, when already computed.
 
     Returns
     -------
     image : (H, W, 3) float32
     mask : (H, W) bool
         Pixels showing a receiver.
+
+    References
+    ----------
+    Tipprasert (2006), §4.6, eq. 4-19.
     """
     from ..raster import rasterize
 
@@ -534,6 +539,20 @@ def receiver_scene(tris):
     Keyed by the triangles' content (SHA-1 of their float64 bytes, ~1 ms per MB), not the array
     object: each render rebuilds the soup, but a scene rendered again (a sweep, a benchmark, the
     tables, a camera change) finds its BVH built. Up to four scenes are kept.
+
+    Parameters
+    ----------
+    tris : (T, 3, 3) array_like
+        The receivers' world-space triangles.
+
+    Returns
+    -------
+    Embree scene
+        The scene :func:`~refraction_ref.embree.soup_scene` builds of ``tris``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.6 (the receivers the eye rays reach after the water).
     """
     t = np.ascontiguousarray(tris, np.float64)
     key = (t.shape, hashlib.sha1(t.view(np.uint8)).hexdigest())
@@ -586,7 +605,12 @@ def water_surface_hits_mesh(mesh, origins, dirs, eta, water=None):
     P, T : (N, 3) float64
         Surface point and refracted unit direction (NaN where the ray misses the water).
     status : (N,) int8
-        ``THROUGH`` (1), ``DIRECT`` (3, missed the water) or ``TIR`` (4).
+        ``VIEW_THROUGH`` (1), ``VIEW_DIRECT`` (3, missed the water) or ``VIEW_TIR`` (4).
+
+    References
+    ----------
+    Tipprasert (2006), §2.6 (Snell's law, eq. 2-8); ch. 5 (views through the
+    water).
     """
     n = int(water["resolution"])
     sx, sz = (float(v) for v in water["size"])
@@ -602,6 +626,26 @@ def water_surface_hits_analytic(water, origins, dirs, eta):
     """Where rays meet the analytic height field, refracted with its analytic normal (exact reference).
 
     Same returns as :func:`water_surface_hits_mesh`.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block (height, size, waves).
+    origins, dirs : (N, 3) float64
+        Ray origins and unit directions, world space.
+    eta : float
+        ``outside_ior / water.ior``.
+
+    Returns
+    -------
+    P, T : (N, 3) float64
+        Surface point and refracted unit direction (NaN where the ray misses the water).
+    status : (N,) int8
+        ``VIEW_THROUGH`` (1), ``VIEW_DIRECT`` (3, missed the water) or ``VIEW_TIR`` (4).
+
+    References
+    ----------
+    Tipprasert (2006), §2.6 (Snell's law, eq. 2-8).
     """
     rays = _new_rays(origins, dirs)
     _analytic_surface(_waves(water), rays, float(eta))
@@ -639,6 +683,11 @@ def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, m
         float64 (NaN where the ray did not enter the water), ``receiver_pos``
         (H, W, 3) float64 (NaN where none), ``water_length`` (H, W) float64
         (distance in water, 0 for direct rays, NaN where none).
+
+    References
+    ----------
+    Tipprasert (2006), §4.6 (eq. 4-19), §4.5 (eq. 4-17, absorption), §2.6
+    (eq. 2-8).
     """
     H, W = camera.shape
     ro, rd = camera.primary_rays() if rays is None else rays
@@ -649,7 +698,7 @@ def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, m
     else:
         P, T, status = water_surface_hits_analytic(water, O, D, eta)
     # the rays that go on to the receivers: refracted ones from the water, direct ones from the eye
-    idx = np.flatnonzero((status == THROUGH) | (status == DIRECT))
+    idx = np.flatnonzero((status == VIEW_THROUGH) | (status == VIEW_DIRECT))
     O2 = np.empty((len(idx), 3), np.float32)
     D2 = np.empty((len(idx), 3), np.float32)
     _second_rays(idx, O, D, P, T, status, O2, D2)
@@ -663,7 +712,7 @@ def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, m
     img = np.empty((len(O), 3), np.float32)
     _receiver_points(_Hits(O, D, P, T, prim, status, np.ascontiguousarray(receivers.tris), receivers.owner, Q,
                            length, rid), _look(receivers, boxes, maps, ambient, K), img)
-    ok = (status == THROUGH) | (status == DIRECT)
+    ok = (status == VIEW_THROUGH) | (status == VIEW_DIRECT)
     return {"image": img.reshape(H, W, 3), "object_mask": ok.reshape(H, W),
             "view_status": status.reshape(H, W), "water_pos": P.reshape(H, W, 3),
             "water_dir": T.reshape(H, W, 3), "receiver_pos": Q.reshape(H, W, 3),

@@ -71,6 +71,10 @@ def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out, p
     -------
     dict
         ``slices`` rendered, ``triangles`` drawn, ``memory_bytes`` of a GPU slice stack (16-bit).
+
+    References
+    ----------
+    Tipprasert (2006), §5.1, §5.2.1, Figs. 5-1 to 5-4; Iwasaki et al. (2003).
     """
     Hc, Wc = box.size
     lat = plane_lattice(box, n, placement)

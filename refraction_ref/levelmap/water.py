@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..optics import refract
-from ..scene import SceneError
+from ..validation import SceneError
 
 __all__ = ["WaterMesh", "wave_height", "wave_gradient", "water_mesh", "incident_directions",
            "refract_at_vertices", "light_weight"]
@@ -51,7 +51,26 @@ def _waves(water):
 
 
 def wave_height(water, x, z):
-    """Surface height ``h(x, z)`` (world y) of the water block."""
+    """Surface height ``h(x, z)`` (world y) of the water block.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block (``height`` and ``waves``: amplitude,
+        wavelength, direction, phase).
+    x, z : array_like
+        World coordinates, broadcast together.
+
+    Returns
+    -------
+    ndarray of float64
+        Height ``h(x, z)``, world units, of the broadcast shape.
+
+    References
+    ----------
+    Tipprasert (2006), §4.3 (the water surface whose triangles cast the
+    illumination volumes).
+    """
     x = np.asarray(x, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     h = np.full(np.broadcast(x, z).shape, float(water["height"]))
@@ -61,7 +80,24 @@ def wave_height(water, x, z):
 
 
 def wave_gradient(water, x, z):
-    """Analytic partial derivatives ``(dh/dx, dh/dz)`` of the height field."""
+    """Analytic partial derivatives ``(dh/dx, dh/dz)`` of the height field.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block.
+    x, z : array_like
+        World coordinates, broadcast together.
+
+    Returns
+    -------
+    hx, hz : ndarray of float64
+        ``dh/dx`` and ``dh/dz`` of the broadcast shape.
+
+    References
+    ----------
+    Tipprasert (2006), §4.3.
+    """
     x = np.asarray(x, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     shape = np.broadcast(x, z).shape
@@ -75,7 +111,24 @@ def wave_gradient(water, x, z):
 
 
 def surface_normals(water, x, z):
-    """Unit upward normals ``(-h_x, 1, -h_z) / |.|`` of the height field."""
+    """Unit upward normals ``(-h_x, 1, -h_z) / |.|`` of the height field.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block.
+    x, z : array_like
+        World coordinates, broadcast together.
+
+    Returns
+    -------
+    (..., 3) float64
+        Unit normals, ``y`` up.
+
+    References
+    ----------
+    Tipprasert (2006), §2.6 (normals for Snell's law) and §4.3.
+    """
     hx, hz = wave_gradient(water, x, z)
     n = np.stack([-hx, np.ones_like(hx), -hz], axis=-1)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
@@ -84,11 +137,21 @@ def surface_normals(water, x, z):
 def water_mesh(water):
     """Mesh the water block: ``resolution x resolution`` quads, two triangles each.
 
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block (``resolution``, ``size``, ``height``,
+        ``waves``).
+
     Returns
     -------
     WaterMesh
         ``(resolution + 1)**2`` vertices displaced by the waves, their
         analytic normals, and ``2 resolution**2`` faces.
+
+    References
+    ----------
+    Tipprasert (2006), §4.3 (water triangles and their illumination volumes).
     """
     n = int(water["resolution"])
     sx, sz = (float(s) for s in water["size"])
@@ -113,13 +176,52 @@ def light_weight(light):
     A directional light of weight 1 delivers unit irradiance measured
     perpendicular to its direction; a point light of weight ``I`` delivers
     ``I / r**2`` at distance ``r``.
+
+    Parameters
+    ----------
+    light : dict
+        A scene light (its ``radiance``, RGB).
+
+    Returns
+    -------
+    float
+        Mean of the three channels.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5 (incident intensity ``I_i`` of eq. 4-18).
     """
     return float(np.mean(np.asarray(light["radiance"], dtype=np.float64)))
 
 
 def incident_directions(light, points):
     """Unit incident light directions at ``points`` (N, 3) and the irradiance
-    perpendicular to them (N,), for a directional or a point light."""
+    perpendicular to them (N,), for a directional or a point light.
+
+    Parameters
+    ----------
+    light : dict
+        A scene light, ``'directional'`` (``direction``) or ``'point'``
+        (``position``), with its ``radiance``.
+    points : (N, 3) array_like
+        World points (the water vertices).
+
+    Returns
+    -------
+    dirs : (N, 3) float64
+        Unit directions from the light towards the points.
+    irradiance : (N,) float64
+        :func:`light_weight`, divided by the squared distance for a point light.
+
+    Raises
+    ------
+    SceneError
+        For another light type.
+
+    References
+    ----------
+    Tipprasert (2006), §4.3 and §4.5 (``I_i`` and ``theta_i`` of eq. 4-18).
+    """
     points = np.asarray(points, dtype=np.float64)
     w = light_weight(light)
     if light["type"] == "directional":

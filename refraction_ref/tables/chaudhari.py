@@ -120,14 +120,51 @@ class Model(NamedTuple):
 
 
 def eye_of(view, distance, target=(0.0, 0.0, 0.0)):
-    """World position of the eye ``distance`` from ``target`` in direction ``view``."""
+    """World position of the eye ``distance`` from ``target`` in direction ``view``.
+
+    Parameters
+    ----------
+    view : View
+        Azimuth and elevation, degrees.
+    distance : float
+        Eye to target, scene units.
+    target : (3,) sequence of float
+        The point looked at.
+
+    Returns
+    -------
+    list of 3 float
+    """
     a, e = math.radians(view.azimuth), math.radians(view.elevation)
     d = np.array([math.sin(a) * math.cos(e), math.sin(e), math.cos(a) * math.cos(e)])
     return (np.asarray(target, dtype=np.float64) + distance * d).tolist()
 
 
 def with_view(scene, view, distance, res, fov_y=30.0, target=(0.0, 0.0, 0.0), imagespace=None):
-    """A copy of a scene dict seen from ``view`` at ``res`` x ``res``; ``imagespace`` knobs merged in."""
+    """A copy of a scene dict seen from ``view`` at ``res`` x ``res``; ``imagespace`` knobs merged in.
+
+    Parameters
+    ----------
+    scene : dict
+        A scene dict (not modified).
+    view : View
+        Camera direction.
+    distance : float
+        Eye to target, scene units.
+    res : int
+        Image width and height in pixels.
+    fov_y : float
+        Vertical field of view, degrees.
+    target : (3,) sequence of float
+        The point looked at.
+    imagespace : dict, optional
+        ``imagespace`` knobs merged over the scene's.
+
+    Returns
+    -------
+    dict
+        The new scene dict, ``up`` +y.
+    """
     d = copy.deepcopy(scene)
     cam = dict(d.get("camera") or {})
     cam.update({"eye": eye_of(view, distance, target), "target": list(map(float, target)), "up": [0.0, 1.0, 0.0],
@@ -148,6 +185,19 @@ def view_complexities(scene, views=VIEWS, distance=2.6, res=256, fov_y=30.0):
     The objects are set up once; each view rasterizes them with the ``count``
     blend (every fragment, no culling: the true depth complexity, before any
     bitmask merges fragments of one slice).
+
+    Parameters
+    ----------
+    scene : dict
+        Scene dict whose objects are measured.
+    views : sequence of View
+        Camera directions (default :data:`VIEWS`, the listed views of Table 4.1).
+    distance : float
+        Eye to target (the origin), scene units.
+    res : int
+        Image side in pixels.
+    fov_y : float
+        Vertical field of view, degrees.
 
     Returns
     -------
@@ -178,6 +228,19 @@ def view_complexities(scene, views=VIEWS, distance=2.6, res=256, fov_y=30.0):
 def highest_complexity_view(scene, views=VIEWS, distance=2.6, res=256, fov_y=30.0):
     """The view of highest depth complexity: the largest per-pixel count, ties to the larger mean.
 
+    Parameters
+    ----------
+    scene : dict
+        Scene dict whose objects are measured.
+    views : sequence of View
+        Camera directions (default :data:`VIEWS`, the listed views of Table 4.1).
+    distance : float
+        Eye to target (the origin), scene units.
+    res : int
+        Image side in pixels.
+    fov_y : float
+        Vertical field of view, degrees.
+
     Returns
     -------
     (View, list of dict)
@@ -190,13 +253,41 @@ def highest_complexity_view(scene, views=VIEWS, distance=2.6, res=256, fov_y=30.
 
 # --------------------------------------------------------------------------- timing
 def pipeline_ms(result):
-    """Sum of the per-frame stages' ``timings_ms`` (min/max pass to finished image)."""
+    """Sum of the per-frame stages' ``timings_ms`` (min/max pass to finished image).
+
+    Parameters
+    ----------
+    result : Result
+        An image-space render (its ``meta['timings_ms']``).
+
+    Returns
+    -------
+    float
+        Milliseconds over :data:`PIPELINE_STAGES`.
+    """
     t = result.meta["timings_ms"]
     return float(sum(t.get(k, 0.0) for k in PIPELINE_STAGES))
 
 
 def time_pipeline(scene, repeats=9, warmup=2):
-    """A plain timer: ``warmup`` renders, then the medians of ``repeats`` (``time_fn`` for the tables)."""
+    """A plain timer: ``warmup`` renders, then the medians of ``repeats`` (``time_fn`` for the tables).
+
+    Parameters
+    ----------
+    scene : Scene or dict
+        The scene to render.
+    repeats : int
+        Timed renders (at least 1).
+    warmup : int
+        Untimed renders first.
+
+    Returns
+    -------
+    dict
+        ``pipeline_ms``, ``total_ms`` (medians), ``stages_ms`` (median per
+        stage), ``samples`` (every ``pipeline_ms``), ``result`` (the last
+        render), ``other_load`` (0: not measured).
+    """
     from ..render import render
 
     for _ in range(max(0, int(warmup))):
@@ -214,7 +305,19 @@ def time_pipeline(scene, repeats=9, warmup=2):
 
 
 def photon_generation_pass(scene):
-    """A callable running the thesis's photon-generation pass once (see :func:`photon_generation_ms`)."""
+    """A callable running the thesis's photon-generation pass once (see :func:`photon_generation_ms`).
+
+    Parameters
+    ----------
+    scene : Scene or dict
+        The scene (objects and camera).
+
+    Returns
+    -------
+    callable
+        ``once()`` rasterizes the objects' triangles with the ``min`` blend and
+        returns the (H, W) nearest depths.
+    """
     from ..camera import Camera
     from ..meshes import scene_geometry
     from ..raster import raster_setup, rasterize
@@ -232,7 +335,26 @@ def photon_generation_pass(scene):
 
 
 def cell_scene(model, view, res, layers, mode):
-    """The loaded scene of one table cell: ``model`` from ``view`` at ``res``^2, ``layers``, ``mode``."""
+    """The loaded scene of one table cell: ``model`` from ``view`` at ``res``^2, ``layers``, ``mode``.
+
+    Parameters
+    ----------
+    model : Model
+        The table row's objects and camera distance.
+    view : View
+        Camera direction.
+    res : int
+        Image side in pixels.
+    layers : int
+        ``imagespace.layers``.
+    mode : str
+        ``'thesis'`` peels all layers (``imagespace.peel_all``), else only the
+        depth complexity.
+
+    Returns
+    -------
+    Scene
+    """
     return _scene_for(model, view, res, layers, mode)
 
 
@@ -243,6 +365,20 @@ def photon_generation_ms(scene, repeats=9, warmup=2):
     thesis's vertex buffers) are transformed into the view, set up and
     rasterized with the ``min`` blend (the nearest surface per pixel: where
     each eye photon starts). Median ms over ``repeats`` after ``warmup``.
+
+    Parameters
+    ----------
+    scene : Scene or dict
+        The scene (objects and camera).
+    repeats : int
+        Timed runs.
+    warmup : int
+        Untimed runs first (at least 1).
+
+    Returns
+    -------
+    float
+        Median milliseconds.
     """
     once = photon_generation_pass(scene)
     for _ in range(max(1, int(warmup))):
@@ -288,6 +424,22 @@ def _cells(model, view, keys, time_fn, time_many, cache, log):
 
 def time_cells(model, view, keys, time_many, cache=None, log=None):
     """Time the cells ``keys`` ((res, layers, mode) tuples) of ``model`` seen from ``view``, interleaved.
+
+    Parameters
+    ----------
+    model : Model
+        The table row's objects and camera distance.
+    view : View
+        Camera direction.
+    keys : iterable of (int, int, str)
+        ``(res, layers, mode)`` cells.
+    time_many : callable
+        Takes a list of scenes and returns one timing dict per scene (the keys
+        of :func:`time_pipeline`).
+    cache : dict, optional
+        Cells timed before, reused and added to.
+    log : callable, optional
+        Receives one progress line per cell.
 
     Returns
     -------
@@ -421,6 +573,13 @@ ERROR_OPTIONS = (
 def exit_error(a, b):
     """One run against the exact reference, over the pixels the reference hits.
 
+    Parameters
+    ----------
+    a : mapping
+        Image-space arrays (``status``, ``exit_dir`` (H, W, 3)).
+    b : mapping
+        Reference arrays (``hit`` (H, W) bool, ``status``, ``exit_dir``).
+
     Returns
     -------
     dict
@@ -452,6 +611,21 @@ def error_vs_view(models, iors=(1.2, 1.33, 1.5), ring=RING, options=ERROR_OPTION
     One :class:`~refraction_ref.session.Session` per model and IOR: a view
     change re-runs the camera's stages, an option only the stages that read
     it. The exact reference is rendered once per view.
+
+    Parameters
+    ----------
+    models : dict
+        Name -> :class:`Model`.
+    iors : sequence of float
+        Indices of refraction given to every object.
+    ring : sequence of View
+        Camera directions (default :data:`RING`).
+    options : sequence of (str, dict)
+        Label and ``imagespace`` knob overrides (default :data:`ERROR_OPTIONS`).
+    res : int
+        Image side in pixels.
+    log : callable or None
+        Receives one progress line per view.
 
     Returns
     -------
@@ -496,7 +670,22 @@ def error_vs_view(models, iors=(1.2, 1.33, 1.5), ring=RING, options=ERROR_OPTION
 
 
 def summarize_error(rows, by=("model", "ior", "option")):
-    """Pool the ring: per group, the median and p90 of every pixel's error and the hit-weighted fractions."""
+    """Pool the ring: per group, the median and p90 of every pixel's error and the hit-weighted fractions.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`error_vs_view`'s rows.
+    by : tuple of str
+        Keys that form a group.
+
+    Returns
+    -------
+    list of dict
+        The group keys, ``views``, ``hit``, pooled ``median`` and ``p90``
+        (degrees), hit-weighted ``exit``, ``within5``, ``tir``, ``lost``,
+        ``exact_exit``, and the range over views of ``exit`` and ``p90``.
+    """
     groups = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in by), []).append(r)
@@ -521,6 +710,13 @@ def defaults_before_after(res=512, log=print):
     The default bunny (front view, IOR 1.2) against the exact reference, and
     the sphere (``mesh: sphere``, fit 1, IOR 1.5, eye at distance 3) against
     the closed form (:func:`~refraction_ref.analytic.sphere_refraction`).
+
+    Parameters
+    ----------
+    res : int
+        Image side in pixels.
+    log : callable or None
+        Receives one line per row.
 
     Returns
     -------

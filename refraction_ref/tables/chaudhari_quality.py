@@ -92,7 +92,18 @@ def front_normal_error(a, b, eta):
 
 
 def roughness(err):
-    """Mean absolute difference of an error map between 4-neighbour pixels where both are finite."""
+    """Mean absolute difference of an error map between 4-neighbour pixels where both are finite.
+
+    Parameters
+    ----------
+    err : (H, W) float
+        Per-pixel error map (degrees), NaN where undefined.
+
+    Returns
+    -------
+    float
+        Mean absolute neighbour difference; NaN when no pair is finite.
+    """
     d = []
     for x, y in ((err[:, 1:], err[:, :-1]), (err[1:, :], err[:-1, :])):
         ok = np.isfinite(x) & np.isfinite(y)
@@ -110,6 +121,15 @@ def _stats(x):
 
 def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
     """§3.5: front-normal and exit-direction error against the exact reference for each estimator.
+
+    Parameters
+    ----------
+    res : int
+        Image side in pixels.
+    scenes : sequence of str
+        Keys of :data:`SCENES` (``'bunny'``, ``'sphere'``).
+    log : callable, optional
+        Receives one line per scene and estimator.
 
     Returns
     -------
@@ -168,7 +188,19 @@ class _Prepared:
 
 
 def run_passes(prep):
-    """The passes before the search bound: minmax, voxelize, peel (§3.3-3.4)."""
+    """The passes before the search bound: minmax, voxelize, peel (§3.3-3.4).
+
+    Parameters
+    ----------
+    prep : _Prepared
+        One view's loaded scene, knobs, geometry and camera.
+
+    Returns
+    -------
+    mm, vox, pl
+        The outputs of :func:`~refraction_ref.imagespace.pipeline.pass_minmax`,
+        ``pass_voxelize`` and ``pass_peel``.
+    """
     from ..imagespace import pipeline as P
 
     mm = P.pass_minmax(prep.geom, prep.cam, prep.p)
@@ -182,6 +214,18 @@ def layered(prep, bound="tight", iterations=5, timings=None):
     ``tight`` is the renderer's own reduction (``bounds=mip``, §3.7);
     ``global`` its exact per-layer maxima; ``loose`` skips the reduction and
     bounds every layer's search by the object's largest depth (§3.6's E).
+
+    Parameters
+    ----------
+    prep : _Prepared
+        One view's loaded scene, knobs, geometry and camera.
+    bound : {'tight', 'global', 'loose'}
+        The search bound.
+    iterations : int
+        Binary-search iterations (``imagespace.iterations``).
+    timings : dict, optional
+        When given, every pass is run again and timed; ``passes``, ``reduce``,
+        ``trace`` and ``frame`` (ms) are written into it.
 
     Returns
     -------
@@ -199,8 +243,8 @@ def layered(prep, bound="tight", iterations=5, timings=None):
     t["passes"] = (tic() - t0) * 1e3
     t0 = tic()
     if bound == "loose":
-        L = pl["ldi"].shape[0]
-        red = {"bounds_hi": np.full(L, mm["gmax"]), "bounds_lo": np.full(L, mm["gmin"])}
+        L = pl.ldi.shape[0]
+        red = P.Bounds(np.full(L, mm.gmax), np.full(L, mm.gmin), "the object's largest depth bounds every layer")
     else:
         red = P.pass_reduce(mm, pl, dict(p, bounds="global" if bound == "global" else "mip"))
     t["reduce"] = (tic() - t0) * 1e3
@@ -223,6 +267,17 @@ def _similar(e, ref):
 
 def bounds_study(res=128, scenes=("bunny", "sphere"), rounds=5, log=None):
     """§3.7: error against the exact reference by bound and iterations, the tight/loose frame ratio, the searches.
+
+    Parameters
+    ----------
+    res : int
+        Image side in pixels.
+    scenes : sequence of str
+        Keys of :data:`SCENES`.
+    rounds : int
+        Timed rounds of the tight and loose frames.
+    log : callable, optional
+        Receives progress lines.
 
     Returns
     -------

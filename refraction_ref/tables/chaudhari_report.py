@@ -60,6 +60,15 @@ def decimate(v, f, target):
     package is installed (``pip install .[bench]``), else vertex clustering on
     a uniform grid whose cell size is bisected to land within 2 % of ``target``.
 
+    Parameters
+    ----------
+    v : (V, 3) array_like
+        Vertices.
+    f : (F, 3) array_like of int
+        Triangles.
+    target : int
+        Triangles wanted.
+
     Returns
     -------
     (vertices, faces, method) : (ndarray, ndarray, str)
@@ -98,6 +107,12 @@ _LOWPOLY = {}
 def lowpoly_bunny(target=LOWPOLY_FACES):
     """The built-in bunny decimated to about ``target`` triangles, in memory (nothing is written to disk).
 
+    Parameters
+    ----------
+    target : int
+        Triangles wanted (default :data:`LOWPOLY_FACES`); the result is kept
+        per target.
+
     Returns
     -------
     ((vertices, faces), method)
@@ -121,7 +136,7 @@ def _obj(mesh, translate=(0.0, 0.0, 0.0), fit=1.0, scale=1.0):
 
 
 def models(quick=False):
-    """""Row name -> :class:`.chaudhari.Model` for every row we have meshes for, and the decimation used.
+    """Row name -> :class:`.chaudhari.Model` for every row we have meshes for, and the decimation used.
 
     Table 4.1's rows (``Bunny-lowpoly``, ``Bunny I``, ``Bunny and Bunny``,
     ``Igea``, each at its own framing) and Table 4.2's scenes ``I-A``,
@@ -130,7 +145,19 @@ def models(quick=False):
     is compared with one camera, as the thesis's Table 4.2 films one scene.
     ``quick`` is accepted for symmetry: quick runs keep every row and shrink
     only sizes and repeats.
-    """""
+
+    Parameters
+    ----------
+    quick : bool
+        Accepted and ignored (see above).
+
+    Returns
+    -------
+    dict
+        Row name -> :class:`.chaudhari.Model`.
+    str
+        The decimation method of the low-poly bunny (:func:`decimate`).
+    """
     low, method = lowpoly_bunny()
     out = {"Bunny-lowpoly": T.Model([_obj(low)], 2.6, f"bunny decimated to {LOWPOLY_FACES:,} ({method})"),
            "Bunny I": T.Model([_obj("bunny")], 2.6, "the bunny, 69,451")}
@@ -201,6 +228,15 @@ def time_frames(scenes, repeats, warmup=1):
     other), and its median and spread over the rounds reported, so that a
     slow spell of a shared machine weighs on both sides of it alike.
 
+    Parameters
+    ----------
+    scenes : sequence of Scene or dict
+        The scenes to time.
+    repeats : int
+        Rounds (at least 1).
+    warmup : int
+        Untimed renders and photon generations of each scene first.
+
     Returns
     -------
     list of dict
@@ -235,7 +271,19 @@ def time_frames(scenes, repeats, warmup=1):
 
 
 def ratio(a, b, key="frame"):
-    """(median, lowest, highest) over the rounds of ``a[key] / b[key]`` (:func:`time_frames`)."""
+    """(median, lowest, highest) over the rounds of ``a[key] / b[key]`` (:func:`time_frames`).
+
+    Parameters
+    ----------
+    a, b : dict
+        Entries of :func:`time_frames`'s list.
+    key : str
+        The per-round series compared (``'frame'``, ``'trace'``, ...).
+
+    Returns
+    -------
+    median, lowest, highest : float
+    """
     r = [x / y for x, y in zip(a[key], b[key])]
     return statistics.median(r), min(r), max(r)
 

@@ -118,7 +118,22 @@ def cpu_jiffies():
 
 
 def other_load(before, after, wall_s, cpus=None):
-    """Share of the machine's CPU capacity other processes used between two :func:`cpu_jiffies`."""
+    """Share of the machine's CPU capacity other processes used between two :func:`cpu_jiffies`.
+
+    Parameters
+    ----------
+    before, after : tuple of int or None
+        :func:`cpu_jiffies` at the start and the end.
+    wall_s : float
+        Wall-clock seconds between them.
+    cpus : int, optional
+        CPUs of the machine (default ``os.cpu_count()``).
+
+    Returns
+    -------
+    float
+        Fraction in ``[0, ...)``; 0 when either reading is missing.
+    """
     if before is None or after is None or wall_s <= 0:
         return 0.0
     hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100

@@ -107,7 +107,19 @@ def _md_table(columns, rows):
 
 
 def unreliable(report, claim):
-    """Whether a claim's verdict rests on a timing taken while the machine was busy (:data:`.common.BUSY`)."""
+    """Whether a claim's verdict rests on a timing taken while the machine was busy (:data:`.common.BUSY`).
+
+    Parameters
+    ----------
+    report : Report
+        The paper's report (its ``other_load``).
+    claim : Claim
+        One of its claims (its ``timing`` flag).
+
+    Returns
+    -------
+    bool
+    """
     return bool(claim.timing) and report.other_load > BUSY
 
 
@@ -119,7 +131,19 @@ def _verdict(report, claim):
 
 
 def markdown(reports, quick=False):
-    """The report's Markdown text."""
+    """The report's Markdown text.
+
+    Parameters
+    ----------
+    reports : list of Report
+        One per paper.
+    quick : bool
+        The run used the quick (CI smoke) sizes.
+
+    Returns
+    -------
+    str
+    """
     from ..contract import software_versions
 
     v = software_versions()
@@ -167,7 +191,17 @@ def markdown(reports, quick=False):
 
 
 def write_report(reports, out, quick=False):
-    """Write ``<table key>.csv`` per table, ``claims.csv`` and ``tables.md`` into ``out``."""
+    """Write ``<table key>.csv`` per table, ``claims.csv`` and ``tables.md`` into ``out``.
+
+    Parameters
+    ----------
+    reports : list of Report
+        One per paper.
+    out : str
+        Existing output folder.
+    quick : bool
+        The run used the quick (CI smoke) sizes.
+    """
     from ..files import atomic_open
 
     for r in reports:

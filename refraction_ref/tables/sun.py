@@ -60,7 +60,20 @@ _SUBDIV = {1280: 3, 5120: 4, 20480: 5, 81920: 6}
 
 
 def luneburg(N, R=0.8):
-    """A Luneburg lens of radius R in the cube [-1, 1]^3: n = sqrt(2 - (r/R)^2) inside, 1 outside."""
+    """A Luneburg lens of radius R in the cube [-1, 1]^3: n = sqrt(2 - (r/R)^2) inside, 1 outside.
+
+    Parameters
+    ----------
+    N : int
+        Voxels per axis.
+    R : float
+        Lens radius, in units of the cube's half side.
+
+    Returns
+    -------
+    (N, N, N) float64
+        Index of refraction at the voxel centres.
+    """
     c = (np.arange(N) + 0.5) / N * 2.0 - 1.0
     X, Y, Z = np.meshgrid(c, c, c, indexing="ij")
     r2 = (X ** 2 + Y ** 2 + Z ** 2) / R ** 2
@@ -127,8 +140,44 @@ def _run(quick, out, log):
     rr.render({"camera": {"width": 8, "height": 8}, "volumetric": {"resolution": 16, "photons": 4, "padding": 2}},
               method="volumetric")  # JIT warm-up
     size = f"{N}^3 volume, {M}^2 initial photons, {W}x{H} image"
+    table1, t1 = _table1(N, M, cam, small, size, quick, log)
+    table2, t2 = _table2(N, M, cam, small, size, log)
+    claims = [_claim_proxy(t2), _claim_scaling(t1, M), _claim_linear(t1, M, quick, small), _claim_adaptive(N, M)]
+    log("Sun et al. 2008: caustic quality against the exact reference (blur, tolerance, resolution) ...")
+    table3, qclaims = quality_study(quick, log)
+    claims += qclaims
+    return Report(paper=PAPER, tables=[table1, table2, table3], claims=claims,
+                  seconds=time.perf_counter() - t_start)
 
-    # ------------------------------------------------------------------ Table 1
+
+def _table1(N, M, cam, small, size, quick, log):
+    """Table 1: icospheres of 1,280-81,920 triangles, radii 0.5-0.8, M/4-M squared initial photons.
+
+    Parameters
+    ----------
+    N, M : int
+        Volume resolution and initial photons per side.
+    cam : dict
+        The camera block of the timed renders.
+    small : dict
+        Overrides of the 'box' renders (a tiny camera).
+    size : str
+        The sizes, for the table's note.
+    quick : bool
+        Reduced sizes.
+    log : callable
+
+    Returns
+    -------
+    table1 : Table
+    t1 : list of dict
+        Per row: ``tris``, ``fit``, ``ph``, the stats ``a`` (proxy) and ``b`` (box), their timings
+        ``ta``, ``tb``, and the ``scene``.
+
+    References
+    ----------
+    Sun et al. (2008), §6, Table 1.
+    """
     rows_def = [(20480, 0.8, M, 1), (1280, 0.8, M, 0), (5120, 0.8, M, 0), (81920, 0.8, M, 3),
                 (20480, 0.5, M, 4), (20480, 0.6, M, 5), (20480, 0.7, M, 6), (20480, 0.8, M // 4, 7),
                 (20480, 0.8, M // 2, 8)]
@@ -163,8 +212,34 @@ def _run(quick, out, log):
               "generated (one per texel covered by the proxy or box), all of them propagated. One render per "
               "row after JIT warm-up, on this CPU (2 cores shared); total = every stage incl. the viewing pass. "
               "Before this change (box photons, robust stepping) the first row took 36.37 M steps at 128^3."))
+    return table1, t1
 
-    # ------------------------------------------------------------------ Table 2
+
+def _table2(N, M, cam, small, size, log):
+    """Table 2: the Fig. 9 scene, the teapot, the bunny and the Luneburg lens, box against proxy photons.
+
+    Parameters
+    ----------
+    N, M : int
+        Volume resolution and initial photons per side.
+    cam, small : dict
+        The camera block of the timed renders; overrides of the 'box' renders.
+    size : str
+        The sizes, for the table's note.
+    log : callable
+
+    Returns
+    -------
+    table2 : Table
+    t2 : list of dict
+        Per row: ``name``, the stats ``a`` (proxy) and ``b`` (box), their timings ``ta``, ``tb``.
+
+    References
+    ----------
+    Sun et al. (2008), §6, Table 2.
+    """
+    import refraction_ref as rr
+
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     fig9 = rr.load_scene(os.path.join(here, "data", "volumetric_fig9.json")).data
     fig9 = {k: fig9[k] for k in ("objects", "lights", "receivers", "environment", "imagespace")}
@@ -206,15 +281,17 @@ def _run(quick, out, log):
               "box of the voxels whose index differs from the outside, grown by 6 voxels). No fluid, turbulence "
               "or painted volume of ours corresponds to 1(a), 1(b), 7 or 8. 'box': photons on the volume's box; "
               "'proxy': the paper's setting. Frames per second = 1000 / every stage's time (proxy)."))
+    return table2, t2
 
-    # ------------------------------------------------------------------ claims
-    claims = []
-    # 1. proxy reduces photons and steps (§4.3)
+
+def _claim_proxy(t2):
+    """§4.3: the proxy saves photons and steps (Table 2's mesh rows); a :class:`Claim`."""
+    # proxy reduces photons and steps (§4.3)
     mesh_rows = [r for r in t2 if r["a"]["triangles"]]
     ph_ratio = [r["a"]["photons_propagated"] / r["b"]["photons_propagated"] for r in mesh_rows]
     st_ratio = [r["a"]["photon_steps"] / r["b"]["photon_steps"] for r in mesh_rows]
     ok = all(x < 1 for x in st_ratio) and all(x < 1 for x in ph_ratio)
-    claims.append(Claim(
+    return Claim(
         PAPER, "§4.3",
         "We can reduce the amount of time we will spend tracing photons through this empty space by generating "
         "the photons as close as possible to the interesting parts of the volume.",
@@ -224,8 +301,11 @@ def _run(quick, out, log):
         "Texels whose ray misses the inflated mesh make no photon, and the others skip the empty space before it."
         if ok else "Some mesh row took no fewer steps with the proxy than with box photons.",
         rule="Held if every mesh row of Table 2 propagates fewer photons and takes fewer steps with the proxy than "
-             "with photons on the volume's box (counts, not times)."))
-    # 2. steps scale with initial photons and occupied voxels (Table 1)
+             "with photons on the volume's box (counts, not times).")
+
+
+def _claim_scaling(t1, M):
+    """§6, Table 1: steps grow with the initial photons and the occupied voxels; a :class:`Claim`."""
     by = {(r["tris"], r["fit"], r["ph"]): r for r in t1}
     s_full, s_quarter = by[(20480, 0.8, M)]["a"]["photon_steps"], by[(20480, 0.8, M // 4)]["a"]["photon_steps"]
     s_small = by[(20480, 0.5, M)]["a"]["photon_steps"]
@@ -233,7 +313,7 @@ def _run(quick, out, log):
     r_ph, r_occ = s_full / s_quarter, s_full / s_small
     paper_ph, paper_occ = 3.81 / 0.24, 3.81 / 1.12
     ok = 8 <= r_ph <= 24 and r_occ > 1.5
-    claims.append(Claim(
+    return Claim(
         PAPER, "§6, Table 1",
         "Table 1 demonstrates how our algorithm's performance depends on several parameters, including the number "
         "of triangles in the input mesh, the number of occupied voxels, and the number of initial photons.",
@@ -244,10 +324,14 @@ def _run(quick, out, log):
         "covers more texels and photons cross more voxels)." if ok else
         "The step counts do not follow the photons and occupied voxels as in the paper.",
         rule="Held if 16x the initial photons give 8-24x the steps and the largest sphere more than 1.5x the steps "
-             "of the smallest (counts, not times)."))
-    # 3. tracing cost is linear in the number of steps (§5.1): the rows that vary the photons (16x the steps),
-    # their marches timed round by round (each round marches the three in turn, so a slow spell of the machine
-    # weighs on all three), on one thread
+             "of the smallest (counts, not times).")
+
+
+def _claim_linear(t1, M, quick, small):
+    """§5.1: photon-tracing time is linear in the steps (Table 1's photon rows, timed); a :class:`Claim`."""
+    # the rows that vary the photons (16x the steps), their marches timed round by round (each round marches
+    # the three in turn, so a slow spell of the machine weighs on all three), on one thread
+    by = {(r["tris"], r["fit"], r["ph"]): r for r in t1}
     ph_rows = [by[(20480, 0.8, m)] for m in (M // 4, M // 2, M)]
     rounds = 5 if quick else 7
     ms = [[] for _ in ph_rows]
@@ -262,7 +346,7 @@ def _run(quick, out, log):
     t_ratio = float(np.median(per_round))
     lin = t_ratio / s_ratio
     ok = rc > 0.95 and 0.5 <= lin <= 2.0
-    claims.append(Claim(
+    return Claim(
         PAPER, "§5.1",
         "photon tracing is the most expensive part of our rendering pipeline and its cost increases linearly with "
         "the number of steps in the photon paths",
@@ -279,8 +363,14 @@ def _run(quick, out, log):
               f"{TABLE_THREADS} Numba thread, the three marches in turn in each round: held if the time per step "
               "changes by at most 2x either way from the fewest to the most photons (the median per-round time "
               "ratio over the step ratio in 0.5-2) and r > 0.95 over the three rows."),
-        timing=True))
-    # 4. adaptive steps against a true one-voxel march (§6). No knob marches one voxel everywhere (a constant
+        timing=True)
+
+
+def _claim_adaptive(N, M):
+    """§6: adaptive steps against a one-voxel march (counted on Table 1's first row); a :class:`Claim`."""
+    import refraction_ref as rr
+
+    # adaptive steps against a true one-voxel march (§6). No knob marches one voxel everywhere (a constant
     # octree node is crossed in one step whatever eps and eps' are), so the baseline is counted: a one-voxel march
     # takes at least |end - start| / voxel steps per photon (the chord; the bent path is longer), for every photon
     # whose end is known (it exited or reached a receiver; the others count 0). A lower bound on the baseline:
@@ -300,7 +390,7 @@ def _run(quick, out, log):
     s_eps = _render(sc, {"volumetric.eps": 1e-12, "volumetric.eps2": 1e-12})[0]["photon_steps"]
     r_one = s_ad / s_one
     ok = r_one <= 0.5
-    claims.append(Claim(
+    return Claim(
         PAPER, "§6",
         "The key to our technique's performance is its use of adaptive step sizes when tracing photons. By taking "
         "fewer steps through the volume, we generate fewer primitives to be rendered",
@@ -315,12 +405,7 @@ def _run(quick, out, log):
         rule=(f"Table 1's first row (icosphere r 0.8, {N}^3, {M}^2 photons): held if the adaptive march takes at most "
               "half the steps of a march of one voxel per step everywhere, counted as each photon's chord "
               "length in voxels (a lower bound for the uniform march)."),
-        timing=False))
-    log("Sun et al. 2008: caustic quality against the exact reference (blur, tolerance, resolution) ...")
-    table3, qclaims = quality_study(quick, log)
-    claims += qclaims
-    return Report(paper=PAPER, tables=[table1, table2, table3], claims=claims,
-                  seconds=time.perf_counter() - t_start)
+        timing=False)
 
 
 QUOTE_BLUR = ("we saw a small improvement as the blur kernel increased in size from 5 to 7 to 9, but no substantial "
@@ -334,7 +419,22 @@ QUOTE_RES = ("The amount of video memory on current graphics hardware limits our
 
 def quality_scene(N, M, cmap):
     """A glass sphere (IOR 1.5, radius 0.8) over a floor in the cube [-1, 1]^3, no medium (the exact reference has
-    none), a slanted directional light; ``N``^3 voxels, ``M``^2 photons, ``cmap``^2 caustic map."""
+    none), a slanted directional light; ``N``^3 voxels, ``M``^2 photons, ``cmap``^2 caustic map.
+
+    Parameters
+    ----------
+    N : int
+        ``volumetric.resolution``.
+    M : int
+        ``volumetric.photons`` (texture side per light).
+    cmap : int
+        Caustic map side in texels.
+
+    Returns
+    -------
+    dict
+        The scene dict.
+    """
     return {"camera": {"width": 8, "height": 8},
             "objects": [{"mesh": "sphere", "fit": 0.8, "material": {"ior": 1.5}}],
             "lights": [{"type": "directional", "direction": [0.2, -1.0, -0.1]}],
@@ -347,10 +447,23 @@ def quality_study(quick, log=print):
     """§4.1's blur kernels, §5.3's tolerance and §7's resolution, judged on the caustic map against the exact reference.
 
     Quality claims are judged by error against the exact caustics reference
-    (:mod:`refraction_ref.exact_render`, 1024^2 jittered photons), never by
+    (:mod:`refraction_ref.exact.pipeline`, 1024^2 jittered photons), never by
     time: the relative L1 of the receiver's caustic map, both blurred by one
     texel. Quick: 32^3 and 64^3, 128^2 photons, a 64^2 map; full: 128^3 and
     256^3, 512^2 photons, a 128^2 map. Not timed: rendered on every Numba thread.
+
+    Parameters
+    ----------
+    quick : bool
+        Quick (CI smoke) sizes.
+    log : callable or None
+        Receives progress lines.
+
+    Returns
+    -------
+    table : Table
+        Relative L1 of each run's caustic map against the exact reference.
+    claims : list of Claim
 
     References
     ----------
@@ -360,7 +473,7 @@ def quality_study(quick, log=print):
 
     import refraction_ref as rr
 
-    from ..levelmap.metrics import relative_l1
+    from ..metrics import relative_l1
 
     N, M, cmap = (32, 128, 64) if quick else (128, 512, 128)
     sc = quality_scene(N, M, cmap)

@@ -168,7 +168,20 @@ def thesis_rows():
 
 
 def uv_sphere(seg=32, rings=32):
-    """A UV sphere of diameter 1 with ``2 seg (rings - 1)`` triangles (32 x 32: 1,984, as Table 5-2)."""
+    """A UV sphere of diameter 1 with ``2 seg (rings - 1)`` triangles (32 x 32: 1,984, as Table 5-2).
+
+    Parameters
+    ----------
+    seg : int
+        Segments around the vertical axis.
+    rings : int
+        Rings from pole to pole.
+
+    Returns
+    -------
+    vertices : (2 + seg (rings - 1), 3) float64
+    faces : (2 seg (rings - 1), 3) int64
+    """
     v = [[0.0, 0.5, 0.0]]
     for i in range(1, rings):
         th = np.pi * i / rings
@@ -196,6 +209,25 @@ def model_scene(mesh, planes=50, floor=False, sun=SUN_TOP, overrides=None, **lm)
     """One model (teapot, sphere or bunny) in the default pool under the default waves, as the thesis's tables.
 
     ``mesh`` is a built-in name, ``"sphere"`` (the 1,984-triangle UV sphere of Table 5-2) or ``(v, f)``.
+
+    Parameters
+    ----------
+    mesh : str or (vertices, faces)
+        The receiver's mesh.
+    planes : int
+        ``levelmap.planes``.
+    floor : bool
+        Keep the default scene's pool floor as a second receiver.
+    sun : (3,) sequence of float
+        Direction of the directional light (default :data:`SUN_TOP`, from above).
+    overrides : dict, optional
+        Knob overrides given to :func:`~refraction_ref.scene.load_scene`.
+    **lm
+        Further ``levelmap`` knobs.
+
+    Returns
+    -------
+    Scene
     """
     from ..levelmap import default_scene
     from ..scene import load_scene
@@ -236,7 +268,7 @@ def measure(meshes, planes, repeats, size=None, log=print):
     size : dict, optional
         Overrides for small runs (``levelmap.map_size``, ``water.resolution``, camera size).
     """
-    from ..levelmap.metrics import luv_difference
+    from ..metrics import luv_difference
     from ..scene import load_scene
 
     th = thesis_rows()
@@ -309,7 +341,22 @@ def _r(x, nd=3):
 
 
 def tables(rows, note, plots):
-    """The four :class:`~.common.Table` of the report from :func:`measure`'s rows."""
+    """The four :class:`~.common.Table` of the report from :func:`measure`'s rows.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`measure`'s rows.
+    note : str
+        Note printed under every table.
+    plots : dict
+        Table number (``'1'``, ``'3'``, ``'4'``, ``'5'``) -> figure file name.
+
+    Returns
+    -------
+    list of Table
+        Tables 5-1, 5-3, 5-4 and 5-5.
+    """
     t1 = Table("tipprasert_5_1", "Table 5-1: rendering time (s), level map against the volumetric baseline",
                ["model (paper)", "planes", "ours level map", "ours volumetric", "ours volumetric / level map",
                 "paper level map", "paper volumetric", "paper volumetric / level map"],
@@ -349,6 +396,23 @@ def component_box(vertices, T0, size, placement="tight", origin=None):
     ``|P_a|`` of the vertex farthest along each axis. Other placements are
     passed through unchanged.
 
+    Parameters
+    ----------
+    vertices : (N, 3) array_like
+        The receiver's world-space vertices.
+    T0 : (3,) array_like
+        Refracted light direction.
+    size : int or (Hc, Wc)
+        Texels of the maps.
+    placement : {"tight", "thesis"}
+        Only ``"thesis"`` is read component-wise.
+    origin : (3,) array_like, optional
+        ``P_0`` (default the vertices' bounding-box centre).
+
+    Returns
+    -------
+    Box
+
     References
     ----------
     Tipprasert (2006), §4.2.1, eqs. 4-2, 4-3.
@@ -383,7 +447,17 @@ class _component_boxes:
 
 
 def placement_scenes(quick):
-    """The wavy pools of the eq. 4-3 study: (name, scene data); the bundled scene, and in full two more."""
+    """The wavy pools of the eq. 4-3 study: (name, scene data); the bundled scene, and in full two more.
+
+    Parameters
+    ----------
+    quick : bool
+        Only the bundled pool floor.
+
+    Returns
+    -------
+    list of (str, dict)
+    """
     from ..levelmap import default_scene
 
     base = json.loads(json.dumps(default_scene().data, default=lambda o: None))
@@ -407,19 +481,37 @@ def placement_study(quick=False, log=print):
     """Eq. 4-3's readings against the exact water reference: one row per (scene, receiver, reading).
 
     Each reading's level-map caustic map is compared with the exact reference
-    rendered in the same box (:mod:`refraction_ref.levelmap.exact_water`):
-    the relative L1 of :func:`~refraction_ref.levelmap.metrics.relative_l1`
+    rendered in the same box (:mod:`refraction_ref.exact.water`):
+    the relative L1 of :func:`~refraction_ref.metrics.relative_l1`
     (both blurred by one texel, over the receiver's own texels) and the ratio
     of the blurred maps' peaks. Quick: the bundled floor alone, 256^2 maps,
     1024^2 exact samples; full: three scenes, 512^2 maps, 2048^2 samples.
+
+    Parameters
+    ----------
+    quick : bool
+        Quick (CI smoke) sizes.
+    log : callable or None
+        Receives one line per row.
+
+    Returns
+    -------
+    rows : list of dict
+        ``scene``, ``receiver``, ``reading``, ``box``, ``own``, ``planes_used``,
+        ``rel_l1``, ``peak``.
+    ms : int
+        Map side in texels.
+    es : int
+        Exact samples per side.
     """
-    from ..levelmap.exact_water import render_water_exact
-    from ..levelmap.metrics import _gaussian_filter_constant, relative_l1
+    from ..exact.pipeline import render_water_exact
+    from ..filters import gaussian_filter_zero
+    from ..metrics import relative_l1
     from ..levelmap.pipeline import planes_pass, prepare, render_levelmap
     from ..scene import load_scene
 
     ms, es = (256, 1024) if quick else (512, 2048)
-    size = {"levelmap.map_size": ms, "levelmap.exact_samples": es, "camera.width": 32, "camera.height": 32}
+    size = {"caustics.map_size": ms, "exact.water_samples": es, "camera.width": 32, "camera.height": 32}
     rows = []
     for name, data in placement_scenes(quick):
         base = load_scene(data, size)
@@ -434,8 +526,8 @@ def placement_study(quick=False, log=print):
             for r, pair in enumerate(ctx["pairs"]):
                 own = pair[0].lm.own
                 a, b = arrays[f"caustic_map_{r}"], exact[f"caustic_map_{r}"]
-                ab = _gaussian_filter_constant(np.where(own, np.nan_to_num(a), 0.0), 1.0)
-                bb = _gaussian_filter_constant(np.where(own, np.nan_to_num(b), 0.0), 1.0)
+                ab = gaussian_filter_zero(np.where(own, np.nan_to_num(a), 0.0), 1.0)
+                bb = gaussian_filter_zero(np.where(own, np.nan_to_num(b), 0.0), 1.0)
                 bx = boxes[r][0]
                 row = {"scene": name, "receiver": sc.data["receivers"][r].get("name", f"receiver {r}"),
                        "reading": reading, "box": f"{bx.w:.2f} x {bx.h:.2f} x {bx.d:.2f}",
@@ -457,7 +549,21 @@ class _null:
 
 
 def placement_table(rows, ms, es):
-    """The eq. 4-3 study as a :class:`~.common.Table`, with a sentence on the reading its numbers support."""
+    """The eq. 4-3 study as a :class:`~.common.Table`, with a sentence on the reading its numbers support.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`placement_study`'s rows.
+    ms : int
+        Map side in texels.
+    es : int
+        Exact samples per side.
+
+    Returns
+    -------
+    Table
+    """
     by = {}
     for r in rows:
         by.setdefault((r["scene"], r["receiver"]), {})[r["reading"]] = r
@@ -511,7 +617,17 @@ def _linear_r2(x, y):
 
 
 def claims(rows):
-    """The thesis's claims checked against the measured rows."""
+    """The thesis's claims checked against the measured rows.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`measure`'s rows.
+
+    Returns
+    -------
+    list of Claim
+    """
     out = []
     ratio = [r["volumetric_s"] / r["levelmap_s"] for r in rows]
     worst = min(range(len(rows)), key=lambda k: ratio[k])
@@ -633,7 +749,20 @@ def claims(rows):
 
 
 def plot(rows, out):
-    """Figures for Tables 5-1, 5-3, 5-4, 5-5 (ours and the thesis's), one panel per model: file names."""
+    """Figures for Tables 5-1, 5-3, 5-4, 5-5 (ours and the thesis's), one panel per model: file names.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`measure`'s rows.
+    out : str
+        Folder the PNG files are written to.
+
+    Returns
+    -------
+    dict
+        Table number (``'1'``, ``'3'``, ``'4'``, ``'5'``) -> file name.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -700,12 +829,12 @@ def run(quick=False, out=".", log=print):
     -------
     Report
     """
-    from ..levelmap.pipeline import warm_up
+    from ..warm import warm
 
     t0 = time.perf_counter()
     out = os.fspath(out)
     os.makedirs(out, exist_ok=True)
-    warm_up()
+    warm("levelmap")
     if quick:
         meshes = [("teapot", "teapot"), ("sphere", "sphere")]
         planes = [3, 17, 31]

@@ -27,8 +27,9 @@ Importing this package is cheap: the passes are imported on first use.
 __all__ = ["render_volumetric"]
 
 
-def render_volumetric(scene, cache=None):
-    """See :func:`refraction_ref.volumetric.pipeline.render_volumetric`."""
-    from .pipeline import render_volumetric as _r
+def __getattr__(name):  # lazy: scene loading imports .knobs without the kernels
+    if name == "render_volumetric":
+        from .pipeline import render_volumetric
 
-    return _r(scene, cache)
+        return render_volumetric
+    raise AttributeError(name)

@@ -21,7 +21,24 @@ __all__ = ["gradient_field", "voxel_size"]
 
 
 def voxel_size(bounds, shape):
-    """Per-axis voxel size ``(hi - lo) / shape`` of a volume."""
+    """Per-axis voxel size ``(hi - lo) / shape`` of a volume.
+
+    Parameters
+    ----------
+    bounds : (2, 3) array_like
+        World-space lower and upper corners of the volume.
+    shape : tuple of int
+        Voxels per axis (only the first three entries are read).
+
+    Returns
+    -------
+    (3,) float64
+        Voxel side along x, y, z in world units.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (the voxel grid) and §4.4 (eq. 3's differences).
+    """
     b = np.asarray(bounds, dtype=np.float64)
     return (b[1] - b[0]) / np.asarray(shape[:3], dtype=np.float64)
 

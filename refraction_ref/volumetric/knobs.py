@@ -102,7 +102,7 @@ VOLUME_KEYS = ("ior", "extinction", "scattering", "bounds")
 
 
 def _rgb(x, where):
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     a = np.asarray(x, dtype=np.float64) if not isinstance(x, str) else None
     if a is None or a.shape not in ((), (3,)) or not np.all(np.isfinite(a)):
@@ -113,7 +113,7 @@ def _rgb(x, where):
 
 
 def _bounds(b, where):
-    from ..scene import SceneError
+    from ..validation import SceneError
 
     try:
         a = np.asarray(b, dtype=np.float64)
@@ -133,50 +133,67 @@ def validate_volumetric(data, base_dir="."):
     bounds}`` (all None) in place; ``.npy`` paths must exist here, their
     contents are checked by :func:`refraction_ref.volumetric.pipeline.load_volume`
     before any work starts.
+
+    Parameters
+    ----------
+    data : dict
+        The scene's data, with ``volumetric`` (resolved knobs) and ``volume``
+        blocks; ``volume`` is completed in place.
+    base_dir : str
+        Folder that relative ``.npy`` paths of ``volume`` are resolved against.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    SceneError
+        On the first knob or volume entry out of range.
     """
-    from ..scene import SceneError, _merge, _num
+    from ..validation import SceneError, merge_defaults, check_number
 
     v = data["volumetric"]
-    _num(v["resolution"], "volumetric.resolution", 8, 1024, integer=True)
-    _num(v["photons"], "volumetric.photons", 1, 8192, integer=True)
-    _num(v["ds_min"], "volumetric.ds_min", 0.0, 1e6, lo_open=True)
-    _num(v["ds_max"], "volumetric.ds_max", 0.0, 1e9, lo_open=True)
+    check_number(v["resolution"], "volumetric.resolution", 8, 1024, integer=True)
+    check_number(v["photons"], "volumetric.photons", 1, 8192, integer=True)
+    check_number(v["ds_min"], "volumetric.ds_min", 0.0, 1e6, lo_open=True)
+    check_number(v["ds_max"], "volumetric.ds_max", 0.0, 1e9, lo_open=True)
     if v["ds_max"] < v["ds_min"]:
         raise SceneError(f"scene: volumetric.ds_max ({v['ds_max']}) is below volumetric.ds_min "
                          f"({v['ds_min']}); the step is clamped between them, so raise ds_max")
-    _num(v["eps"], "volumetric.eps", 0.0, lo_open=True)
-    _num(v["eps2"], "volumetric.eps2", 0.0, lo_open=True)
+    check_number(v["eps"], "volumetric.eps", 0.0, lo_open=True)
+    check_number(v["eps2"], "volumetric.eps2", 0.0, lo_open=True)
     if v["eps2"] < v["eps"]:
         raise SceneError(f"scene: volumetric.eps2 ({v['eps2']}) is below volumetric.eps ({v['eps']}); "
                          "the secondary tolerance must be the larger one (§5.3)")
     if v["integrator"] not in INTEGRATORS:
         raise SceneError(f"scene: 'volumetric.integrator' is {v['integrator']!r}; choose one of "
                          f"{', '.join(INTEGRATORS)}")
-    _num(v["phase_g"], "volumetric.phase_g", -0.999, 0.999)
+    check_number(v["phase_g"], "volumetric.phase_g", -0.999, 0.999)
     _rgb(v["scattering"], "volumetric.scattering")
     _rgb(v["absorption"], "volumetric.absorption")
-    _num(v["supersample"], "volumetric.supersample", 1, 16, integer=True)
-    _num(v["blur"], "volumetric.blur", 0, 63, integer=True)
+    check_number(v["supersample"], "volumetric.supersample", 1, 16, integer=True)
+    check_number(v["blur"], "volumetric.blur", 0, 63, integer=True)
     if v["blur"] > 1 and v["blur"] % 2 == 0:
         raise SceneError(f"scene: volumetric.blur is {v['blur']}; the Gaussian window must be odd (e.g. 9), "
                          "or 0 for no blur")
-    _num(v["padding"], "volumetric.padding", 0, 1000, integer=True)
+    check_number(v["padding"], "volumetric.padding", 0, 1000, integer=True)
     if 2 * v["padding"] + 2 > v["resolution"]:
         raise SceneError(f"scene: volumetric.padding {v['padding']} leaves no voxels for the objects at "
                          f"resolution {v['resolution']}; lower padding or raise resolution")
     if v["bounds"] is not None:
         _bounds(v["bounds"], "volumetric.bounds")
-    _num(v["max_steps"], "volumetric.max_steps", 0, 10**8, integer=True)
-    _num(v["min_radiance"], "volumetric.min_radiance", 0.0, 1.0)
-    _num(v["stop_fraction"], "volumetric.stop_fraction", 0.0, 1.0)
-    _num(v["stiff"], "volumetric.stiff", 0.0, 10.0, lo_open=True)
+    check_number(v["max_steps"], "volumetric.max_steps", 0, 10**8, integer=True)
+    check_number(v["min_radiance"], "volumetric.min_radiance", 0.0, 1.0)
+    check_number(v["stop_fraction"], "volumetric.stop_fraction", 0.0, 1.0)
+    check_number(v["stiff"], "volumetric.stiff", 0.0, 10.0, lo_open=True)
     if v["stepping"] not in STEPPINGS:
         raise SceneError(f"scene: 'volumetric.stepping' is {v['stepping']!r}; choose 'paper' (Sun et al. 2008 "
                          "§4.4/§5.3 as written) or 'robust' (stiffness cap, step halving, dilated octree)")
     if v["proxy"] not in PROXIES:
         raise SceneError(f"scene: 'volumetric.proxy' is {v['proxy']!r}; choose 'inflated' (photons start on an "
                          "inflated copy of the objects, §4.3) or 'box' (on the volume's bounding box)")
-    _num(v["proxy_inflate"], "volumetric.proxy_inflate", 0.0, 1000.0)
+    check_number(v["proxy_inflate"], "volumetric.proxy_inflate", 0.0, 1000.0)
     N = int(v["resolution"])
     need = N ** 3 * 200
     if data["volume"] is None and need > 12 * 2**30:
@@ -187,7 +204,7 @@ def validate_volumetric(data, base_dir="."):
         return data
     if not isinstance(vol, dict):
         raise SceneError("scene: 'volume' must be an object {ior, extinction, scattering, bounds} or null")
-    vol = _merge(dict.fromkeys(VOLUME_KEYS), vol, "volume")
+    vol = merge_defaults(dict.fromkeys(VOLUME_KEYS), vol, "volume")
     data["volume"] = vol
     if vol["ior"] is None:
         raise SceneError("scene: 'volume.ior' is missing; give an (nx, ny, nz) array or a .npy path")

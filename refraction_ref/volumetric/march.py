@@ -76,8 +76,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ..filters import sym_tap
 from ..status import EXITED, LIMIT, LOST
-from .voxelize import sym_tap
 
 __all__ = ["march_photons", "smooth_radiance", "trace_paths", "release_workspace", "STATUS",
            "PHOTON_ACTIVE", "PHOTON_ABSORBED", "PHOTON_RECEIVED", "receiver_tuple"]
@@ -112,7 +112,29 @@ def _lerp_axis(u, na):
 
 @nb.njit(cache=True)  # a call, not inlined: its callers would compile its body at every call site
 def sample_field(field, lo, ih, x, y, z):
-    """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume)."""
+    """Trilinear (n, dn/dx, dn/dy, dn/dz) at a world point (clamped to the volume).
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient at voxel centres
+        (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    lo : (3,) float64
+        Lower corner of the volume, world units.
+    ih : (3,) float64
+        Inverse voxel size per axis.
+    x, y, z : float
+        World point.
+
+    Returns
+    -------
+    n, dndx, dndy, dndz : float
+        Interpolated index and gradient (per world unit).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (n and its gradient at the photon, eqs. 4-5).
+    """
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     i, fx = _lerp_axis((x - lo[0]) * ih[0] - 0.5, nx)
     j, fy = _lerp_axis((y - lo[1]) * ih[1] - 0.5, ny)
@@ -141,6 +163,30 @@ def advance(field, lo, ih, integ, p, v, g, ds):
     ``p = (x, y, z)``, ``v = (vx, vy, vz)``; ``g = (n, dn/dx, dn/dy, dn/dz)``
     is the field at p, already sampled by the caller. Returns
     ``(x, y, z, vx, vy, vz)`` after the step ``ds``.
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient (RK4 samples it at the inner stages).
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    integ : int
+        ``INTEG_EULER`` (0) or ``INTEG_RK4`` (1).
+    p, v : 3-tuples of float
+        Position and velocity ``n dx/ds``.
+    g : 4-tuple of float
+        ``(n, dn/dx, dn/dy, dn/dz)`` at ``p``.
+    ds : float
+        Step length, world units.
+
+    Returns
+    -------
+    tuple of 6 floats
+        New position and velocity.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5; §3, eqs. 2-3.
     """
     x, y, z = p
     vx, vy, vz = v
@@ -175,7 +221,24 @@ def advance(field, lo, ih, integ, p, v, g, ds):
 
 @nb.njit(cache=True, inline="always")
 def cell(u, na):
-    """``min(max(floor(u), 0), na - 1)`` (truncation is floor for u >= 0; NaN -> 0)."""
+    """``min(max(floor(u), 0), na - 1)`` (truncation is floor for u >= 0; NaN -> 0).
+
+    Parameters
+    ----------
+    u : float
+        Coordinate in voxel units along one axis.
+    na : int
+        Voxels along that axis.
+
+    Returns
+    -------
+    int
+        Voxel index in ``0 .. na - 1``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (voxel of the photon).
+    """
     if not u > 0.0:
         return 0
     c = int(u)
@@ -184,6 +247,26 @@ def cell(u, na):
 
 @nb.njit(cache=True, inline="always")
 def voxel_of(lo, ih, nx, ny, nz, x, y, z):
+    """Voxel ``(i, j, k)`` holding a world point, clamped to the grid.
+
+    Parameters
+    ----------
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    nx, ny, nz : int
+        Voxels per axis.
+    x, y, z : float
+        World point.
+
+    Returns
+    -------
+    i, j, k : int
+        Voxel indices (:func:`cell` per axis).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (octree node of the photon's voxel).
+    """
     return cell((x - lo[0]) * ih[0], nx), cell((y - lo[1]) * ih[1], ny), cell((z - lo[2]) * ih[2], nz)
 
 
@@ -201,7 +284,31 @@ def _axis_distance(xa, da, lo, h, ih, na, lev):
 
 @nb.njit(cache=True, inline="always")
 def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
-    """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5)."""
+    """Distance along the unit direction d from x to the boundary of its level-``lev`` node (Fig. 5).
+
+    Parameters
+    ----------
+    lo, h, ih : (3,) float64
+        Lower corner, voxel size and its inverse.
+    shape_n : (3,) int64
+        Voxels per axis.
+    lev : int
+        Octree level of the node (a level-``lev`` node spans ``2**lev`` voxels).
+    x, y, z : float
+        World point inside the node.
+    dx, dy, dz : float
+        Unit direction.
+
+    Returns
+    -------
+    float
+        Distance (world units, >= 0) to the node's boundary; ``inf`` when the
+        direction is zero.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 and Fig. 5 (step to the leaf node's boundary).
+    """
     t = min(_axis_distance(x, dx, lo[0], h[0], ih[0], shape_n[0], lev),
             min(_axis_distance(y, dy, lo[1], h[1], ih[1], shape_n[1], lev),
                 _axis_distance(z, dz, lo[2], h[2], ih[2], shape_n[2], lev)))
@@ -210,7 +317,26 @@ def node_distance(lo, h, ih, shape_n, lev, x, y, z, dx, dy, dz):
 
 @nb.njit(cache=True, inline="always")
 def segment_exit(lo, hi, x, y, z, x1, y1, z1):
-    """Fraction s in [0, 1] of the segment x -> x1 still inside the box (1 when x1 is inside)."""
+    """Fraction s in [0, 1] of the segment x -> x1 still inside the box (1 when x1 is inside).
+
+    Parameters
+    ----------
+    lo, hi : (3,) float64
+        Corners of the box.
+    x, y, z : float
+        Segment start (inside the box).
+    x1, y1, z1 : float
+        Segment end.
+
+    Returns
+    -------
+    float
+        Fraction of the segment inside, in ``[0, 1]``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (a photon leaving the volume).
+    """
     s = 1.0
     for a in range(3):
         p0 = x if a == 0 else (y if a == 1 else z)
@@ -289,6 +415,17 @@ def receiver_tuple(tris=None, owner=None):
     tris : (T, 3, 3) float64, optional
     owner : (T,) int, optional
         Receiver index of each triangle (0 .. R - 1).
+
+    Returns
+    -------
+    _Recv
+        Triangles grouped by receiver with each receiver's bounding box and the
+        start of its triangles; empty arrays when there are no receivers.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (photons stop on diffuse surfaces), §6 (caustics on
+    receivers).
     """
     if tris is None or len(tris) == 0:
         z = np.zeros((0, 3))
@@ -394,6 +531,31 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
     the length of the segment inside each voxel (in voxels); values are
     converted to fixed point with scale ``dep.sr`` (radiance) and ``dep.sd``
     (direction) by truncation, and added with sign ``dep.sign``.
+
+    Parameters
+    ----------
+    dep : _Deposits
+        Deposit buffers and their fixed-point scales.
+    g : int
+        Buffer index.
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    a, b : 3-tuples of float
+        Segment end points, world units.
+    l0, l1 : 3-tuples of float
+        RGB radiance at ``a`` and ``b``.
+    d : 3-tuple of float
+        Unit direction of the segment.
+
+    Returns
+    -------
+    None
+        ``dep.rows`` is added to in place.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (radiance stored in the voxels the photon crosses)
+    and §5.1 (radiance storage); Amanatides and Woo (1987).
     """
     accr, nx, ny, nz, py, pz = dep.rows, dep.nx, dep.ny, dep.nz, dep.py, dep.pz
     sr, sd, sgn = dep.sr, dep.sd, dep.sign
@@ -472,6 +634,70 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
             if k < 0 or k >= nz:
                 return
         t = tn
+
+
+@nb.njit(cache=True, inline="always")
+def _robust_step(field, lo, ih, integ, state, ds, stiff, hmin):
+    """One 'robust' step from ``state = (x, y, z, vx, vy, vz, n, gx, gy, gz)`` (module docstring).
+
+    The step is capped by the stiffness bound and halved (up to 8 times)
+    while it crosses an index jump the local gradient does not predict.
+    Returns ``(ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz)``: the step
+    taken, the state after it, and the field sampled at its end (carried
+    into the next step).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5.
+    """
+    x, y, z, vx, vy, vz, n, gx, gy, gz = state
+    gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+    if gn * ds > stiff * n:
+        ds = stiff * n / gn
+    # stiffness: a step across an index jump that the local gradient does not predict is halved
+    for _ in range(8):
+        x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz),
+                                            (n, gx, gy, gz), ds)
+        cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
+        dn = cn - n
+        if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
+            break
+        pred = gx * (x1 - x) + gy * (y1 - y) + gz * (z1 - z)
+        if abs(dn - pred) <= 0.5 * abs(dn):
+            break
+        ds *= 0.5
+    return ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz
+
+
+@nb.njit(cache=True, inline="always")
+def _attenuate(ext, i, j, k, seg, lrad, trans):
+    """Radiance ``lrad`` and transmittance ``trans`` (RGB 3-tuples) after ``seg`` world units in voxel (i, j, k).
+
+    Beer-Lambert with the voxel's extinction (Sun et al. 2008, eq. 6);
+    returns ``(nr, ng, nb, tr_r, tr_g, tr_b)``.
+    """
+    lr, lg, lb = lrad
+    tr_r, tr_g, tr_b = trans
+    kr, kg, kb = ext[i, j, k, 0], ext[i, j, k, 1], ext[i, j, k, 2]
+    if kr == kg and kg == kb:  # grey extinction (the common case): one exp
+        a = math.exp(-kr * seg) if kr != 0.0 else 1.0
+        nr, ng, nb_ = lr * a, lg * a, lb * a
+        tr_r, tr_g, tr_b = tr_r * a, tr_g * a, tr_b * a
+    else:
+        a_r = math.exp(-kr * seg)
+        a_g = math.exp(-kg * seg)
+        a_b = math.exp(-kb * seg)
+        nr, ng, nb_ = lr * a_r, lg * a_g, lb * a_b
+        tr_r, tr_g, tr_b = tr_r * a_r, tr_g * a_g, tr_b * a_b
+    return nr, ng, nb_, tr_r, tr_g, tr_b
+
+
+@nb.njit(cache=True, inline="always")
+def _put3(a, p, v):
+    """``a[p, :] = v`` for a 3-tuple ``v``, one component per statement."""
+    a[p, 0] = v[0]
+    a[p, 1] = v[1]
+    a[p, 2] = v[2]
 
 
 @nb.njit(cache=True)
@@ -555,21 +781,8 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
             x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
         else:
             ds = min(ds, cap * hmin)
-            gn = math.sqrt(gx * gx + gy * gy + gz * gz)
-            if gn * ds > stiff * n:
-                ds = stiff * n / gn
-            # stiffness: a step across an index jump that the local gradient does not predict is halved
-            for _ in range(8):
-                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz),
-                                                    (n, gx, gy, gz), ds)
-                cn, cgx, cgy, cgz = sample_field(field, lo, ih, x1, y1, z1)
-                dn = cn - n
-                if abs(dn) <= stiff * n or ds <= 0.125 * hmin:
-                    break
-                pred = gx * (x1 - x) + gy * (y1 - y) + gz * (z1 - z)
-                if abs(dn - pred) <= 0.5 * abs(dn):
-                    break
-                ds *= 0.5
+            ds, x1, y1, z1, vx1, vy1, vz1, cn, cgx, cgy, cgz = _robust_step(
+                field, lo, ih, integ, (x, y, z, vx, vy, vz, n, gx, gy, gz), ds, stiff, hmin)
             carried = True
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                 and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
@@ -585,17 +798,7 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
         ex, ey, ez = x + s * (x1 - x), y + s * (y1 - y), z + s * (z1 - z)
         sx, sy, sz = ex - x, ey - y, ez - z
         seg = math.sqrt(sx * sx + sy * sy + sz * sz)
-        kr, kg, kb = ext[i, j, k, 0], ext[i, j, k, 1], ext[i, j, k, 2]
-        if kr == kg and kg == kb:  # grey extinction (the common case): one exp
-            a = math.exp(-kr * seg) if kr != 0.0 else 1.0
-            nr, ng, nb_ = lr * a, lg * a, lb * a
-            tr_r, tr_g, tr_b = tr_r * a, tr_g * a, tr_b * a
-        else:
-            a_r = math.exp(-kr * seg)
-            a_g = math.exp(-kg * seg)
-            a_b = math.exp(-kb * seg)
-            nr, ng, nb_ = lr * a_r, lg * a_g, lb * a_b
-            tr_r, tr_g, tr_b = tr_r * a_r, tr_g * a_g, tr_b * a_b
+        nr, ng, nb_, tr_r, tr_g, tr_b = _attenuate(ext, i, j, k, seg, (lr, lg, lb), (tr_r, tr_g, tr_b))
         if steps >= dep_from and seg > 0.0:
             deposit_segment(dep, g, lo, ih, (x, y, z), (ex, ey, ez), (lr, lg, lb), (nr, ng, nb_),
                             (sx / seg, sy / seg, sz / seg))
@@ -606,28 +809,18 @@ def _trace_one(p, grid, photons, knobs, dep, g, out, path, recv):
             path[steps, 2] = ez
         if hitr >= 0:
             status = PHOTON_RECEIVED
-            hit_pos[p, 0] = ex
-            hit_pos[p, 1] = ey
-            hit_pos[p, 2] = ez
+            _put3(hit_pos, p, (ex, ey, ez))
             hit_recv[p] = hitr
-            hit_trans[p, 0] = tr_r
-            hit_trans[p, 1] = tr_g
-            hit_trans[p, 2] = tr_b
+            _put3(hit_trans, p, (tr_r, tr_g, tr_b))
             break
         if s < 1.0:
             status = EXITED
             if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
                 vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), s * ds)[3:]
             v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
-            exit_pos[p, 0] = ex
-            exit_pos[p, 1] = ey
-            exit_pos[p, 2] = ez
-            exit_dir[p, 0] = vx1 / v1
-            exit_dir[p, 1] = vy1 / v1
-            exit_dir[p, 2] = vz1 / v1
-            hit_trans[p, 0] = tr_r
-            hit_trans[p, 1] = tr_g
-            hit_trans[p, 2] = tr_b
+            _put3(exit_pos, p, (ex, ey, ez))
+            _put3(exit_dir, p, (vx1 / v1, vy1 / v1, vz1 / v1))
+            _put3(hit_trans, p, (tr_r, tr_g, tr_b))
             break
         x, y, z, vx, vy, vz = x1, y1, z1, vx1, vy1, vz1
         lr, lg, lb = nr, ng, nb_
@@ -738,6 +931,27 @@ def half_contrast(field_or_ior, outside_ior):
 
     A point with ``side * (n - n_half) > 0`` is inside refractive material
     (the viewing pass's ``hit``; the march's "met the object" flag).
+
+    Parameters
+    ----------
+    field_or_ior : ndarray
+        ``(nx, ny, nz, 4)`` gradient field (its channel 0) or ``(nx, ny, nz)``
+        index of refraction.
+    outside_ior : float
+        Index of refraction outside the objects.
+
+    Returns
+    -------
+    n_half : float
+        ``outside_ior`` plus half the largest contrast; ``inf`` for a volume
+        without contrast.
+    side : float
+        ``+1`` when the material's index is above the outside's, else ``-1``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (rays meeting the refractive object in the viewing
+    pass).
     """
     a = np.asarray(field_or_ior)
     n = a[..., 0] if a.ndim == 4 else a
@@ -789,6 +1003,24 @@ def locality_order(pos, bounds, shape):
     Photons that start close together cross the same voxels, so processing
     them together keeps the deposit buffers in cache. The order does not
     change any result (integer deposits), only the speed.
+
+    Parameters
+    ----------
+    pos : (P, 3) float64
+        Photon start points, world units.
+    bounds : (2, 3) array_like
+        World-space corners of the volume.
+    shape : tuple of int
+        Voxels per axis.
+
+    Returns
+    -------
+    (P,) int64
+        Permutation of the photons.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 and §5.1 (photon tracing and radiance storage).
     """
     lo, hi, h, ih, shape_n, hmin = _geometry(bounds, shape)
     keys = np.empty(len(pos), np.int64)
@@ -830,7 +1062,12 @@ def _give_workspace(a):
 
 
 def release_workspace():
-    """Free the deposit buffers kept between marches."""
+    """Free the deposit buffers kept between marches.
+
+    References
+    ----------
+    Sun et al. (2008), §5.1 (radiance storage).
+    """
     with _WORKSPACE_LOCK:
         _WORKSPACE.clear()
 
@@ -850,6 +1087,79 @@ def _integ_code(integrator):
 def _grid(field, extinction, level, smax, bounds):
     return _Grid(np.ascontiguousarray(field), np.ascontiguousarray(extinction, dtype=np.float32),
                  np.ascontiguousarray(level), np.ascontiguousarray(smax), *_geometry(bounds, field.shape))
+
+
+def _new_outputs(P, paths):
+    """Fresh per-photon outputs of a march (:class:`_Outputs`): nothing hit, nothing exited yet."""
+    return _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
+                    np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths, np.zeros(P, np.int8),
+                    np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
+
+
+def _stopping_rule(grid, photons, knobs, dep, out, recv, stop_fraction):
+    """The paper's stopping rule (§4.4): cut the march when fewer than ``stop_fraction * P`` photons are active.
+
+    The photons that ran past the cut are traced again with their deposits
+    from the cut on removed (``dep`` with ``start`` = the cut, ``sign`` -1),
+    and their outputs in ``out`` truncated there.
+
+    Parameters
+    ----------
+    grid, photons, knobs, dep, out, recv : named tuples
+        The march's (:func:`march_photons`); ``dep`` is its deposit buffer.
+    stop_fraction : float or None
+        None or 0: no stopping rule.
+
+    Returns
+    -------
+    int
+        Photons cut by the rule.
+
+    References
+    ----------
+    Sun et al. (2008), §4.4.
+    """
+    steps, P = out.steps, len(out.steps)
+    if not (P and stop_fraction is not None and stop_fraction > 0):  # 0: no stopping rule
+        return 0
+    k = int(math.ceil(stop_fraction * P)) - 1
+    if k >= P:
+        return 0
+    cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
+    late = np.flatnonzero(steps > cut)
+    if not len(late):
+        return 0
+    # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
+    _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
+                  dep._replace(start=cut, sign=-1), _new_outputs(P, np.zeros((1, 1, 3))), recv)
+    steps[late] = cut
+    out.status[late] = LIMIT
+    out.exit_pos[late] = np.nan
+    out.exit_dir[late] = np.nan
+    out.hit_pos[late] = np.nan
+    out.hit_recv[late] = -1
+    if knobs.record:
+        out.paths[late, cut + 1:] = np.nan
+    return int(len(late))
+
+
+def _photon_info(out, recv, truncated, max_steps, buffers):
+    """The per-photon results of a march as :func:`march_photons` returns them (its ``photons``)."""
+    P = len(out.steps)
+    steps, drift = out.steps, out.drift
+    hit_tri = out.hit_recv.astype(np.int64)
+    hit_receiver = np.where(hit_tri >= 0, np.searchsorted(recv.start, hit_tri, side="right") - 1, -1)
+    return {
+        "touched": out.touched.astype(bool), "hit_pos": out.hit_pos, "hit_receiver": hit_receiver.astype(np.int32),
+        "hit_tri": hit_tri,
+        "hit_trans": out.hit_trans, "propagated": int(np.count_nonzero(steps > 0)),
+        "exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "status": out.status, "steps": steps,
+        "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
+        "drift_max": float(drift.max()) if P else 0.0,
+        "drift_median": float(np.median(drift)) if P else 0.0,
+        "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
+        "max_steps": int(max_steps), "buffers": int(buffers),
+    }
 
 
 def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_min=1.0, stiff=0.25,
@@ -949,10 +1259,7 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     if stepping not in ("paper", "robust"):
         raise ValueError(f"stepping must be 'paper' or 'robust', got {stepping!r}")
     recv = receiver_tuple() if receivers is None else receivers
-    out = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P, np.float64),
-                   np.full((P, 3), np.nan), np.full((P, 3), np.nan), paths, np.zeros(P, np.int8),
-                   np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
-    steps, status, drift, exit_pos, exit_dir = out.steps, out.status, out.drift, out.exit_pos, out.exit_dir
+    out = _new_outputs(P, paths)
     rad = np.ascontiguousarray(rad, dtype=np.float64)
     pre_trans = None
     if entry is not None and P:
@@ -965,57 +1272,21 @@ def march_photons(field, extinction, level, smax, bounds, pos, dirs, rad, *, ds_
     n_half, side = half_contrast(field, float(outside_ior))
     knobs = _Knobs(float(ds_min) * hmin, float(stiff), _integ_code(integrator), int(max_steps),
                    float(min_radiance), record, 1 if stepping == "paper" else 0, n_half, side)
-    rows = acc.reshape(-1, 6)
-    py, pz = acc.shape[2], acc.shape[3]
+    dep = _Deposits(acc.reshape(-1, 6), int(buffers), nx, ny, nz, acc.shape[2], acc.shape[3], sr, sd, 0, 1)
     if P:
-        _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs,
-                      _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, 0, 1), out, recv)
+        _march_kernel(grid, photons, locality_order(pos, bounds, field.shape), knobs, dep, out, recv)
     # the paper's stopping rule: iterate until fewer than stop_fraction * P photons are active
-    truncated = 0
-    if P and stop_fraction is not None and stop_fraction > 0:  # 0: no stopping rule (every photon to its end)
-        k = int(math.ceil(stop_fraction * P)) - 1
-        if k < P:
-            cut = int(np.sort(steps)[::-1][max(k, 0)]) if k >= 0 else 0
-            late = np.flatnonzero(steps > cut)
-            if len(late):
-                # trace them again, removing every deposit from step ``cut`` on (and recording nothing)
-                redo = _Outputs(np.zeros(P, np.int32), np.full(P, PHOTON_ACTIVE, np.int8), np.zeros(P),
-                                np.full((P, 3), np.nan), np.full((P, 3), np.nan), np.zeros((1, 1, 3)),
-                                np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32),
-                                np.full((P, 3), np.nan))
-                _march_kernel(grid, photons, late.astype(np.int64), knobs._replace(record=0),
-                              _Deposits(rows, int(buffers), nx, ny, nz, py, pz, sr, sd, cut, -1), redo, recv)
-                steps[late] = cut
-                status[late] = LIMIT
-                exit_pos[late] = np.nan
-                exit_dir[late] = np.nan
-                out.hit_pos[late] = np.nan
-                out.hit_recv[late] = -1
-                if record:
-                    paths[late, cut + 1:] = np.nan
-                truncated = int(len(late))
+    truncated = _stopping_rule(grid, photons, knobs, dep, out, recv, stop_fraction)
     if P and recv.tris.shape[0]:
-        ex = np.flatnonzero(status == EXITED).astype(np.int64)
+        ex = np.flatnonzero(out.status == EXITED).astype(np.int64)
         reach = 1e6 * (1.0 + float(np.abs(grid.lo).max() + np.abs(grid.hi).max()))
-        _exit_receivers(ex, exit_pos, exit_dir, recv, reach, out.hit_pos, out.hit_recv)
+        _exit_receivers(ex, out.exit_pos, out.exit_dir, recv, reach, out.hit_pos, out.hit_recv)
     if pre_trans is not None:
         out.hit_trans[:] *= pre_trans
-    hit_tri = out.hit_recv.astype(np.int64)
-    hit_receiver = np.where(hit_tri >= 0, np.searchsorted(recv.start, hit_tri, side="right") - 1, -1)
     sums = np.empty((nx, ny, nz, 6))
     _merge_buffers(acc, sr, sd, sums)
     _give_workspace(acc)
-    info = {
-        "touched": out.touched.astype(bool), "hit_pos": out.hit_pos, "hit_receiver": hit_receiver.astype(np.int32),
-        "hit_tri": hit_tri,
-        "hit_trans": out.hit_trans, "propagated": int(np.count_nonzero(steps > 0)),
-        "exit_pos": exit_pos, "exit_dir": exit_dir, "status": status, "steps": steps,
-        "total_steps": int(steps.sum(dtype=np.int64)), "truncated": truncated,
-        "drift_max": float(drift.max()) if P else 0.0,
-        "drift_median": float(np.median(drift)) if P else 0.0,
-        "drift_p99": float(np.percentile(drift, 99)) if P else 0.0,
-        "max_steps": int(max_steps), "buffers": int(buffers),
-    }
+    info = _photon_info(out, recv, truncated, max_steps, buffers)
     if record:
         info["paths"] = paths
     return sums, info
@@ -1025,10 +1296,31 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
                 integrator="euler", max_steps=0, max_points=100000, stepping="robust"):
     """The polylines followed by a few photons (for tests and figures); no deposition.
 
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    extinction : (nx, ny, nz, 3) float32
+        kappa per voxel (per scene unit).
+    level, smax : ndarray
+        From :func:`~refraction_ref.volumetric.octree.build_octree`.
+    bounds : (2, 3) array_like
+        World-space corners of the volume.
+    pos, dirs : (P, 3) float64
+        Photon start points and directions.
+    ds_min, stiff, integrator, max_steps, stepping
+        As in :func:`march_photons`.
+    max_points : int
+        Most points kept per path (the start point included).
+
     Returns
     -------
     list of (k, 3) float64
         Start point and the end point of every step (clipped at the volume).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4, eqs. 4-5 and Fig. 5.
     """
     grid = _grid(field, extinction, level, smax, bounds)
     nx, ny, nz = (int(s) for s in field.shape[:3])
@@ -1044,9 +1336,7 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
                    1 if stepping == "paper" else 0, float("inf"), 1.0)
     dep = _Deposits(np.zeros((1, 6), np.int64), 1, nx, ny, nz, 1, 1, 1.0, 1.0, 1 << 62, 0)  # never deposits
     P = len(pos)
-    out = _Outputs(np.zeros(P, np.int32), np.zeros(P, np.int8), np.zeros(P),
-                   np.full(pos.shape, np.nan), np.full(pos.shape, np.nan), np.zeros((1, 1, 3)),
-                   np.zeros(P, np.int8), np.full((P, 3), np.nan), np.full(P, -1, np.int32), np.full((P, 3), np.nan))
+    out = _new_outputs(P, np.zeros((1, 1, 3)))
     recv = receiver_tuple()
     paths = []
     for p in range(len(pos)):
@@ -1059,11 +1349,21 @@ def trace_paths(field, extinction, level, smax, bounds, pos, dirs, *, ds_min=1.0
 def smooth_radiance(sums):
     """3x3x3 approximate Gaussian ([1, 2, 1] / 4 per axis) of the deposits, then unit directions (§4.4).
 
+    Parameters
+    ----------
+    sums : (nx, ny, nz, 6) float64
+        Deposited radiance (RGB) and radiance-weighted direction
+        (:func:`march_photons`).
+
     Returns
     -------
     radiance : (nx, ny, nz, 3) float32
     direction : (nx, ny, nz, 3) float32
         Unit mean photon direction (zero where no photon passed).
+
+    References
+    ----------
+    Sun et al. (2008), §4.4 (smoothing of the stored radiance) and §5.1.
     """
     # voxelize.separable_correlate (x, then y, then z passes; bit-identical to scipy) and the split, fused one
     # x slab at a time: every value is formed by the same operations, but no intermediate volume is written

@@ -119,10 +119,22 @@ def _pyramid_flat(n, dilate=True):
 def minmax_pyramid(ior, dilate=True):
     """Min and max of n per node, for levels 0 (voxels, dilated by default) to K (one node).
 
+    Parameters
+    ----------
+    ior : (nx, ny, nz) array_like
+        Index of refraction at voxel centres.
+    dilate : bool
+        Level 0 spans each voxel's 3x3x3 neighbourhood (``stepping =
+        'robust'``); without it a voxel's range is its own value.
+
     Returns
     -------
     list of (nmin, nmax)
         Level k arrays have shape ``ceil(shape / 2^k)``; K = ceil(log2(max shape)).
+
+    References
+    ----------
+    Sun et al. (2008), §4.2 (Fig. 4) and §5.3.
     """
     n = np.ascontiguousarray(ior, dtype=np.float64)
     return _pyramid_flat(n, dilate)[0]
@@ -168,6 +180,10 @@ def leaf_levels(pyr, shape, eps, eps2, ds_max):
     level : (nx, ny, nz) int8
     smax : (nx, ny, nz) float32
         Maximum step in voxels (``inf`` inside constant nodes).
+
+    References
+    ----------
+    Sun et al. (2008), §4.2 and §5.3 (secondary tolerance, maximum step).
     """
     shapes = np.array([m.shape for m, _ in pyr], np.int64)
     off = np.zeros(len(pyr) + 1, np.int64)

@@ -49,7 +49,7 @@ import numba as nb
 import numpy as np
 
 from ..camera import Camera
-from ..scene import SceneError
+from ..validation import SceneError
 
 __all__ = ["generate_photons", "box_entry", "inflate_mesh", "occupied_box"]
 
@@ -66,6 +66,10 @@ def box_entry(origins, dirs, bounds):
     -------
     t_in, t_out : (P,) float64
         Entry and exit parameters (t_in clamped at 0 for origins inside).
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (where each texel's ray enters the volume's box).
     """
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / dirs
@@ -130,7 +134,26 @@ def _slab_both(org, dirs, b, t_in, t_out, want_out):
 def entry_points(pos, dirs, b, entry):
     """Where each photon's texel ray entered the box: ``pos - max(t, 0) dirs`` with ``t`` the exit
     parameter of the reversed ray (:func:`box_entry` of ``(pos, -dirs)``; 0 where not finite), the same
-    operations in the same order as that NumPy expression; parallel over photons."""
+    operations in the same order as that NumPy expression; parallel over photons.
+
+    Parameters
+    ----------
+    pos, dirs : (P, 3) float64
+        Photon start points and directions.
+    b : (2, 3) float64
+        World-space corners of the volume.
+    entry : (P, 3) float64
+        Output, written in place.
+
+    Returns
+    -------
+    None
+        ``entry`` holds the points.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (photons that start on a proxy, last paragraph).
+    """
     for p in nb.prange(pos.shape[0]):
         hi = 0.0
         for c in range(3):
@@ -316,6 +339,10 @@ def occupied_box(ior, bounds, outside_ior, eps, grow):
     -------
     (2, 3) float64 or None
         World bounds, clipped to the volume; None when no voxel differs.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (proxy geometry, last paragraph).
     """
     n = np.asarray(ior)
     b = np.asarray(bounds, dtype=np.float64)
@@ -464,6 +491,10 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
     SceneError
         A point light without a position or inside the volume, a zero
         direction, an unknown type, a negative radiance.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3.
     """
     b = np.asarray(bounds, dtype=np.float64)
     h = (b[1] - b[0]) / np.asarray(shape[:3], dtype=np.float64)

@@ -14,7 +14,7 @@ stage             inputs                                               section
 ``octree``        voxelize; eps, eps2, ds_max, stepping                §4.2, §5.3
 ``photons``       voxelize (bounds, meshes); lights; photons, proxy,   §4.3
                   proxy_inflate, outside_ior
-``receivers``     receivers, lights, imagespace.caustic_map (only      §6.2.2, Fig. 9
+``receivers``     receivers, lights, caustics.map_size (only           §6.2.2, Fig. 9
                   with lights and receivers)
 ``march``         gradient, octree, photons, (receivers); ds_min,      §4.4, eqs. 4-6
                   stiff, integrator, max_steps, min_radiance,
@@ -53,7 +53,8 @@ import numpy as np
 from ..camera import Camera
 from ..environment import environment_lookup
 from ..graph import Method, Stage, describe, register_method, run_graph
-from ..scene import SceneError
+from ..validation import SceneError
+from ..warm import warmer
 from .gradient import gradient_field
 from .march import march_photons, receiver_tuple, smooth_radiance
 from .octree import build_octree
@@ -197,14 +198,10 @@ def _run_voxelize(scene):
             "mesh": (geom.vertices, geom.faces)}
 
 
-def _warm(scene=None):
-    """Compile (or load from numba's cache) the kernels this scene's plan needs, on a tiny copy of it.
-
-    ``scene`` None warms the default scene; see ``refraction_ref._warmup.warm``.
-    """
-    from .. import _warmup
-
-    _warmup.warm("volumetric", scene)
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a 16^3 volume, a few photons and pixels."""
+    return {"camera.width": 4, "camera.height": 4, "volumetric.photons": 4, "volumetric.resolution": 16,
+            "volumetric.padding": 2, "imagespace.photons": 8, "caustics.map_size": 8}
 
 
 # --------------------------------------------------------------------- the stage graph
@@ -297,10 +294,10 @@ def _st_receivers(ctx):
     from ..caustics.receivers import receiver_set
 
     d = ctx.scene.data
-    rs = receiver_set(ctx.scene, d["lights"][0], int(d["imagespace"]["caustic_map"]))
+    rs = receiver_set(ctx.scene, d["lights"][0], int(d["caustics"]["map_size"]))
     recv = receiver_tuple(rs.tris, rs.owner)
     ctx.note(f"{len(rs.boxes)} diffuse receiver(s), {len(rs.tris)} triangles: photons stop on them (inside the "
-             f"volume, or straight on after leaving it); {d['imagespace']['caustic_map']}^2 caustic maps")
+             f"volume, or straight on after leaving it); {d['caustics']['map_size']}^2 caustic maps")
     return {"rs": rs, "recv": recv, **{f"frame_{r}": rs.frame(r).astype(np.float64) for r in range(len(rs.boxes))}}
 
 
@@ -402,7 +399,7 @@ def _st_caustics(ctx):
     (docs/oracle.md, "Caustics on receivers"). Photons that never crossed
     the half-contrast level of the index (direct light) are left out.
     """
-    from ..caustics.pipeline import _collect, splat_maps
+    from ..caustics.pipeline import collect_maps, splat_maps
 
     d = ctx.scene.data
     rs = ctx.buf["receivers"]["rs"]
@@ -412,7 +409,7 @@ def _st_caustics(ctx):
     b = np.asarray(vox["bounds"], dtype=np.float64)
     h = (b[1] - b[0]) / np.asarray(vox["ior"].shape, dtype=np.float64)
     h2 = float(np.prod(h)) ** (2.0 / 3.0)
-    size = int(d["imagespace"]["caustic_map"])
+    size = int(d["caustics"]["map_size"])
     light = ph[3]
     per_light = []
     landed = 0
@@ -427,7 +424,7 @@ def _st_caustics(ctx):
         per_light.append(splat_maps(rs, minfo["hit_pos"][sel], minfo["hit_tri"][sel], flux, size))
         landed += len(sel)
     arrays = {}
-    _collect(d["lights"], rs, per_light, arrays, 1)
+    collect_maps(d["lights"], rs, per_light, arrays, 1)
     ctx.note(f"{landed} photons that met refractive material landed on the receivers; bilinear splat, no gathering")
     ctx.stats["caustics"] = {"photons_on_receivers": int(landed), "caustic_map": size,
                              "receivers": len(rs.boxes)}
@@ -484,10 +481,10 @@ def _skipped(scene):
 def _stages(scene):
     rc = _has_receivers(scene)
     nr = len(scene.data["receivers"] or []) if rc else 0
-    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "imagespace.caustic_map"),
+    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "caustics.map_size"),
                         makes=tuple(f"frame_{r}" for r in range(nr)),
                         doc="diffuse receivers the photons stop on, and their caustic-map frames (Fig. 9)"),) if rc else ()
-    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "imagespace.caustic_map"), after=("voxelize", "photons", "march", "receivers"),
+    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "caustics.map_size"), after=("voxelize", "photons", "march", "receivers"),
                         makes=tuple(f"{k}_{r}" for k in ("caustic_map", "caustic_frame", "caustic_rgb")
                                     for r in range(nr)),
                         doc="irradiance of the refracted photons on each receiver (Fig. 9)"),) if rc else ()
@@ -545,14 +542,15 @@ def _assemble(scene, bufs, stats):
 
 
 METHOD = register_method(Method(
-    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble, warm=_warm,
+    "volumetric", blocks=("volumetric", "volume"), stages=_stages, assemble=_assemble,
+    warm=warmer("volumetric"), tiny=_tiny, label="Sun et al. 2008",
     skipped=_skipped,
     results=("voxelize.ior", "voxelize.bounds", "voxelize.triangles", "march.minfo", "smooth.radiance",
              "smooth.direction", "view", "caustics"),
     doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
 
 
-def render_volumetric(scene, cache=None, warm=True, keep=None):
+def render_volumetric(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Render a scene with the volumetric method of Sun et al. (2008) (runs :data:`METHOD`'s graph).
 
     Parameters
@@ -563,10 +561,12 @@ def render_volumetric(scene, cache=None, warm=True, keep=None):
         Stage outputs of an earlier render (filled in by this call). Stages
         whose inputs did not change are reused from it
         (:class:`refraction_ref.session.Session` keeps one).
-    warm : bool
-        Compile every kernel first so that ``timings_ms`` exclude JIT time.
     keep : str or list, optional
         Stages whose buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool
+        Compile every kernel first so that ``timings_ms`` exclude JIT time.
+    progress : bool
+        Show a progress bar on long work.
 
     Returns
     -------
@@ -585,7 +585,7 @@ def render_volumetric(scene, cache=None, warm=True, keep=None):
     ----------
     Sun et al. (2008), §3-§5.
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, warm=warm)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
 
 
 def _summary(d):

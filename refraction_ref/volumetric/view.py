@@ -53,7 +53,25 @@ __all__ = ["view_volume", "hg_phase", "source_volume"]
 
 @nb.njit(cache=True, inline="always")
 def hg_phase(cos_t, g):
-    """Henyey-Greenstein phase function, normalised over the sphere."""
+    """Henyey-Greenstein phase function, normalised over the sphere.
+
+    Parameters
+    ----------
+    cos_t : float
+        Cosine of the angle between the photon direction and the direction
+        towards the camera.
+    g : float
+        Asymmetry, in (-1, 1); 0 is isotropic.
+
+    Returns
+    -------
+    float
+        Phase function value per steradian.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (in-scattering towards the viewer).
+    """
     d = 1.0 + g * g - 2.0 * g * cos_t
     return (1.0 - g * g) / (4.0 * math.pi * d * math.sqrt(d))
 
@@ -63,6 +81,26 @@ def source_volume(radiance, direction, scattering, extinction):
 
     The float32 product ``radiance * scattering`` as NumPy forms it, packed in parallel over x slabs
     (``scattering`` and ``extinction`` may be broadcast views).
+
+    Parameters
+    ----------
+    radiance : (nx, ny, nz, 3) float32
+        Smoothed radiance (:func:`~refraction_ref.volumetric.march.smooth_radiance`).
+    direction : (nx, ny, nz, 3) float32
+        Unit mean photon direction per voxel.
+    scattering : array_like, broadcastable to (nx, ny, nz, 3)
+        Scattering coefficient sigma (per scene unit).
+    extinction : array_like, broadcastable to (nx, ny, nz, 3)
+        Extinction coefficient kappa (per scene unit).
+
+    Returns
+    -------
+    (nx, ny, nz, 9) float32
+        ``sigma L``, direction and ``kappa`` per voxel.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 and §5.1 (radiance storage read by the viewing pass).
     """
     shape = radiance.shape[:3] + (3,)
     out = np.empty(radiance.shape[:3] + (9,), np.float32)
@@ -109,7 +147,26 @@ def _slab(o, d, lo, hi):
 
 @nb.njit(cache=True, inline="always")
 def box_entry_one(lo, hi, ox, oy, oz, dx, dy, dz):
-    """Entry parameter of one ray into the box (clamped at 0), ``inf`` when it misses."""
+    """Entry parameter of one ray into the box (clamped at 0), ``inf`` when it misses.
+
+    Parameters
+    ----------
+    lo, hi : (3,) float64
+        Corners of the box.
+    ox, oy, oz : float
+        Ray origin.
+    dx, dy, dz : float
+        Ray direction.
+
+    Returns
+    -------
+    float
+        Ray parameter of the entry point.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (viewing rays entering the volume).
+    """
     a0, b0 = _slab(ox, dx, lo[0], hi[0])
     a1, b1 = _slab(oy, dy, lo[1], hi[1])
     a2, b2 = _slab(oz, dz, lo[2], hi[2])
@@ -162,6 +219,57 @@ class _Outputs(NamedTuple):
     status: np.ndarray  # (R,) int8
 
 
+@nb.njit(cache=True, inline="always")
+def _in_scatter(src, i, j, k, u, g, seg, t, c):
+    """Colour ``c`` plus the in-scattering of voxel (i, j, k) towards the camera over ``seg``, attenuated by ``t``.
+
+    ``u`` is the ray's unit direction (the camera sees along ``-u``), ``g``
+    the Henyey-Greenstein asymmetry (0: isotropic); ``t`` and ``c`` are RGB
+    3-tuples. Returns the new colour (Sun et al. 2008, §4.5).
+    """
+    cr, cg, cb = c
+    tr, tg, tb = t
+    ux, uy, uz = u
+    sr, sg, sb = src[i, j, k, 0], src[i, j, k, 1], src[i, j, k, 2]
+    if sr != 0.0 or sg != 0.0 or sb != 0.0:
+        if g != 0.0:
+            ph = hg_phase(-(src[i, j, k, 3] * ux + src[i, j, k, 4] * uy + src[i, j, k, 5] * uz), g)
+        else:
+            ph = 1.0 / (4.0 * math.pi)
+        cr += tr * sr * ph * seg
+        cg += tg * sg * ph * seg
+        cb += tb * sb * ph * seg
+    return cr, cg, cb
+
+
+@nb.njit(cache=True, inline="always")
+def _extinguish(src, i, j, k, seg, t, ek, eseg, ea):
+    """Transmittance ``t`` (RGB) after ``seg`` in voxel (i, j, k): Beer-Lambert (Sun et al. 2008, eq. 6).
+
+    ``ek``, ``eseg``, ``ea``: kappa, seg and exp(-kappa seg) of the last
+    grey voxel, reused while kappa and seg do not change (grey, uniform
+    media). Returns ``(tr, tg, tb, ek, eseg, ea)``.
+    """
+    tr, tg, tb = t
+    kr, kg, kb = src[i, j, k, 6], src[i, j, k, 7], src[i, j, k, 8]
+    if kr == kg and kg == kb:
+        if kr != 0.0:
+            if kr != ek or seg != eseg:
+                ek, eseg = kr, seg
+                ea = math.exp(-kr * seg)
+            tr *= ea
+            tg *= ea
+            tb *= ea
+    else:
+        if kr != 0.0:
+            tr *= math.exp(-kr * seg)
+        if kg != 0.0:
+            tg *= math.exp(-kg * seg)
+        if kb != 0.0:
+            tb *= math.exp(-kb * seg)
+    return tr, tg, tb, ek, eseg, ea
+
+
 @nb.njit(cache=True, parallel=True)
 def _view_kernel(vol, rays, knobs, out):
     # the named tuples unpacked by name (a reordered field cannot swap two arguments), one field per
@@ -194,7 +302,6 @@ def _view_kernel(vol, rays, knobs, out):
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     lo0, lo1, lo2 = lo[0], lo[1], lo[2]
     ih0, ih1, ih2 = ih[0], ih[1], ih[2]
-    iso = 1.0 / (4.0 * math.pi)
     for r in nb.prange(org.shape[0]):
         t_in = box_entry_one(lo, hi, org[r, 0], org[r, 1], org[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2])
         if not (t_in < np.inf):
@@ -263,31 +370,8 @@ def _view_kernel(vol, rays, knobs, out):
             else:
                 seg = s * math.sqrt((x1 - x) ** 2 + (y1 - y) ** 2 + (z1 - z) ** 2)
             # in-scattering of the voxel towards the camera (-u), attenuated so far
-            sr, sg, sb = src[i, j, k, 0], src[i, j, k, 1], src[i, j, k, 2]
-            if sr != 0.0 or sg != 0.0 or sb != 0.0:
-                if g != 0.0:
-                    ph = hg_phase(-(src[i, j, k, 3] * ux + src[i, j, k, 4] * uy + src[i, j, k, 5] * uz), g)
-                else:
-                    ph = iso
-                cr += tr * sr * ph * seg
-                cg += tg * sg * ph * seg
-                cb += tb * sb * ph * seg
-            kr, kg, kb = src[i, j, k, 6], src[i, j, k, 7], src[i, j, k, 8]
-            if kr == kg and kg == kb:
-                if kr != 0.0:
-                    if kr != ek or seg != eseg:
-                        ek, eseg = kr, seg
-                        ea = math.exp(-kr * seg)
-                    tr *= ea
-                    tg *= ea
-                    tb *= ea
-            else:
-                if kr != 0.0:
-                    tr *= math.exp(-kr * seg)
-                if kg != 0.0:
-                    tg *= math.exp(-kg * seg)
-                if kb != 0.0:
-                    tb *= math.exp(-kb * seg)
+            cr, cg, cb = _in_scatter(src, i, j, k, (ux, uy, uz), g, seg, (tr, tg, tb), (cr, cg, cb))
+            tr, tg, tb, ek, eseg, ea = _extinguish(src, i, j, k, seg, (tr, tg, tb), ek, eseg, ea)
             if inside:
                 plen += seg
             if s < 1.0:
@@ -348,6 +432,10 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
         ``exit_dir`` (R, 3; exit_dir = ray direction and exit_pos NaN where
         the ray missed the box), ``hit``, ``interfaces``, ``path_length``,
         ``status``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5, eqs. 4-6.
     """
     box = _geometry(bounds, field.shape)
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)

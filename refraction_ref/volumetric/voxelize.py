@@ -35,11 +35,12 @@ from __future__ import annotations
 
 import hashlib
 import threading
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from scipy import ndimage
 
+from ..filters import gaussian_blur, separable_correlate  # re-exported (__all__): they lived here
 from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",
@@ -49,10 +50,23 @@ __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_cover
 def auto_bounds(vertices, resolution, padding):
     """A cube around ``vertices`` leaving ``padding`` empty voxels on every side.
 
+    Parameters
+    ----------
+    vertices : (V, 3) ndarray
+        World-space vertices of every object.
+    resolution : int
+        Voxels per axis.
+    padding : int
+        Empty voxels left on every side.
+
     Returns
     -------
     (2, 3) float64
         Lower and upper corners; the voxel size is ``(hi - lo) / resolution``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (the voxel grid around the objects).
     """
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     ext = float(np.max(hi - lo))
@@ -128,6 +142,10 @@ def column_crossings(tri, axis, lo, h, shape):
     cum : (K,) int32
         Winding number just past each crossing, counted from -infinity
         (+1 entering through a face whose normal points against the ray).
+
+    References
+    ----------
+    Sun et al. (2008), §4.1; Crane et al. (2007), §30.2.4.
     """
     p, q = (axis + 1) % 3, (axis + 2) % 3
     ncol, nrow = int(shape[0]), int(shape[1])
@@ -168,11 +186,24 @@ def _read_centres(off, depth, cum, ncol, nrow, z0, dz, nz, w_minus, w_total):
                 w_minus[j, i, k] = cum[m - 1] if m > a else 0
 
 
+class _Columns(NamedTuple):
+    """A grid of parallel rays' surface crossings (:func:`column_crossings`), column by column."""
+
+    off: np.ndarray  # (columns + 1,) int64: column c's crossings are depth[off[c]:off[c + 1]]
+    depth: np.ndarray  # crossing depths along the axis, sorted within a column
+    cum: np.ndarray  # running winding number after each crossing
+
+
 @nb.njit(cache=True, parallel=True)
-def _vote_centres(off, depth, cum, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
+def _vote_centres(cols, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
     """``votes += (w_minus != 0)`` (+ ``(w_plus != 0)`` with ``both``) at every voxel centre, in (x, y, z)
     order: :func:`_read_centres` and :func:`winding_at_centres`' difference and transpose in one pass.
-    Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds)."""
+    Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds).
+    ``cols`` is a :class:`_Columns`."""
+    # the named tuple unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
+    off = cols.off
+    depth = cols.depth
+    cum = cols.cum
     for i0 in nb.prange(nrow):
         i = np.int64(i0)
         for j in range(ncol):
@@ -210,11 +241,27 @@ def _inside_coverage(votes, need, inside, cov):
 def winding_at_centres(tri, axis, lo, h, n):
     """Winding numbers along +axis and -axis at every voxel centre.
 
+    Parameters
+    ----------
+    tri : (T, 3, 3) float64
+        World-space triangles.
+    axis : {0, 1, 2}
+        Viewing axis.
+    lo, h : (3,) float64
+        Grid origin and voxel size.
+    n : (3,) int
+        Voxels per axis.
+
     Returns
     -------
     w_minus, w_plus : (nx, ny, nz) int32
         Counted from -infinity and from +infinity along ``axis`` (equal for a
         closed mesh).
+
+    References
+    ----------
+    Sun et al. (2008), §4.1; Crane et al. (2007), §30.2.4 (winding number by
+    slice rendering).
     """
     p, q = (axis + 1) % 3, (axis + 2) % 3
     off, depth, cum = column_crossings(tri, axis, lo, h, (n[p], n[q]))
@@ -228,8 +275,11 @@ def winding_at_centres(tri, axis, lo, h, n):
 
 
 @nb.njit(cache=True, parallel=True)
-def _read_subsamples(off, depth, cum, ncol, S, vox, p, q, r, z0, dz, both, votes):
-    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis."""
+def _read_subsamples(cols, ncol, S, vox, p, q, r, z0, dz, both, votes):
+    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis (``cols``: :class:`_Columns`)."""
+    off = cols.off
+    depth = cols.depth
+    cum = cols.cum
     for m in nb.prange(vox.shape[0]):
         vp = vox[m, p]
         vq = vox[m, q]
@@ -353,8 +403,8 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     votes_c = np.zeros(n, np.int32)
     for ax in axes:  # winding_at_centres' w_minus (and w_plus) != 0, added up in parallel
         p, q = (ax + 1) % 3, (ax + 2) % 3
-        off, depth, cum = column_crossings(tri, ax, lo, h, (n[p], n[q]))
-        _vote_centres(off, depth, cum, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
+        cols = _Columns(*column_crossings(tri, ax, lo, h, (n[p], n[q])))
+        _vote_centres(cols, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
     need = 1 if closed else 4
     inside = np.empty(n, np.bool_)
     cov = np.empty(n)
@@ -367,8 +417,8 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
         hs = h / S
         for ax in axes:
             p, q = (ax + 1) % 3, (ax + 2) % 3
-            off, depth, cum = column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S))
-            _read_subsamples(off, depth, cum, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
+            cols = _Columns(*column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S)))
+            _read_subsamples(cols, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
         _subsample_coverage(votes, need, vox, cov)  # argwhere order = boolean-mask order
     return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
 
@@ -405,11 +455,23 @@ def repair_mesh(vertices, faces):
     objects again (a resolution, padding or blur change, a sweep, the next
     render) skips it.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like
+        Mesh vertices.
+    faces : (F, 3) array_like of int
+        Triangle vertex indices.
+
     Returns
     -------
     vertices, faces, ok
         The repaired mesh and True when it is now watertight; the input and
         False otherwise.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (voxelization needs a closed mesh); Nooruddin and
+    Turk (2003).
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
@@ -440,93 +502,6 @@ def repair_mesh(vertices, faces):
     return hit[0], hit[1], True
 
 
-@nb.njit(cache=True, inline="always")
-def sym_tap(line, x, c, w, r):
-    """``line[x] w[r] + sum_{j=-r..-1} (line[x + j] + line[x - j]) w[r + j]``, indices clamped.
-
-    ``line`` is (n, C): one line of a volume along the filtered axis. The
-    terms are added in scipy's symmetric-filter order, so a whole pass is
-    ``scipy.ndimage.correlate1d(..., mode="nearest")`` bit for bit.
-    """
-    n = line.shape[0]
-    acc = line[x, c] * w[r]
-    for jj in range(-r, 0):
-        acc += (line[max(x + jj, 0), c] + line[min(x - jj, n - 1), c]) * w[r + jj]
-    return acc
-
-
-@nb.njit(cache=True, parallel=True)
-def _sym_correlate_axis(a, w, axis, out):
-    """``scipy.ndimage.correlate1d(a, w, axis, mode="nearest")`` for a symmetric ``w``, bit for bit.
-
-    ``a`` and ``out`` are (nx, ny, nz, C) float64 (every value by :func:`sym_tap`);
-    each parallel slab writes only its own outputs, so the result does not
-    depend on the thread count.
-    """
-    nx, ny, nz, nc = a.shape
-    r = w.shape[0] // 2
-    if axis == 0:
-        for j in nb.prange(ny):
-            for i in range(nx):
-                for k in range(nz):
-                    line = a[:, j, k, :]
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, i, c, w, r)
-    elif axis == 1:
-        for i in nb.prange(nx):
-            for j in range(ny):
-                for k in range(nz):
-                    line = a[i, :, k, :]
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, j, c, w, r)
-    else:
-        for i in nb.prange(nx):
-            for j in range(ny):
-                line = a[i, j]
-                for k in range(nz):
-                    for c in range(nc):
-                        out[i, j, k, c] = sym_tap(line, k, c, w, r)
-
-
-def separable_correlate(a, w):
-    """Correlate a (nx, ny, nz[, C]) volume with the symmetric taps ``w`` along x, then y, then z.
-
-    Edges clamped. Equal bit for bit to three ``scipy.ndimage.correlate1d``
-    passes (mode ``nearest``), but parallel over slabs.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    w = np.ascontiguousarray(w, dtype=np.float64)
-    if a.ndim not in (3, 4) or w.ndim != 1 or len(w) % 2 != 1 or not np.array_equal(w, w[::-1]):
-        out = a
-        for ax in range(3):
-            out = ndimage.correlate1d(out, w, axis=ax, mode="nearest")
-        return out
-    src = np.ascontiguousarray(a.reshape(a.shape[:3] + (-1,)))
-    x = np.empty_like(src)
-    y = np.empty_like(src)
-    _sym_correlate_axis(src, w, 0, x)  # never writes into the caller's array
-    _sym_correlate_axis(x, w, 1, y)
-    _sym_correlate_axis(y, w, 2, x)
-    return x.reshape(a.shape)
-
-
-def gaussian_blur(a, window):
-    """Separable Gaussian of ``window`` taps per axis, sigma = window / 6, edges clamped (§4.1).
-
-    ``a`` may carry trailing channels (blurred independently). ``window`` <= 1
-    returns a copy.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    if window <= 1:
-        return a.copy()
-    r = window // 2
-    sigma = window / 6.0
-    x = np.arange(-r, r + 1, dtype=np.float64)
-    w = np.exp(-0.5 * (x / sigma) ** 2)
-    w /= w.sum()
-    return separable_correlate(a, w)
-
-
 def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, bounds=None):
     """Voxelize every object of a :class:`~refraction_ref.meshes.Geometry` (§4.1).
 
@@ -550,6 +525,10 @@ def voxelize_objects(geom, outside_ior, resolution, padding, supersample, blur, 
     bounds : (2, 3) float64
     notes : list of str
         What was done to each object (closed, or open and voted), for the plan.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1.
     """
     N = int(resolution)
     b = auto_bounds(geom.vertices, N, padding) if bounds is None else np.asarray(bounds, dtype=np.float64)

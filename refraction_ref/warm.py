@@ -1,20 +1,25 @@
-"""Compile (or load from Numba's cache) the kernels a scene's plan needs, once per process; report compilation.
+"""Warming up: compile (or load from Numba's cache) the kernels a scene's plan needs, once per process.
 
-A method's warm-up renders a tiny copy of the scene itself: the same objects,
-knobs, environment, lights and receivers, at a few pixels and a few photons.
-It therefore compiles exactly the kernels the real render calls, with the
-argument types the real render passes (one signature per kernel), and no
-variant the scene does not use (the lookup-table peeling, the float A-buffer,
-the other integrator ...). The render's own ``total_ms`` then excludes JIT
-time; ``jit_ms`` holds it. A second scene with other knobs warms again, which
-costs a tiny render once its kernels are cached.
+One warm-up for every method: a method registers ``warm=warmer(name)``
+(:class:`~refraction_ref.graph.Method`), and :func:`warm` renders a tiny copy
+of the scene itself: the same objects, knobs, environment, lights and
+receivers, at the few pixels and photons of the method's
+:attr:`~refraction_ref.graph.Method.tiny` overrides. It therefore compiles
+exactly the kernels the real render calls, with the argument types the real
+render passes (one signature per kernel), and no variant the scene does not
+use (the lookup-table peeling, the float A-buffer, the other integrator ...).
+The render's own ``total_ms`` then excludes JIT time; ``jit_ms`` holds it. A
+second scene with other knobs warms again, which costs a tiny render once its
+kernels are cached.
 
 Kernels are compiled with ``cache=True``: in a later process the warm-up only
 loads them from Numba's on-disk cache. :func:`kernels_cached` looks at that
 cache kernel by kernel (the list per method is ``data/kernels.json``, written
 by ``benchmarks/bench_first_run.py``), and :func:`compile_report` shows
 compilation as it happens: a bar of kernels done of the expected total on a
-terminal, one line per method otherwise.
+terminal, one line per method otherwise. ``refraction-ref warmup`` runs them.
+
+This module imports no method: it asks :mod:`refraction_ref.graph` for them by name.
 """
 
 from __future__ import annotations
@@ -26,29 +31,38 @@ import os
 import sys
 import time
 
-__all__ = ["warm", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report"]
+from .graph import Method, get_method, method_blocks, run_graph
+from .scene import load_scene
+
+__all__ = ["warm", "warmer", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report"]
 
 _done = set()
 
-#: Overrides that shrink a scene to a warm-up size without changing which kernels run or their argument types.
-_TINY = {
-    "imagespace": {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "imagespace.caustic_map": 8},
-    "levelmap": {"camera.width": 8, "camera.height": 8, "levelmap.map_size": 8, "levelmap.exact_samples": 16,
-                 "imagespace.caustic_map": 8},
-    "exact": {"camera.width": 16, "camera.height": 16, "exact.photons": 8, "imagespace.caustic_map": 8},
-    "volumetric": {"camera.width": 4, "camera.height": 4, "volumetric.photons": 4, "volumetric.resolution": 16,
-                   "volumetric.padding": 2, "imagespace.photons": 8, "imagespace.caustic_map": 8},
-}
+#: the scene inputs that choose kernels by their kind only (array ranks and dtypes, not sizes or values)
+_INPUTS = ("objects", "lights", "environment", "volume", "water")
+
+
+def _method(method):
+    return method if isinstance(method, Method) else get_method(method)
 
 
 def tiny_scene(method, scene):
-    """``scene`` shrunk for ``method``'s warm-up: same knobs and inputs, a few pixels (a new Scene)."""
-    from .scene import load_scene
+    """``scene`` shrunk for ``method``'s warm-up: same knobs and inputs, a few pixels.
 
-    over = dict(_TINY.get(method, {}))
-    if method in ("levelmap", "exact") and scene.data.get("water") is not None:
-        over.update({"water.resolution": 4, "levelmap.map_size": 8, "levelmap.exact_samples": 16})
-    return load_scene(scene, over)
+    Parameters
+    ----------
+    method : str or Method
+        Its :attr:`~refraction_ref.graph.Method.tiny` overrides shrink the scene.
+    scene : Scene
+        A validated scene.
+
+    Returns
+    -------
+    Scene
+        A new scene; ``scene`` is unchanged.
+    """
+    m = _method(method)
+    return load_scene(scene, dict(m.tiny(scene)) if m.tiny is not None else {})
 
 
 def _kind(v):
@@ -65,25 +79,58 @@ def _kind(v):
 def _key(method, scene):
     """What decides which kernels a render runs and their argument types (not sizes, positions or counts)."""
     d = scene.data
-    return json.dumps([method, {b: d.get(b) for b in ("imagespace", "levelmap", "volumetric", "exact")},
-                       _kind({k: d.get(k) for k in ("objects", "lights", "environment", "volume", "water")}),
+    name = _method(method).name
+    return json.dumps([name, {b: d.get(b) for b in method_blocks()}, _kind({k: d.get(k) for k in _INPUTS}),
                        bool(d.get("receivers")), sorted(scene.callables)], sort_keys=True, default=str)
 
 
 def warm(method, scene=None):
-    """Compile (or load) the kernels ``method`` needs for ``scene`` (the method's default scene if None)."""
-    from .graph import run_graph
-    from .scene import load_scene
+    """Compile (or load) the kernels ``method`` needs for ``scene``, once per process and plan.
 
+    Parameters
+    ----------
+    method : str or Method
+    scene : Scene, optional
+        Default: the method's :attr:`~refraction_ref.graph.Method.default_scene`
+        (the bundled default scene when that is None).
+
+    Returns
+    -------
+    bool
+        Whether it rendered the tiny scene (False: this plan was warm already).
+    """
+    m = _method(method)
     if scene is None:
-        from .levelmap.pipeline import DEFAULT_SCENE_PATH
-
-        scene = load_scene(DEFAULT_SCENE_PATH if method == "levelmap" else None)
-    key = _key(method, scene)
+        scene = load_scene(m.default_scene)
+    key = _key(m, scene)
     if key in _done:
-        return
-    run_graph(method, tiny_scene(method, scene), warm=False)
+        return False
+    run_graph(m, tiny_scene(m, scene), warm=False)
     _done.add(key)
+    return True
+
+
+def warmer(name):
+    """The :attr:`~refraction_ref.graph.Method.warm` of the method called ``name``: :func:`warm` bound to it.
+
+    Parameters
+    ----------
+    name : str
+        The method's registered name.
+
+    Returns
+    -------
+    callable
+        ``warm(scene=None) -> bool``, as :func:`warm`.
+    """
+
+    def warm_method(scene=None):
+        return warm(name, scene)
+
+    warm_method.__name__ = warm_method.__qualname__ = f"warm_{name}"
+    warm_method.__doc__ = (f"Compile (or load) the kernels the {name} method needs for ``scene`` "
+                           "(:func:`refraction_ref.warm.warm`).")
+    return warm_method
 
 
 # ------------------------------------------------------------- the cache, kernel by kernel
@@ -97,7 +144,17 @@ def _manifest():
 
 
 def expected_kernels(method):
-    """Qualified names of the kernels a default render of ``method`` compiles (``data/kernels.json``)."""
+    """Qualified names of the kernels a default render of ``method`` compiles (``data/kernels.json``).
+
+    Parameters
+    ----------
+    method : str
+
+    Returns
+    -------
+    list of str
+        ``module.function`` names; empty for a method the manifest does not list.
+    """
     return list(_manifest().get(method, []))
 
 
@@ -128,6 +185,15 @@ def kernels_cached(method):
 
     Checked kernel by kernel against the list in ``data/kernels.json``: a cache
     that the tests or an interrupted run filled in part counts as not cached.
+
+    Parameters
+    ----------
+    method : str
+
+    Returns
+    -------
+    bool
+        False as well for a method the manifest does not list.
     """
     names = expected_kernels(method)
     if not names:

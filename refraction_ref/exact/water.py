@@ -1,7 +1,7 @@
 """Exact water-caustics reference (``--method exact`` on a scene with water).
 
 The analytic water surface (not its mesh) is sampled very densely: one
-jittered sample per cell of an ``exact_samples x exact_samples`` grid over the
+jittered sample per cell of an ``exact.water_samples`` squared grid over the
 water rectangle. Each sample carries the flux the light pours through its
 patch, ``E_perp |I . (-h_x, 1, -h_z)| dx dz`` (the patch's area projected
 perpendicular to the light; zero where the light meets the surface from
@@ -37,11 +37,11 @@ import numpy as np
 
 from ..embree import nearest_hits, run_chunks, soup_scene
 from ..optics import refract3
-from .planes import to_map
-from .water import incident_directions, surface_normals, wave_gradient, wave_height
+from ..caustics.boxes import to_map
+from ..levelmap.water import incident_directions, surface_normals, wave_gradient, wave_height
 from ..vec3 import dot
 
-__all__ = ["render_water_exact", "trace_water_photons"]
+__all__ = ["trace_water_photons"]
 
 _CHUNK = 1 << 18
 
@@ -95,6 +95,48 @@ class _Turns:
             self.cond.notify_all()
 
 
+def _splats(ctx, p, t, flux, prim, hit, dist):
+    """Each receiver's bilinear splat of the photons that landed on it and that its map sees.
+
+    Photons from ``p`` along ``t`` with ``flux``, meeting receiver triangle ``prim`` (where
+    ``hit``) at distance ``dist``: ``[(r, (Hc, Wc) map, photons seen), ...]`` for the
+    receivers met.
+    """
+    rec, K = ctx["receivers"], ctx["K"]
+    splats = []
+    for r in range(len(ctx["pairs"])):
+        m = hit & (rec.owner[np.maximum(prim, 0)] == r)
+        if not m.any():
+            continue
+        pair = ctx["pairs"][r][0]
+        box, lm = pair.box, pair.lm
+        Hc, Wc = box.size
+        pts = p[m] + dist[m, None] * t[m]
+        q = to_map(box, pts)
+        jn = np.clip(np.floor(q[:, 0]).astype(np.int64), 0, Wc - 1)
+        in_ = np.clip(np.floor(q[:, 1]).astype(np.int64), 0, Hc - 1)
+        nrm = rec.normals[prim[m]]
+        cosv = np.abs(dot(nrm, box.V))
+        tol = 2.0 * box.texel_size / np.maximum(cosv, 0.05)
+        seen = lm.own[in_, jn] & (np.abs(q[:, 2] - lm.depth[in_, jn]) <= tol)
+        w = flux[m] * np.exp(-K * dist[m]) * cosv / box.texel_area
+        c = q[:, 0] - 0.5
+        rr = q[:, 1] - 0.5
+        j0 = np.floor(c).astype(np.int64)
+        i0_ = np.floor(rr).astype(np.int64)
+        fx = c - j0
+        fy = rr - i0_
+        acc = np.zeros(Hc * Wc)
+        for di, wy in ((0, 1.0 - fy), (1, fy)):
+            for dj, wx in ((0, 1.0 - fx), (1, fx)):
+                a = i0_ + di
+                b = j0 + dj
+                good = seen & (a >= 0) & (a < Hc) & (b >= 0) & (b < Wc)
+                acc += np.bincount(a[good] * Wc + b[good], weights=(w * wy * wx)[good], minlength=Hc * Wc)
+        splats.append((r, acc.reshape(Hc, Wc), int(seen.sum())))
+    return splats
+
+
 def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=False):
     """Trace the photons of one light into ``out[r]`` (maps in each receiver's frame 0).
 
@@ -105,16 +147,44 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
     ``out`` in chunk order, so the maps are bit-identical whatever the
     thread count.
 
+    Parameters
+    ----------
+    scene : Scene
+        A scene with ``water`` and ``lights``.
+    ctx : dict
+        The light side shared with the level map: ``receivers``
+        (:class:`~refraction_ref.caustics.receivers.Receivers`), ``pairs[r][l]`` (box and
+        level map per receiver and light: the maps' frame and what they see),
+        ``eta`` (outside over water index) and ``K`` (the water's absorption).
+    light_index : int
+        The light traced.
+    samples : int
+        ``exact.water_samples``: jittered samples per side of the water rectangle.
+    seed : int
+        ``exact.photon_seed``; the generator is seeded with ``[seed, light_index]``.
+    out : list of (Hc, Wc) ndarray
+        Each receiver's irradiance map, in the frame of the first light's box; added to.
+    progress : bool, default False
+        Unused (kept for the signature of the stage's call).
+
     Returns
     -------
     dict
         ``photons`` traced, ``hit`` (landed on a receiver), ``deposited``
         (seen by the map).
+
+    References
+    ----------
+    .. [1] docs/oracle.md, "Level map" (``exact`` on water scenes) and the ``exact`` block.
+    .. [2] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+       with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+       University, 2006, eq. 2-8 (Snell at the water surface), §4.5 and eq. 4-18
+       (the flux through a patch, ``exp(-K t)``, no Fresnel loss).
     """
     water = scene.data["water"]
     light = scene.data["lights"][light_index]
     rec = ctx["receivers"]
-    eta, K = ctx["eta"], ctx["K"]
+    eta = ctx["eta"]
     sx, sz = (float(s) for s in water["size"])
     M = int(samples)
     rng = np.random.default_rng([int(seed), int(light_index)])
@@ -156,38 +226,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
         hit = prim >= 0
         n_hit = int(hit.sum())
         dist = tfar.astype(np.float64)
-        splats = []
-        for r in range(len(ctx["pairs"])):
-            m = hit & (rec.owner[np.maximum(prim, 0)] == r)
-            if not m.any():
-                continue
-            pair = ctx["pairs"][r][0]
-            box, lm = pair.box, pair.lm
-            Hc, Wc = box.size
-            pts = p[m] + dist[m, None] * t[m]
-            q = to_map(box, pts)
-            jn = np.clip(np.floor(q[:, 0]).astype(np.int64), 0, Wc - 1)
-            in_ = np.clip(np.floor(q[:, 1]).astype(np.int64), 0, Hc - 1)
-            nrm = rec.normals[prim[m]]
-            cosv = np.abs(dot(nrm, box.V))
-            tol = 2.0 * box.texel_size / np.maximum(cosv, 0.05)
-            seen = lm.own[in_, jn] & (np.abs(q[:, 2] - lm.depth[in_, jn]) <= tol)
-            w = flux[m] * np.exp(-K * dist[m]) * cosv / box.texel_area
-            c = q[:, 0] - 0.5
-            rr = q[:, 1] - 0.5
-            j0 = np.floor(c).astype(np.int64)
-            i0_ = np.floor(rr).astype(np.int64)
-            fx = c - j0
-            fy = rr - i0_
-            acc = np.zeros(Hc * Wc)
-            for di, wy in ((0, 1.0 - fy), (1, fy)):
-                for dj, wx in ((0, 1.0 - fx), (1, fx)):
-                    a = i0_ + di
-                    b = j0 + dj
-                    good = seen & (a >= 0) & (a < Hc) & (b >= 0) & (b < Wc)
-                    acc += np.bincount(a[good] * Wc + b[good], weights=(w * wy * wx)[good], minlength=Hc * Wc)
-            splats.append((r, acc.reshape(Hc, Wc), int(seen.sum())))
-        deposit(k, n_hit, splats)
+        deposit(k, n_hit, _splats(ctx, p, t, flux, prim, hit, dist))
         # Keep this chunk's arrays until the thread's next chunk has made its own: freed all at
         # once, its ~100 MB of temporaries let glibc give the heap back to the system, and the
         # next chunk page-faults it all in again (measured: 6x the page faults, +50 % time).
@@ -223,20 +262,3 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
         held.clear()  # now (the arrays refer back to `held`: a cycle the collector would free later)
     return {"photons": M * M, "hit": counts["hit"], "deposited": counts["deposited"]}
 
-
-def render_water_exact(scene, progress=False, cache=None, keep=None):
-    """Exact reference caustics maps for a water scene (same keys as the level map).
-
-    The exact method's graph for water scenes (:mod:`refraction_ref.exact_render`):
-    the level map's ``water``, ``planes`` and ``level_map`` stages, then
-    ``trace`` (:func:`trace_water_photons` per light) and ``image``.
-
-    Returns
-    -------
-    arrays, info : dict, dict
-        ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
-        ``timings_ms``, ``plan``, ``stats``.
-    """
-    from ..exact_render import render_exact
-
-    return render_exact(scene, progress=progress, cache=cache, keep=keep)

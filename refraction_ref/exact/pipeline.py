@@ -11,27 +11,47 @@ stage               pass
 ==================  ===========================================================
 
 With lights and receivers the exact photon reference follows
-(:func:`refraction_ref.caustics.pipeline.exact_caustic_stages`). A scene with
+(:func:`refraction_ref.exact.caustics.exact_caustic_stages`). A scene with
 ``water`` is rendered by the exact water reference instead: the level map's
 ``water``, ``planes`` and ``level_map`` stages, then ``trace`` (jittered
 samples of the analytic surface, Embree first hits;
-:func:`refraction_ref.levelmap.exact_water.trace_water_photons`) and ``image``.
+:func:`refraction_ref.exact.water.trace_water_photons`; ``exact.water_samples``
+squared, jittered by ``exact.photon_seed``) and ``image``.
+
+The method reads its own ``exact`` block and the shared ``caustics`` block
+(receiver maps, gathering, placement, shadows, ambient); no other method's.
+
+References
+----------
+.. [1] docs/oracle.md, "The exact reference" (the contract the outputs follow).
+.. [2] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+   Objects", M.S. thesis, UMBC, 2008, §3.8 and §4.1 (the quantities the mesh
+   reference reproduces: multi-interface Snell refraction, Beer-Lambert, caustics).
+.. [3] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+   with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+   University, 2006, §2.6, §4.5 (the quantities the water reference reproduces).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .camera import Camera
-from .environment import environment_lookup
-from .graph import Method, Stage, register_method, run_graph
-from .exact import mesh_normals
-from .meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
-from .scene import SceneError
-from .status import MISSED
-from .vec3 import affine
+from ..camera import Camera
+from ..caustics.pipeline import caustic_arrays, has_caustics, merge_caustics, skip_reason
+from ..environment import environment_lookup
+from ..graph import Method, Stage, register_method, run_graph
+from ..levelmap.pipeline import IMAGE_BUFFERS, check_water_scene, shade_stage, shared_stages, water_arrays
+from ..caustics.boxes import frame_of
+from ..meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
+from ..status import MISSED
+from ..validation import SceneError
+from ..vec3 import affine
+from ..warm import warmer
+from . import water
+from .caustics import exact_caustic_stages
+from .trace import mesh_normals, trace_exact
 
-__all__ = ["render_exact", "shading_normals", "METHOD"]
+__all__ = ["render_exact", "render_water_exact", "shading_normals", "check_memory", "METHOD"]
 
 
 def _object_label(k, o):
@@ -42,15 +62,28 @@ def _object_label(k, o):
 def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
     """The shading normals of the merged objects for ``exact.normals = mode``.
 
-    ``mesh``: the :class:`~refraction_ref.exact.MeshNormals` of ``geom`` with corner
-    normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
-    computed here (on every thread, bit-identical to the serial functions of
-    :mod:`refraction_ref.meshes`).
+    Parameters
+    ----------
+    scene : Scene
+        The scene (its ``objects``, for ``mode == "file"``: their mesh files and rotations).
+    geom : Geometry
+        The merged objects (:func:`refraction_ref.meshes.scene_geometry`).
+    mode : {"crease", "file", "smooth", "face"}
+        ``exact.normals``.
+    crease_deg : float
+        ``exact.crease_deg``, in ``(0, 180]``.
+    vn : (V, 3) ndarray, optional
+        The area-weighted vertex normals when already computed.
+    mesh : MeshNormals, optional
+        The :class:`~refraction_ref.exact.trace.MeshNormals` of ``geom`` with corner
+        normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
+        computed here (on every thread, bit-identical to the serial functions of
+        :mod:`refraction_ref.meshes`).
 
     Returns
     -------
     normals : (V, 3) or (F, 3, 3) ndarray or None
-        What :func:`~refraction_ref.exact.trace_exact` takes as ``normals``:
+        What :func:`~refraction_ref.exact.trace.trace_exact` takes as ``normals``:
         the area-weighted vertex normals (``smooth``; ``vn`` when given), per-corner normals
         (``crease``, ``file``) or None (``face``).
     smooth : bool
@@ -121,8 +154,6 @@ def _st_geometry(ctx):
 
 
 def _st_trace(ctx):
-    from .exact import trace_exact
-
     d = ctx.scene.data
     p = d["exact"]
     g = ctx.buf["geometry"]
@@ -192,21 +223,19 @@ def _mesh_stages():
 
 # --------------------------------------------------------------------- water scenes
 def _st_water_trace(ctx):
-    from .levelmap.exact_water import trace_water_photons
-    from .levelmap.planes import frame_of
-
     d = ctx.scene.data
-    p = d["levelmap"]
+    p = d["exact"]
     w = ctx.buf["water"]
     pairs = ctx.buf["level_map"]["pairs"]
     wctx = {"mesh": w["mesh"], "vols": w["vols"], "receivers": ctx.buf["planes"]["receivers"], "pairs": pairs,
             "eta": w["eta"], "K": w["K"]}
     R = len(pairs)
     out = [np.zeros(pairs[r][0].box.size) for r in range(R)]
-    stats = [trace_water_photons(ctx.scene, wctx, l, int(p["exact_samples"]), int(p["exact_seed"]), out,
-                                 ctx.progress) for l in range(len(d["lights"]))]
+    # through the module (tests replace water.trace_water_photons by a serial reference)
+    stats = [water.trace_water_photons(ctx.scene, wctx, l, int(p["water_samples"]), int(p["photon_seed"]), out,
+                                       ctx.progress) for l in range(len(d["lights"]))]
     ctx.stats["water_stats"] = stats
-    M = int(p["exact_samples"])
+    M = int(p["water_samples"])
     ctx.note(f"{M}x{M} jittered samples of the analytic surface per light, Embree first hits")
     res = {}
     for r in range(R):
@@ -216,15 +245,13 @@ def _st_water_trace(ctx):
 
 
 def _water_stages(scene):
-    from .levelmap.pipeline import IMAGE_BUFFERS, shade_stage, shared_stages
-
     R = len(scene.data["receivers"])
     return shared_stages(scene) + (
         Stage("trace", _st_water_trace,
-              reads=("water", "lights", "outside_ior", "levelmap.exact_samples", "levelmap.exact_seed"),
+              reads=("water", "lights", "outside_ior", "exact.water_samples", "exact.photon_seed"),
               after=("water", "planes", "level_map"), makes=tuple(f"caustic_map_{r}" for r in range(R)),
               doc="exact water photons: jittered samples of the analytic surface, Embree first hits"),
-        Stage("image", lambda ctx: shade_stage(ctx, "trace"), reads=("camera", "levelmap.ambient"),
+        Stage("image", lambda ctx: shade_stage(ctx, "trace"), reads=("camera", "caustics.ambient"),
               after=("planes", "level_map", "trace"), makes=IMAGE_BUFFERS,
               doc="eq. 4-19 with the exact maps, seen through the analytic water surface and directly"),
     )
@@ -233,27 +260,19 @@ def _water_stages(scene):
 # --------------------------------------------------------------------- the method
 def _stages(scene):
     if scene.data.get("water") is not None:
-        from .levelmap.pipeline import _check
-
-        _check(scene)
+        check_water_scene(scene)
         return _water_stages(scene)
-    from .caustics.pipeline import exact_caustic_stages, has_caustics
-
     return _mesh_stages() + (exact_caustic_stages(scene) if has_caustics(scene) else ())
 
 
 def _skipped(scene):
     if scene.data.get("water") is not None:
         return []
-    from .caustics.pipeline import has_caustics, skip_reason
-
     return [] if has_caustics(scene) else [{"stage": "caustics", "ran": False, "why": skip_reason(scene)}]
 
 
 def _assemble(scene, bufs, stats):
     if "water" in bufs:
-        from .levelmap.pipeline import water_arrays
-
         return water_arrays(bufs, "trace"), {"stats": stats["water_stats"], "triangles": stats["triangles"]}
     tr = bufs["trace"]
     arrays = {k: tr[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
@@ -261,15 +280,24 @@ def _assemble(scene, bufs, stats):
     arrays["image"] = bufs["shade"]["image"]
     info = {"triangles": stats["triangles"]}
     if "caustic_final" in bufs:
-        from .caustics.pipeline import caustic_arrays, merge_caustics
-
         c_arrays, info["caustics"] = caustic_arrays(scene, "exact", bufs, stats)
         merge_caustics(arrays, c_arrays)
     return arrays, info
 
 
 def check_memory(scene):
-    """The exact reference keeps about 60 float64 words per pixel (rays, hits, outputs): refuse what cannot fit."""
+    """Refuse a camera the exact trace cannot hold (about 60 float64 words per pixel: rays, hits, outputs).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene (``camera.width``, ``camera.height``, ``exact.record``).
+
+    Raises
+    ------
+    SceneError
+        When the trace would need more than 16 GiB.
+    """
     c = scene.data["camera"]
     W, H = c["width"], c["height"]
     K = int(scene.data["exact"]["record"])
@@ -279,14 +307,42 @@ def check_memory(scene):
                          "camera.width and camera.height" + (" or exact.record" if K else ""))
 
 
+def _tiny(scene):
+    """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a few pixels and photons, same kernels."""
+    over = {"camera.width": 16, "camera.height": 16, "exact.photons": 8, "caustics.map_size": 8}
+    if scene.data.get("water") is not None:
+        over.update({"water.resolution": 4, "exact.water_samples": 16})
+    return over
+
+
+def _params(scene):
+    """The blocks of ``meta["params"]``: the exact block, and the water's on a water scene."""
+    return ("exact", "water") if scene.data.get("water") is not None else ("exact",)
+
+
 METHOD = register_method(Method(
     "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped, check=check_memory,
+    warm=warmer("exact"), tiny=_tiny, params=_params, label="Embree reference",
     results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final"),
     doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface"))
 
 
-def render_exact(scene, progress=False, cache=None, keep=None):
+def render_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
     """Trace every pixel's primary ray exactly (Embree) and shade like the image-space method.
+
+    Parameters
+    ----------
+    scene : Scene
+        A mesh scene, or a scene with ``water`` (the exact water reference).
+    cache : dict, optional
+        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
+    keep : str or sequence of str, optional
+        Stage buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool, default True
+        Compile (or load) the kernels on a tiny copy of the scene first, so
+        that ``timings_ms`` exclude JIT time.
+    progress : bool, default False
+        Show progress bars.
 
     Returns
     -------
@@ -294,4 +350,34 @@ def render_exact(scene, progress=False, cache=None, keep=None):
         Same keys as :func:`~refraction_ref.imagespace.pipeline.render_imagespace`
         (for a water scene: as the level map).
     """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress)
+    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
+
+
+def render_water_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
+    """Exact reference caustics maps for a water scene (same keys as the level map).
+
+    The exact method's graph for water scenes: the level map's ``water``,
+    ``planes`` and ``level_map`` stages, then ``trace``
+    (:func:`~refraction_ref.exact.water.trace_water_photons` per light) and ``image``.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a ``water`` block and at least one light.
+    cache : dict, optional
+        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
+    keep : str or sequence of str, optional
+        Stage buffers to return as ``stage.<stage>.<buffer>``.
+    warm : bool, default True
+        Compile (or load) the kernels on a tiny copy of the scene first, so
+        that ``timings_ms`` exclude JIT time.
+    progress : bool, default False
+        Show progress bars.
+
+    Returns
+    -------
+    arrays, info : dict, dict
+        ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
+        ``timings_ms``, ``plan``, ``stats``.
+    """
+    return render_exact(scene, cache=cache, keep=keep, warm=warm, progress=progress)

@@ -10,6 +10,20 @@ Snell's law, total internal reflection and Beer–Lambert absorption are *not*
 implemented here; they come from :mod:`refraction_ref.optics` so that the
 oracle and the approximations share one implementation of each law.
 
+Deterministic: identical inputs give bit-identical outputs whatever the
+thread count (Embree's BVH build and traversal are deterministic, its
+queries run on fixed chunks of rays, and all float64 work is per ray, in
+Numba kernels that write only their ray's rows). Each bounce splits the rays
+still travelling into fixed chunks that ``numba.get_num_threads()`` threads
+take in turn (:func:`refraction_ref.embree.run_chunks`); a chunk is queried
+with Embree (embreex releases the GIL while tracing) and then bounced by a
+Numba kernel that releases the GIL too. The kernels take their arrays as
+small named tuples (:class:`_Rays`, :class:`_Outputs`, :class:`_Mesh`,
+:class:`_Hits`, :class:`_Settings`).
+
+The exact reference is described in docs/oracle.md ("Per-pixel keys", the
+``exact`` block and "Caustics on receivers").
+
 References
 ----------
 .. [1] T. Whitted, "An Improved Illumination Model for Shaded Display",
@@ -27,15 +41,16 @@ References
 from __future__ import annotations
 
 import math
+import warnings
 from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
-from . import optics
-from .embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
-from .meshes import bounds, face_corner_normals
-from .status import EXITED, LIMIT, LOST, MISSED, TIR
+from .. import optics
+from ..embree import HIT_CHUNK, chunk_length, mesh_scene, run_chunks
+from ..meshes import CREASE_MARGIN, bounds, face_corner_normals
+from ..status import EXITED, LIMIT, LOST, MISSED, TIR
 
 __all__ = [
     "trace_exact",
@@ -80,6 +95,12 @@ def area_weighted_vertex_normals(vertices, faces):
     (V, 3) ndarray of float64
         Unit normals; all-zero rows for vertices used by no face of non-zero
         area (the tracer then falls back to the face normal).
+
+    References
+    ----------
+    .. [1] N. Max, "Weights for Computing Vertex Normals from Facet Normals",
+       *Journal of Graphics Tools* 4(2), 1-6, 1999 (area weights).
+    .. [2] docs/oracle.md, Conventions (vertex and shading normals).
     """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
@@ -318,8 +339,6 @@ def mesh_normals(vertices, faces, crease_deg=None):
     .. [2] H. Hoppe et al., "Piecewise Smooth Surface Reconstruction",
        *Proc. SIGGRAPH 94*, 295-302, 1994 (crease edges).
     """
-    from .meshes import _CREASE_MARGIN
-
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
     fnt = _FaceNormals(np.empty((len(f), 3)), np.empty(len(f)), np.empty((len(f), 3)))
@@ -337,7 +356,7 @@ def mesh_normals(vertices, faces, crease_deg=None):
         crease_deg = float(crease_deg)
         if not (0.0 < crease_deg <= 180.0):
             raise ValueError(f"crease_deg must lie in (0, 180], got {crease_deg}")
-        cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + _CREASE_MARGIN
+        cos_t = -np.inf if crease_deg >= 180.0 else float(np.cos(np.radians(crease_deg))) + CREASE_MARGIN
         cn = np.zeros((len(f), 3, 3))
         _corner_normals_kernel(adj, fnt, cos_t, cn)
     return MeshNormals(vn, cn, ang)
@@ -471,11 +490,88 @@ def _face_rows(lo, hi, v, faces, v0, e1, e2, ng):
         ng[k, 2] = nz / nrm
 
 
+class _Rays(NamedTuple):
+    """The tracer's per-ray state, N rows each; the first bounce's chunks fill it (:func:`_init_rows`)."""
+
+    dir0: np.ndarray  # (N, 3) the rays' given directions (read only)
+    pos: np.ndarray  # (N, 3) the last surface point (the origin before the first hit)
+    dirn: np.ndarray  # (N, 3) the direction after the last event
+    side: np.ndarray  # (N, 3) unit face normal on the side the ray leaves to
+    medium: np.ndarray  # (N,) int64 object the ray travels in, _OUTSIDE
+    status: np.ndarray  # (N,) int8, _ACTIVE while traced
+    last_tir: np.ndarray  # (N,) bool, the last event was a total internal reflection
+    interfaces: np.ndarray  # (N,) int16
+    bounces: np.ndarray  # (N,) int16
+    path_length: np.ndarray  # (N,) float64
+
+
+class _Outputs(NamedTuple):
+    """The tracer's outputs besides :class:`_Rays` (the keys of :func:`trace_exact`'s dict)."""
+
+    exit_pos: np.ndarray  # (N, 3)
+    exit_dir: np.ndarray  # (N, 3)
+    last_dir: np.ndarray  # (N, 3)
+    hit_pos: np.ndarray  # (N, 3)
+    first_face: np.ndarray  # (N,) int64
+    first_normal: np.ndarray  # (N, 3)
+    first_dir: np.ndarray  # (N, 3)
+    leaked: np.ndarray  # (N,) bool
+    path_pos: np.ndarray  # (N, K, 3), or a (1, 1, 3) dummy when nothing is recorded
+    path_dir: np.ndarray  # (N, K, 3), or a (1, 1, 3) dummy
+    transmittance: np.ndarray  # (N, 3)
+
+
+class _Mesh(NamedTuple):
+    """Per face: first vertex, edges, unit geometric normal (:func:`_face_rows`); the shading
+    normals per vertex ``vn_v`` or per corner ``vn_c`` (the other a dummy); the media."""
+
+    v0: np.ndarray  # (F, 3)
+    e1: np.ndarray  # (F, 3)
+    e2: np.ndarray  # (F, 3)
+    ng: np.ndarray  # (F, 3)
+    faces: np.ndarray  # (F, 3) int64
+    vn_v: np.ndarray  # (V, 3) or (1, 3)
+    vn_c: np.ndarray  # (F, 3, 3) or (1, 3, 3)
+    face_object: np.ndarray  # (F,) int64
+    ior: np.ndarray  # (K,) the objects' indices
+    med_ior: np.ndarray  # (K + 1,) the media's indices, the outside medium last
+
+
+class _Settings(NamedTuple):
+    """The scalars of a trace."""
+
+    max_bounces: int
+    record: int
+    eps: float
+    smooth: bool
+    per_corner: bool
+    outside_ior: float
+
+
+class _Hits(NamedTuple):
+    """One bounce's rows ``m``: the ray ``active[m]``, Embree's answer (``prim``, ``tfar``,
+    barycentrics ``bu``, ``bv``) and the segment just travelled inside an object (``seg``,
+    ``seg_obj``; -1: none), for the Beer-Lambert factor."""
+
+    active: np.ndarray  # (M,) int64
+    prim: np.ndarray  # int32
+    tfar: np.ndarray  # float32
+    bu: np.ndarray  # float32
+    bv: np.ndarray  # float32
+    seg: np.ndarray  # float64
+    seg_obj: np.ndarray  # int64
+
+
 @nb.njit(cache=True, nogil=True)
-def _init_rows(lo, hi, o, d, pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length, trans,
-               exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked, path_pos, path_dir):
+def _init_rows(lo, hi, o, st, out):
     """Rays ``[lo, hi)``: the tracer's per-ray arrays before the first bounce (filled by the
     first bounce's chunks, in parallel, rather than by NumPy up front)."""
+    d = st.dir0
+    pos, dirn, side, medium, status = st.pos, st.dirn, st.side, st.medium, st.status
+    last_tir, interfaces, bounces, path_length = st.last_tir, st.interfaces, st.bounces, st.path_length
+    exit_pos, exit_dir, last_dir, hit_pos = out.exit_pos, out.exit_dir, out.last_dir, out.hit_pos
+    first_face, first_normal, first_dir, leaked = out.first_face, out.first_normal, out.first_dir, out.leaked
+    path_pos, path_dir, trans = out.path_pos, out.path_dir, out.transmittance
     for i in range(lo, hi):
         for c in range(3):
             pos[i, c] = o[i, c]
@@ -519,30 +615,131 @@ def _query_rows(lo, hi, active, pos, dirn, side, eps, first, org32, dir32):
             dir32[m, c] = np.float32(dc)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, outside_ior,
-                 v0_all, e1_all, e2_all, ng_all, faces, vn_v, vn_c, fo, ior, med_ior, d0,
-                 active, prim, tfar, bu, bv, seg, seg_obj,
-                 pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length,
-                 exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked,
-                 path_pos, path_dir):
-    """One bounce of the rays ``active[m]``, rows ``m`` in ``[lo, hi)``, given Embree's hits in
-    those rows (``prim``, ``tfar``, barycentrics ``bu``, ``bv``).
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _hit_distance(v0, e1, e2, embree_hit, fi, p, d, s, eps, bounce):
+    """float64 Möller-Trumbore on the triangle ``fi`` Embree found (``embree_hit``: its float32
+    ``tfar``, ``u``, ``v``): the distance ``t`` from ``p`` along ``d`` and the barycentrics ``u``,
+    ``w2``. Parallel or degenerate (``t`` not finite or not positive): Embree's distance from the
+    pushed-off origin (``p + eps (d + s)`` after the first bounce) and its barycentrics."""
+    px, py, pz = p
+    dx, dy, dz = d
+    e1x, e1y, e1z = e1[fi, 0], e1[fi, 1], e1[fi, 2]
+    e2x, e2y, e2z = e2[fi, 0], e2[fi, 1], e2[fi, 2]
+    pvx = dy * e2z - dz * e2y
+    pvy = dz * e2x - dx * e2z
+    pvz = dx * e2y - dy * e2x
+    det = _dot3(e1x, e1y, e1z, pvx, pvy, pvz)
+    inv = 1.0 / det
+    tx = px - v0[fi, 0]
+    ty = py - v0[fi, 1]
+    tz = pz - v0[fi, 2]
+    u = _dot3(tx, ty, tz, pvx, pvy, pvz) * inv
+    qx = ty * e1z - tz * e1y
+    qy = tz * e1x - tx * e1z
+    qz = tx * e1y - ty * e1x
+    w2 = _dot3(dx, dy, dz, qx, qy, qz) * inv
+    t = _dot3(e2x, e2y, e2z, qx, qy, qz) * inv
+    if not math.isfinite(t) or t <= 0.0:  # parallel / degenerate: trust Embree's distance
+        tf = np.float64(embree_hit[0])
+        if bounce:
+            hx = (px + eps * (dx + s[0])) + tf * dx
+            hy = (py + eps * (dy + s[1])) + tf * dy
+            hz = (pz + eps * (dz + s[2])) + tf * dz
+        else:
+            hx = px + tf * dx
+            hy = py + tf * dy
+            hz = pz + tf * dz
+        t = _dot3(hx - px, hy - py, hz - pz, dx, dy, dz)
+        u = np.float64(embree_hit[1])  # barycentrics of the Embree point
+        w2 = np.float64(embree_hit[2])
+    return t, u, w2
 
-    float64 Möller-Trumbore on Embree's triangle, Snell / TIR
-    (:func:`refraction_ref.optics.refract3`) with the interpolated shading
-    normal (per vertex ``vn_v`` or per corner ``vn_c``; the other is a
-    dummy), and the bookkeeping of the tracer's per-ray arrays. Writes only
-    the rows of its own rays, so any split of the rows over threads gives
-    the same result. ``seg[m]``, ``seg_obj[m]``: length and object of the
-    segment just travelled inside an object (``seg_obj = -1``: none), for
-    the Beer-Lambert factor. Serial and without the GIL: one chunk of a
-    thread pool (:func:`refraction_ref.embree.run_chunks`).
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _shading_normal(vn_c, vn_v, faces, fi, u, w2, ng, per_corner):
+    """The unit shading normal at barycentrics ``(u, w2)`` of face ``fi``, interpolated from its
+    corner (``per_corner``) or vertex normals, on the side of the geometric normal ``ng``; ``ng``
+    itself where the interpolation is zero or not finite."""
+    ngx, ngy, ngz = ng
+    b1 = _clip01(u)
+    b2 = _clip01(w2)
+    b0 = _clip01(1.0 - u - w2)
+    s = b0 + b1 + b2
+    if not (s > 0):
+        s = 1.0
+    if per_corner:  # the same sum, the corner normals of face fi
+        nsx = (b0 * vn_c[fi, 0, 0] + b1 * vn_c[fi, 1, 0] + b2 * vn_c[fi, 2, 0]) / s
+        nsy = (b0 * vn_c[fi, 0, 1] + b1 * vn_c[fi, 1, 1] + b2 * vn_c[fi, 2, 1]) / s
+        nsz = (b0 * vn_c[fi, 0, 2] + b1 * vn_c[fi, 1, 2] + b2 * vn_c[fi, 2, 2]) / s
+    else:
+        a0, a1, a2 = faces[fi, 0], faces[fi, 1], faces[fi, 2]
+        nsx = (b0 * vn_v[a0, 0] + b1 * vn_v[a1, 0] + b2 * vn_v[a2, 0]) / s
+        nsy = (b0 * vn_v[a0, 1] + b1 * vn_v[a1, 1] + b2 * vn_v[a2, 1]) / s
+        nsz = (b0 * vn_v[a0, 2] + b1 * vn_v[a1, 2] + b2 * vn_v[a2, 2]) / s
+    nrm = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
+    nsx = nsx / nrm
+    nsy = nsy / nrm
+    nsz = nsz / nrm
+    if not (math.isfinite(nsx) and math.isfinite(nsy) and math.isfinite(nsz)):
+        nsx, nsy, nsz = ngx, ngy, ngz
+    if _dot3(nsx, nsy, nsz, ngx, ngy, ngz) < 0.0:
+        nsx, nsy, nsz = -nsx, -nsy, -nsz
+    return nsx, nsy, nsz
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _refract_event(d, ns, ng, cos_g, eta, smooth):
+    """Snell / TIR (:func:`refraction_ref.optics.refract3`) of ``d`` at the shading normal ``ns``.
+
+    With shading normals a transmitted ray must keep the sign of ``d . ng`` and a reflected one
+    flip it; otherwise the event is redone with the face normal ``ng``. A non-finite result
+    keeps ``d`` (``lost``). Returns the new direction, ``tir``, ``lost`` and the normal used.
+    """
+    dx, dy, dz = d
+    nsx, nsy, nsz = ns
+    ngx, ngy, ngz = ng
+    ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, nsx, nsy, nsz, eta)
+    if smooth:
+        # transmitted rays must keep the sign of d.Ng, reflected ones flip it
+        sn = _sign(_dot3(ndx, ndy, ndz, ngx, ngy, ngz))
+        sg = _sign(cos_g)
+        wrong = (sn == sg) if tir else (sn != sg)
+        if wrong:
+            ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, ngx, ngy, ngz, eta)
+            nsx, nsy, nsz = ngx, ngy, ngz
+    lost = not (math.isfinite(ndx) and math.isfinite(ndy) and math.isfinite(ndz))
+    if lost:  # keep the previous direction
+        ndx, ndy, ndz = dx, dy, dz
+    return ndx, ndy, ndz, tir, lost, nsx, nsy, nsz
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _bounce_rows(lo, hi, bounce, cfg, mesh, hits, st, out):
+    """One bounce of the rays ``hits.active[m]``, rows ``m`` in ``[lo, hi)``, given Embree's hits
+    in those rows.
+
+    float64 Möller-Trumbore on Embree's triangle (:func:`_hit_distance`), Snell / TIR
+    (:func:`_refract_event`) with the interpolated shading normal (:func:`_shading_normal`),
+    and the bookkeeping of the tracer's per-ray arrays. Writes only the rows of its own rays,
+    so any split of the rows over threads gives the same result. Serial and without the GIL:
+    one chunk of a thread pool (:func:`refraction_ref.embree.run_chunks`).
 
     The dot products are summed as NumPy's ``einsum('ij,ij->i')`` sums them
     (:func:`_dot3`) and every other operation is the one of the NumPy tracer
     of earlier versions, in its order, so the results are bit-identical to it.
     """
+    max_bounces, record, eps = cfg.max_bounces, cfg.record, cfg.eps
+    smooth, per_corner, outside_ior = cfg.smooth, cfg.per_corner, cfg.outside_ior
+    ng_all, fo, ior, med_ior = mesh.ng, mesh.face_object, mesh.ior, mesh.med_ior
+    v0_all, e1_all, e2_all, faces, vn_v, vn_c = mesh.v0, mesh.e1, mesh.e2, mesh.faces, mesh.vn_v, mesh.vn_c
+    active, prim, seg, seg_obj = hits.active, hits.prim, hits.seg, hits.seg_obj
+    tfar, bu, bv = hits.tfar, hits.bu, hits.bv
+    pos, dirn, side, medium, status = st.pos, st.dirn, st.side, st.medium, st.status
+    last_tir, interfaces, bounces, path_length = st.last_tir, st.interfaces, st.bounces, st.path_length
+    last_dir, hit_pos, first_face = out.last_dir, out.hit_pos, out.first_face
+    first_normal, first_dir = out.first_normal, out.first_dir
+    exit_pos, exit_dir, leaked, dir0 = out.exit_pos, out.exit_dir, out.leaked, st.dir0
+    path_pos, path_dir = out.path_pos, out.path_dir
     n_out = med_ior.shape[0] - 1  # med_ior's entry of the outside medium
     for m in range(lo, hi):
         i = active[m]
@@ -552,11 +749,11 @@ def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, o
         dx, dy, dz = dirn[i, 0], dirn[i, 1], dirn[i, 2]
         fi = np.int64(prim[m])
         if fi < 0:  # no further hit
-            if bounce == 0:
+            if bounce == 0:  # missed
                 status[i] = MISSED
                 for c in range(3):
-                    exit_dir[i, c] = d0[i, c]
-            else:
+                    exit_dir[i, c] = dir0[i, c]
+            else:  # exited
                 status[i] = EXITED
                 for c in range(3):
                     exit_pos[i, c] = pos[i, c]
@@ -565,37 +762,8 @@ def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, o
             for c in range(3):
                 last_dir[i, c] = dirn[i, c]
             continue
-
-        # --- float64 Möller–Trumbore on the triangle Embree found ------------
-        e1x, e1y, e1z = e1_all[fi, 0], e1_all[fi, 1], e1_all[fi, 2]
-        e2x, e2y, e2z = e2_all[fi, 0], e2_all[fi, 1], e2_all[fi, 2]
-        pvx = dy * e2z - dz * e2y
-        pvy = dz * e2x - dx * e2z
-        pvz = dx * e2y - dy * e2x
-        det = _dot3(e1x, e1y, e1z, pvx, pvy, pvz)
-        inv = 1.0 / det
-        tx = px - v0_all[fi, 0]
-        ty = py - v0_all[fi, 1]
-        tz = pz - v0_all[fi, 2]
-        u = _dot3(tx, ty, tz, pvx, pvy, pvz) * inv
-        qx = ty * e1z - tz * e1y
-        qy = tz * e1x - tx * e1z
-        qz = tx * e1y - ty * e1x
-        w2 = _dot3(dx, dy, dz, qx, qy, qz) * inv
-        t = _dot3(e2x, e2y, e2z, qx, qy, qz) * inv
-        if not math.isfinite(t) or t <= 0.0:  # parallel / degenerate: trust Embree's distance
-            tf = np.float64(tfar[m])
-            if bounce:
-                hx = (px + eps * (dx + side[i, 0])) + tf * dx
-                hy = (py + eps * (dy + side[i, 1])) + tf * dy
-                hz = (pz + eps * (dz + side[i, 2])) + tf * dz
-            else:
-                hx = px + tf * dx
-                hy = py + tf * dy
-                hz = pz + tf * dz
-            t = _dot3(hx - px, hy - py, hz - pz, dx, dy, dz)
-            u = np.float64(bu[m])  # barycentrics of the Embree point
-            w2 = np.float64(bv[m])
+        t, u, w2 = _hit_distance(v0_all, e1_all, e2_all, (tfar[m], bu[m], bv[m]), fi, (px, py, pz),
+                                 (dx, dy, dz), (side[i, 0], side[i, 1], side[i, 2]), eps, bounce)
         xx = px + t * dx
         xy = py + t * dy
         xz = pz + t * dz
@@ -610,74 +778,34 @@ def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, o
                 last_dir[i, c] = dirn[i, c]
             continue
 
-        # --- path length on the segment just travelled (Beer-Lambert: _absorb) --
+        # --- path length on the segment just travelled (Beer-Lambert: trace_exact's chunks) --
         med = medium[i]
         if med != _OUTSIDE:
             path_length[i] += t
             seg[m] = t
             seg_obj[m] = med
 
-        # --- normals --------------------------------------------------------
+        # --- normals, Snell (optics.refract3) ----------------------------------
         ngx, ngy, ngz = ng_all[fi, 0], ng_all[fi, 1], ng_all[fi, 2]
         cos_g = _dot3(dx, dy, dz, ngx, ngy, ngz)
         entering = cos_g < 0.0
         if smooth:
-            b1 = _clip01(u)
-            b2 = _clip01(w2)
-            b0 = _clip01(1.0 - u - w2)
-            s = b0 + b1 + b2
-            if not (s > 0):
-                s = 1.0
-            if per_corner:  # the same sum, the corner normals of face fi
-                nsx = (b0 * vn_c[fi, 0, 0] + b1 * vn_c[fi, 1, 0] + b2 * vn_c[fi, 2, 0]) / s
-                nsy = (b0 * vn_c[fi, 0, 1] + b1 * vn_c[fi, 1, 1] + b2 * vn_c[fi, 2, 1]) / s
-                nsz = (b0 * vn_c[fi, 0, 2] + b1 * vn_c[fi, 1, 2] + b2 * vn_c[fi, 2, 2]) / s
-            else:
-                a0, a1, a2 = faces[fi, 0], faces[fi, 1], faces[fi, 2]
-                nsx = (b0 * vn_v[a0, 0] + b1 * vn_v[a1, 0] + b2 * vn_v[a2, 0]) / s
-                nsy = (b0 * vn_v[a0, 1] + b1 * vn_v[a1, 1] + b2 * vn_v[a2, 1]) / s
-                nsz = (b0 * vn_v[a0, 2] + b1 * vn_v[a1, 2] + b2 * vn_v[a2, 2]) / s
-            nrm = math.sqrt(nsx * nsx + nsy * nsy + nsz * nsz)
-            nsx = nsx / nrm
-            nsy = nsy / nrm
-            nsz = nsz / nrm
-            if not (math.isfinite(nsx) and math.isfinite(nsy) and math.isfinite(nsz)):
-                nsx, nsy, nsz = ngx, ngy, ngz
-            if _dot3(nsx, nsy, nsz, ngx, ngy, ngz) < 0.0:
-                nsx, nsy, nsz = -nsx, -nsy, -nsz
+            nsx, nsy, nsz = _shading_normal(vn_c, vn_v, faces, fi, u, w2, (ngx, ngy, ngz), per_corner)
         else:
             nsx, nsy, nsz = ngx, ngy, ngz
-
-        # --- Snell (optics.refract3) -----------------------------------------
         obj = fo[fi]
         n1 = med_ior[n_out] if med == _OUTSIDE else med_ior[med]
         n2 = ior[obj] if entering else outside_ior
         eta = n1 / n2
-        ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, nsx, nsy, nsz, eta)
-        if smooth:
-            # transmitted rays must keep the sign of d.Ng, reflected ones flip it
-            sn = _sign(_dot3(ndx, ndy, ndz, ngx, ngy, ngz))
-            sg = _sign(cos_g)
-            wrong = (sn == sg) if tir else (sn != sg)
-            if wrong:
-                ndx, ndy, ndz, tir = optics.refract3(dx, dy, dz, ngx, ngy, ngz, eta)
-                nsx, nsy, nsz = ngx, ngy, ngz
-
-        lost = not (math.isfinite(ndx) and math.isfinite(ndy) and math.isfinite(ndz))
-        if lost:  # keep the previous direction
-            ndx, ndy, ndz = dx, dy, dz
+        ndx, ndy, ndz, tir, lost, nsx, nsy, nsz = _refract_event((dx, dy, dz), (nsx, nsy, nsz), (ngx, ngy, ngz),
+                                                                 cos_g, eta, smooth)
         if bounce < record:  # every active ray has had `bounce` events: this is row `bounce`
             path_pos[i, bounce, 0] = xx
             path_pos[i, bounce, 1] = xy
             path_pos[i, bounce, 2] = xz
-            if lost:
-                path_dir[i, bounce, 0] = np.nan
-                path_dir[i, bounce, 1] = np.nan
-                path_dir[i, bounce, 2] = np.nan
-            else:
-                path_dir[i, bounce, 0] = ndx
-                path_dir[i, bounce, 1] = ndy
-                path_dir[i, bounce, 2] = ndz
+            path_dir[i, bounce, 0] = np.nan if lost else ndx
+            path_dir[i, bounce, 1] = np.nan if lost else ndy
+            path_dir[i, bounce, 2] = np.nan if lost else ndz
 
         # --- bookkeeping ----------------------------------------------------
         if bounce == 0:
@@ -711,25 +839,27 @@ def _bounce_rows(lo, hi, bounce, max_bounces, record, eps, smooth, per_corner, o
 
 
 def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
-                origins, dirs, *, vertex_normals=None, smooth=True,
+                origins, dirs, *, normals=None, smooth=True,
                 outside_ior=1.0, max_bounces=64, progress=False,
-                epsilon=None, chunk_size=_CHUNK, record=0, normals=None) -> dict:
+                epsilon=None, chunk_size=_CHUNK, record=0, vertex_normals=None) -> dict:
     """Trace rays through a triangle scene, refracting at every interface.
 
     Each ray is intersected with the real triangles: Embree (float32) finds
     the nearest triangle, then the hit distance and barycentrics are
     recomputed in float64 with Möller–Trumbore [3]_ on that triangle. At each
     hit the ray is refracted with :func:`refraction_ref.optics.refract`
-    (Snell's law [1]_ [2]_); under total internal reflection (TIR) it takes
-    the mirror direction and stays in the same medium. This is the exact
-    reference for the image-space method of Chaudhari (2008) [4]_.
+    (Snell's law [1]_ [2]_; no Fresnel split: the whole ray is transmitted);
+    under total internal reflection (TIR) it takes the mirror direction and
+    stays in the same medium. This is the exact reference for the image-space
+    method of Chaudhari (2008) [4]_ (docs/oracle.md, "Per-pixel keys").
 
     Inside/outside is decided by the geometric facing of the hit triangle
     (outward, counter-clockwise winding is assumed): ``dot(d, Ng) < 0``
     means the ray enters object ``face_object[f]`` (index goes from the
     current medium to ``object_ior[k]``); ``> 0`` means it leaves (index goes
-    to ``outside_ior``). A per-ray current-medium index is kept; rays start
-    in the outside medium. Objects are assumed not to be nested.
+    to ``outside_ior``). Rays start in the outside medium; objects are
+    assumed not to be nested. Deterministic whatever the thread count (see
+    the module's docstring).
 
     Parameters
     ----------
@@ -745,25 +875,19 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
         Absorption coefficient per colour channel of each object, >= 0.
     origins, dirs : (N, 3) array_like of float
         Ray origins (outside every object) and unit directions.
-    vertex_normals : (V, 3) or (F, 3, 3) array_like of float, optional
+    normals : (V, 3) or (F, 3, 3) array_like of float, optional
         Shading normals, per vertex or per corner (row ``[f, k]`` belongs to
-        vertex ``faces[f, k]``; e.g. the crease normals of
-        :func:`refraction_ref.meshes.corner_normals`, which let a vertex on a
-        sharp edge carry one normal per side). Default: area-weighted vertex
+        vertex ``faces[f, k]``, e.g. the crease normals of :func:`mesh_normals`,
+        which let a vertex on a sharp edge carry one normal per side); the
+        ``geometry`` stage's ``normals`` buffer. Default: area-weighted vertex
         normals (:func:`area_weighted_vertex_normals`). Only used when
         ``smooth``. A zero normal (interpolated) means "use the face normal".
-    normals : (V, 3) or (F, 3, 3) array_like of float, optional
-        The same as ``vertex_normals`` under the name the exact reference's
-        ``geometry`` stage gives its buffer (``ctx.buf["geometry"]["normals"]``,
-        passed with ``smooth=ctx.buf["geometry"]["smooth"]``); give one of
-        the two.
     smooth : bool, default True
         Refract with barycentrically interpolated shading normals (``True``)
         or with the face normals (``False``). The shading normal is flipped
         to the geometric normal's side when they disagree; if it would send
-        the refracted / reflected ray to the wrong side of the triangle the
-        face normal is used for that event instead (keeps the medium
-        bookkeeping consistent with the geometry).
+        the ray to the wrong side of the triangle the face normal is used for
+        that event instead (keeps the media consistent with the geometry).
     outside_ior : float, default 1.0
         Index of the surrounding medium.
     max_bounces : int, default 64
@@ -773,87 +897,54 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     progress : bool, default False
         Show a tqdm progress bar over bounces.
     epsilon : float, optional
-        Origin offset used to avoid self-intersection in the float32 Embree
-        query (along the new direction and along the face normal, to the
-        side the ray leaves to). Default ``1e-5 * scale`` with ``scale`` the
-        larger of the bounding-box diagonal and the largest absolute
-        coordinate. Distances and hit points are *not* affected by it: they
-        are recomputed in float64 from the un-offset surface point.
+        Origin offset of the float32 Embree query against self-intersection
+        (along the new direction and the face normal, to the side the ray
+        leaves to). Default ``1e-5 * scale``, ``scale`` the larger of the
+        bounding-box diagonal and the largest absolute coordinate. Distances
+        and hit points are recomputed in float64 from the un-offset point.
     chunk_size : int, default 8192
-        Rays per Embree call and per chunk of a bounce; the chunks run on up
-        to ``numba.get_num_threads()`` threads. Results depend neither on the
-        chunk size nor on the thread count.
+        Rays per Embree call and per chunk of a bounce, on up to
+        ``numba.get_num_threads()`` threads; results depend on neither.
     record : int, default 0
         Keep the first ``record`` events of every path in ``path_pos`` and
         ``path_dir``; 0 records nothing (and adds no keys).
+    vertex_normals : array_like, optional
+        Deprecated: the former name of ``normals`` (a DeprecationWarning).
 
     Returns
     -------
     dict of ndarray, N rows each
-        ``hit`` (bool)
-            The first ray hit a triangle.
-        ``status`` (int8)
-            :mod:`refraction_ref.status`: 0 ``MISSED``, 1 ``EXITED``, 2
-            ``LIMIT`` (stopped at the bounce limit), 3 ``TIR`` (stopped at
-            the bounce limit with TIR as last event), 4 ``LOST``
-            (non-finite direction; should not happen).
-        ``exit_pos`` (N, 3)
-            Last surface point, where the ray left (NaN unless status 1).
-        ``exit_dir`` (N, 3)
-            Direction after the last event (status 1), ``dirs`` (status 0),
-            NaN otherwise.
-        ``last_dir`` (N, 3)
-            Direction at the end of tracing (the one before the failure for
-            status 4).
-        ``hit_pos`` (N, 3), ``first_face`` (N,) int64
-            First hit point (NaN on miss) and face (-1 on miss).
-        ``first_normal`` (N, 3), ``first_dir`` (N, 3)
-            Shading normal actually used at the first hit (outward, i.e. on
-            the geometric normal's side) and the direction right after the
-            first event (NaN on miss); for checking Snell's law.
-        ``interfaces`` (int16)
-            Number of refractions (interface crossings); TIR not counted.
-        ``bounces`` (int16)
-            Number of surface events (refractions + TIR reflections).
-        ``path_length`` (float64)
-            Geometric length travelled inside objects.
-        ``transmittance`` (N, 3)
-            Product over segments inside object ``k`` of
-            ``exp(-absorption_k * length * ior_k)``
-            (:func:`refraction_ref.optics.beer_lambert`).
-        ``leaked`` (bool)
-            The ray escaped to infinity while its medium was an object (an
-            open or inconsistently wound mesh); its status is still 1.
-        ``path_pos`` (N, K, 3), ``path_dir`` (N, K, 3)
-            Only with ``record=K > 0``. Row ``k`` is the ``k``-th surface
-            event (``k < bounces``): the float64 hit point on the triangle
-            (row 0 is ``hit_pos``, unless ``max_bounces=0``: no events) and
-            the unit direction after the event, refracted or, under TIR,
-            reflected (row 0 is ``first_dir``).
-            A lost event keeps its point with a NaN direction. Rows past
-            the path's events are NaN (all rows of a missed ray; a hit
-            beyond the bounce limit is not an event and not recorded). For
-            an exited ray with at most ``K`` events the last row is
-            ``exit_pos`` and ``exit_dir``, bit for bit.
+        ``hit`` (bool): the first ray hit a triangle. ``status`` (int8,
+        :mod:`refraction_ref.status`): 0 ``MISSED``, 1 ``EXITED``, 2 ``LIMIT``
+        (stopped at the bounce limit), 3 ``TIR`` (the same, TIR as last
+        event), 4 ``LOST`` (non-finite direction; should not happen).
+        ``exit_pos`` (N, 3): where the ray left (NaN unless status 1).
+        ``exit_dir`` (N, 3): the direction after the last event (status 1),
+        ``dirs`` (status 0), NaN otherwise. ``last_dir`` (N, 3): the direction
+        at the end (the one before the failure for status 4). ``hit_pos``
+        (N, 3), ``first_face`` (N,) int64: first hit point (NaN on miss) and
+        face (-1). ``first_normal``, ``first_dir`` (N, 3): the shading normal
+        used at the first hit (on the geometric normal's side) and the
+        direction after it (NaN on miss). ``interfaces`` (int16): refractions
+        (TIR not counted). ``bounces`` (int16): surface events.
+        ``path_length``: length travelled inside objects. ``transmittance``
+        (N, 3): the product over segments inside object ``k`` of
+        ``exp(-absorption_k * length * ior_k)``
+        (:func:`refraction_ref.optics.beer_lambert`). ``leaked`` (bool): the
+        ray escaped while inside an object (an open or badly wound mesh;
+        status still 1). With ``record=K > 0``: ``path_pos``, ``path_dir``
+        (N, K, 3), row ``k`` the ``k``-th event's float64 point and the
+        direction after it (row 0: ``hit_pos``, ``first_dir``); a lost event
+        keeps its point with a NaN direction; rows past the path's events are
+        NaN; for an exited ray with at most ``K`` events the last row is
+        ``exit_pos`` and ``exit_dir``, bit for bit.
 
     Raises
     ------
     ValueError
         On malformed input: wrong shapes, non-finite vertices, ``ior <= 0``,
-        negative absorption, face indices out of range, non-unit directions.
-
-    Notes
-    -----
-    Deterministic: identical inputs give bit-identical outputs whatever the
-    thread count (Embree's BVH build and traversal are deterministic, its
-    queries run on fixed chunks of rays, and all float64 work is per ray,
-    in Numba kernels that write only their ray's rows).
-
-    Threads: each bounce splits the rays still travelling into fixed chunks
-    of ``chunk_size`` that ``numba.get_num_threads()`` threads take in turn
-    (:func:`refraction_ref.embree.run_chunks`); a chunk is queried with
-    Embree (embreex releases the GIL while tracing) and then bounced by a
-    Numba kernel that releases the GIL too.
+        negative absorption, face indices out of range, non-unit directions,
+        both ``normals`` and ``vertex_normals``.
 
     References
     ----------
@@ -864,21 +955,53 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     .. [3] T. Möller, B. Trumbore, "Fast, Minimum Storage Ray/Triangle
        Intersection", J. Graphics Tools 2(1), 1997.
     .. [4] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008.
+       Objects", M.S. thesis, UMBC, 2008, §3.6-3.8 (the quantities
+       reproduced; docs/oracle.md, "The exact reference").
     """
-    if normals is not None and vertex_normals is not None:
-        raise ValueError("give the shading normals as normals or as vertex_normals, not both")
-    name = "normals" if normals is not None else "vertex_normals"
+    normals, name = _normals_argument(normals, vertex_normals)
     v, f, fo, ior, ab, o, d, vn = _validate(
         vertices, faces, face_object, object_ior, object_absorption,
-        origins, dirs, vertex_normals if normals is None else normals, outside_ior, max_bounces, name)
+        origins, dirs, normals, outside_ior, max_bounces, name)
     max_bounces = int(max_bounces)
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError("chunk_size must be >= 1")
     if smooth and vn is None:
         vn = area_weighted_vertex_normals(v, f)
+    epsilon = _epsilon(v, epsilon)
+    if int(record) != record or record < 0:
+        raise ValueError(f"record must be an integer >= 0, got {record!r}")
+    record = int(record)
     per_corner = vn is not None and vn.ndim == 3
+    cfg = _Settings(max_bounces, record, epsilon, bool(smooth), bool(per_corner), float(outside_ior))
+    mesh = _mesh_tables(v, f, fo, ior, vn, cfg)
+    st, out = _allocate(d, record)
+    _run_bounces(v, f, o, ab, cfg, mesh, st, out, chunk_size, progress)
+    assert not np.any(st.status == _ACTIVE)
+    res = {"hit": st.status != MISSED, "status": st.status}
+    res.update({k: getattr(out, k) for k in ("exit_pos", "exit_dir", "last_dir", "hit_pos", "first_face",
+                                             "first_normal", "first_dir")})
+    res.update({"interfaces": st.interfaces, "bounces": st.bounces, "path_length": st.path_length,
+                "transmittance": out.transmittance, "leaked": out.leaked})
+    if record:
+        res["path_pos"] = out.path_pos
+        res["path_dir"] = out.path_dir
+    return res
+
+
+def _normals_argument(normals, vertex_normals):
+    """``normals``, or the deprecated ``vertex_normals`` with a warning; and the name to report."""
+    if vertex_normals is None:
+        return normals, "normals"
+    warnings.warn("trace_exact(vertex_normals=...) is deprecated; pass normals=...", DeprecationWarning,
+                  stacklevel=3)
+    if normals is not None:
+        raise ValueError("give the shading normals as normals or as vertex_normals, not both")
+    return vertex_normals, "vertex_normals"
+
+
+def _epsilon(v, epsilon):
+    """The query offset: ``epsilon``, or ``1e-5`` of the scene's scale (:func:`trace_exact`)."""
     if epsilon is None:
         lo, hi = bounds(v)  # v.min(axis=0), v.max(axis=0) in one pass (NumPy's is ~50x slower on (N, 3))
         scale = max(float(np.linalg.norm(hi - lo)), float(np.abs(v).max()), 1e-30)
@@ -886,41 +1009,45 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     epsilon = float(epsilon)
     if not (np.isfinite(epsilon) and epsilon >= 0):
         raise ValueError("epsilon must be finite and >= 0")
-    if int(record) != record or record < 0:
-        raise ValueError(f"record must be an integer >= 0, got {record!r}")
-    record = int(record)
+    return epsilon
 
-    n = len(o)
-    # per-ray arrays; the first bounce's chunks fill them (_init_rows)
-    pos, dirn, side = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))  # side: unit face normal on the
-    medium = np.empty(n, dtype=np.int64)                                     # side the ray leaves to
-    status = np.empty(n, dtype=np.int8)
-    last_tir = np.empty(n, dtype=bool)
-    interfaces = np.empty(n, dtype=np.int16)
-    bounces = np.empty(n, dtype=np.int16)
-    path_length = np.empty(n)
-    trans = np.empty((n, 3))
-    exit_pos, exit_dir, last_dir, hit_pos = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-    first_face = np.empty(n, dtype=np.int64)
-    first_normal, first_dir = np.empty((n, 3)), np.empty((n, 3))
-    leaked = np.empty(n, dtype=bool)
+
+def _mesh_tables(v, f, fo, ior, vn, cfg):
+    """The per-face tables of the bounces (:class:`_Mesh`), on every thread."""
+    nf = len(f)
+    v0_all, e1_all, e2_all, ng_all = np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3))
+    run_chunks(lambda a, b: _face_rows(a, b, v, f, v0_all, e1_all, e2_all, ng_all), nf, chunk_length(nf, 1 << 15))
+    # shading normals: per vertex (V, 3) or per corner (F, 3, 3); the other is a dummy
+    vn_v = np.ascontiguousarray(vn) if cfg.smooth and not cfg.per_corner else np.zeros((1, 3))
+    vn_c = np.ascontiguousarray(vn) if cfg.smooth and cfg.per_corner else np.zeros((1, 3, 3))
+    # index of refraction of each medium; the outside medium is the last entry
+    med_ior = np.append(ior, cfg.outside_ior)
+    return _Mesh(v0_all, e1_all, e2_all, ng_all, f, vn_v, vn_c, fo, ior, med_ior)
+
+
+def _allocate(d, record):
+    """The per-ray arrays, unfilled: the first bounce's chunks fill them (:func:`_init_rows`)."""
+    n = len(d)
+    v3 = lambda: np.empty((n, 3))  # noqa: E731
+    st = _Rays(d, v3(), v3(), v3(), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int8),
+               np.empty(n, dtype=bool), np.empty(n, dtype=np.int16), np.empty(n, dtype=np.int16), np.empty(n))
     if record:
         path_pos = np.empty((n, record, 3))
         path_dir = np.empty((n, record, 3))
     else:  # never written (bounce < record is never true)
         path_pos = path_dir = np.empty((1, 1, 3))
-    # index of refraction of each medium; the outside medium is the last entry
-    med_ior = np.append(ior, float(outside_ior))
+    out = _Outputs(v3(), v3(), v3(), v3(), np.empty(n, dtype=np.int64), v3(), v3(), np.empty(n, dtype=bool),
+                   path_pos, path_dir, v3())
+    return st, out
 
-    # per face: first vertex, edges, unit geometric normal
-    nf = len(f)
-    v0_all, e1_all, e2_all, ng_all = np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3)), np.empty((nf, 3))
-    run_chunks(lambda a, b: _face_rows(a, b, v, f, v0_all, e1_all, e2_all, ng_all), nf, chunk_length(nf, 1 << 15))
-    # shading normals: per vertex (V, 3) or per corner (F, 3, 3); the other is a dummy
-    vn_v = np.ascontiguousarray(vn) if smooth and not per_corner else np.zeros((1, 3))
-    vn_c = np.ascontiguousarray(vn) if smooth and per_corner else np.zeros((1, 3, 3))
-    absorbing = bool(np.any(ab > 0))  # else exp(-0) = 1 leaves the transmittance as it is
 
+def _run_bounces(v, f, o, ab, cfg, mesh, st, out, chunk_size, progress):
+    """Every bounce: the rays still travelling, in fixed chunks of ``chunk_size`` on the thread pool.
+
+    A chunk is queried with Embree (embreex releases the GIL while tracing), bounced by
+    :func:`_bounce_rows` (no GIL either), then its Beer-Lambert factors multiplied in.
+    """
+    n = len(o)
     scene = mesh_scene(v, f) if n else None
     # per-bounce work arrays, rows [0, len(active)) used
     org32 = np.empty((n, 3), np.float32)
@@ -931,40 +1058,36 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
     bv = np.empty(n, np.float32)
     seg = np.empty(n)
     seg_obj = np.empty(n, np.int64)
+    absorbing = bool(np.any(ab > 0))  # else exp(-0) = 1 leaves the transmittance as it is
+    ior, trans = mesh.ior, out.transmittance
 
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from tqdm.auto import tqdm  # deferred: only for a progress bar
 
-        bar = tqdm(total=max_bounces + 1, desc="trace_exact", unit="bounce")
-
-    # the arguments of _bounce_rows
-    params = (max_bounces, record, epsilon, bool(smooth), bool(per_corner), float(outside_ior))
-    geo = (v0_all, e1_all, e2_all, ng_all, f, vn_v, vn_c, fo, ior, med_ior, d)
-    state = (pos, dirn, side, medium, status, last_tir, interfaces, bounces, path_length)
-    out_arrays = (exit_pos, exit_dir, last_dir, hit_pos, first_face, first_normal, first_dir, leaked,
-                  path_pos, path_dir)
+        bar = tqdm(total=cfg.max_bounces + 1, desc="trace_exact", unit="bounce")
     active = np.arange(n, dtype=np.int64)
-    for bounce in range(max_bounces + 1):
+    for bounce in range(cfg.max_bounces + 1):
         if bounce:
-            active = active[status[active] == _ACTIVE]
+            active = active[st.status[active] == _ACTIVE]
         m = len(active)
         if bar is not None:
             bar.set_postfix(active=m)
         if m == 0:
             break
+        hits = _Hits(active, prim, tfar, bu, bv, seg, seg_obj)
 
-        def chunk(a, b, bounce=bounce, active=active):
+        def chunk(a, b, bounce=bounce, active=active, hits=hits):
             # rows [a, b) of the active rays: float32 queries, Embree, the float64 bounce
             if bounce == 0:  # active is 0..n-1: rows [a, b) are rays [a, b)
-                _init_rows(a, b, o, d, *state, trans, *out_arrays)
-            _query_rows(a, b, active, pos, dirn, side, epsilon, bounce == 0, org32, dir32)
+                _init_rows(a, b, o, st, out)
+            _query_rows(a, b, active, st.pos, st.dirn, st.side, cfg.eps, bounce == 0, org32, dir32)
             res = scene.run(org32[a:b], dir32[a:b], output=1)
             prim[a:b] = res["primID"]
             tfar[a:b] = res["tfar"]
             bu[a:b] = res["u"]
             bv[a:b] = res["v"]
-            _bounce_rows(a, b, bounce, *params, *geo, active, prim, tfar, bu, bv, seg, seg_obj, *state, *out_arrays)
+            _bounce_rows(a, b, bounce, cfg, mesh, hits, st, out)
             if absorbing:  # Beer-Lambert with NumPy's exp, the one of optics.beer_lambert
                 k = seg_obj[a:b]
                 sel = np.flatnonzero(k >= 0)
@@ -977,25 +1100,3 @@ def trace_exact(vertices, faces, face_object, object_ior, object_absorption,
             bar.update(1)
     if bar is not None:
         bar.close()
-
-    assert not np.any(status == _ACTIVE)
-    out = {
-        "hit": status != MISSED,
-        "status": status,
-        "exit_pos": exit_pos,
-        "exit_dir": exit_dir,
-        "last_dir": last_dir,
-        "hit_pos": hit_pos,
-        "first_face": first_face,
-        "first_normal": first_normal,
-        "first_dir": first_dir,
-        "interfaces": interfaces,
-        "bounces": bounces,
-        "path_length": path_length,
-        "transmittance": trans,
-        "leaked": leaked,
-    }
-    if record:
-        out["path_pos"] = path_pos
-        out["path_dir"] = path_dir
-    return out

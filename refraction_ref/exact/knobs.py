@@ -1,18 +1,29 @@
 """The ``exact`` knob block (the exact Embree reference): defaults and validation side by side.
 
-``normals`` and ``crease_deg`` are read by the ``geometry`` stage (it makes
-the shading normals every tracing stage uses), ``max_bounces`` by the
-per-pixel trace and the photon trace; ``photons`` and ``photon_seed`` by the
-exact photon reference of the caustic stages.
-Water scenes (the exact water reference) read the ``levelmap`` block's
-``exact_samples`` and ``exact_seed`` instead.
+One block holds every setting of the exact reference, for every kind of scene:
+
+- mesh scenes: ``normals`` and ``crease_deg`` are read by the ``geometry``
+  stage (it makes the shading normals every tracing stage uses),
+  ``max_bounces`` by the per-pixel trace and the photon trace, ``record`` by
+  the per-pixel trace; ``photons`` and ``photon_seed`` by the exact photon
+  reference of the caustic stages (:mod:`refraction_ref.exact.caustics`);
+- water scenes (the exact water reference, :mod:`refraction_ref.exact.water`):
+  ``water_samples`` (samples per side of the analytic surface) and
+  ``photon_seed`` (their jitter).
+
+The old names ``levelmap.exact_samples`` and ``levelmap.exact_seed`` keep
+working as aliases of ``exact.water_samples`` and ``exact.photon_seed``
+(declared by the ``levelmap`` block). What the exact reference shares with
+the other methods (the receivers' map size, gathering, placement, shadows,
+ambient) it reads from the ``caustics`` block; it reads no other method's block.
 
 Importing this module is cheap (no kernels): scene loading reads it.
 """
 
 from __future__ import annotations
 
-from .graph import KnobBlock, register_block
+from ..graph import KnobBlock, register_block
+from ..validation import SceneError, check_number
 
 __all__ = ["EXACT_DEFAULTS", "validate_exact", "BLOCK"]
 
@@ -43,23 +54,41 @@ EXACT_DEFAULTS = {
     "photons": 1024,          # caustics reference: jittered photons per side of the light's window
     "photon_seed": 0,         # seed of the jitter (the reference is deterministic)
     "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
+    "water_samples": 2048,    # water reference: jittered samples per side of the analytic surface (seed: photon_seed)
 }
 
 NORMALS = ("crease", "file", "smooth", "face")
 
 
 def validate_exact(data, base_dir="."):
-    """Check ``data['exact']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
-    from .scene import SceneError, _num
+    """Check the ``exact`` block of a merged scene.
 
+    Parameters
+    ----------
+    data : dict
+        The merged scene; ``data['exact']`` holds every key of :data:`EXACT_DEFAULTS`.
+    base_dir : str, default "."
+        The scene file's folder (unused: the block names no file).
+
+    Returns
+    -------
+    dict
+        ``data``, unchanged.
+
+    Raises
+    ------
+    SceneError
+        Naming the first key out of range (``exact.<key>``).
+    """
     p = data["exact"]
     if p["normals"] not in NORMALS:
         raise SceneError(f"scene: 'exact.normals' is {p['normals']!r}; choose one of {', '.join(NORMALS)}")
-    _num(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
-    _num(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
-    _num(p["photons"], "exact.photons", 1, 16384, integer=True)
-    _num(p["photon_seed"], "exact.photon_seed", 0, integer=True)
-    _num(p["record"], "exact.record", 0, 64, integer=True)
+    check_number(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
+    check_number(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
+    check_number(p["photons"], "exact.photons", 1, 16384, integer=True)
+    check_number(p["photon_seed"], "exact.photon_seed", 0, integer=True)
+    check_number(p["record"], "exact.record", 0, 64, integer=True)
+    check_number(p["water_samples"], "exact.water_samples", 2, 16384, integer=True)
     return data
 
 

@@ -15,7 +15,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..vec3 import affine
+from .filters import gaussian_filter_zero
+from .vec3 import affine
 
 __all__ = ["rgb_to_luv", "luv_difference", "relative_l1"]
 
@@ -28,10 +29,19 @@ _WHITE = _RGB2XYZ.sum(axis=1)  # D65, Y = 1
 def rgb_to_luv(rgb):
     """CIE L*u*v* of linear RGB (sRGB primaries, D65), clamped to [0, 1] first.
 
+    Parameters
+    ----------
+    rgb : (..., 3) array_like
+        Linear RGB; NaN counts as 0.
+
     Returns
     -------
     (..., 3) float64
         ``L`` in [0, 100]; black has ``u = v = 0``.
+
+    References
+    ----------
+    CIE 15:2004 (CIE 1976 L*u*v*); Tipprasert (2006), §2.7 (eq. 2-9).
     """
     c = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64)), 0.0, 1.0)
     xyz = affine(c, _RGB2XYZ.T)
@@ -62,70 +72,15 @@ def luv_difference(img1, img2, mask=None):
     float
         Mean Euclidean distance in CIE L*u*v*, 0 for identical images; 0
         when the mask is empty.
+
+    References
+    ----------
+    Tipprasert (2006), §2.7 (eq. 2-9), Table 5-5.
     """
     d = np.linalg.norm(rgb_to_luv(img1) - rgb_to_luv(img2), axis=-1)
     if mask is not None:
         d = d[np.asarray(mask, bool)]
     return float(d.mean()) if d.size else 0.0
-
-
-def _gaussian_taps(sigma, truncate=4.0):
-    """SciPy's ``gaussian_filter1d`` taps for ``sigma`` (``_gaussian_kernel1d``, reversed), the same
-    operations on the same values."""
-    sd = float(sigma)
-    radius = int(truncate * sd + 0.5)
-    sigma2 = sigma * sigma
-    x = np.arange(-radius, radius + 1)
-    phi_x = np.exp(-0.5 / sigma2 * x ** 2)
-    phi_x = phi_x / phi_x.sum()
-    return np.ascontiguousarray(phi_x[::-1])
-
-
-@nb.njit(cache=True, parallel=True)
-def _correlate_symmetric(a, fw, axis, out):
-    """``scipy.ndimage.correlate1d(a, fw, axis, mode="constant")`` for symmetric taps ``fw``
-    (odd length), operation for operation: each texel starts at ``x[0] * fw[0]`` and adds
-    ``(x[-k] + x[+k]) * fw[-k]`` for k from the widest in (ni_filters.c's symmetric branch;
-    the constant 0 outside the map). Rows of ``out`` on the threads, whole rows at a time
-    (the inner loops run along memory)."""
-    H, W = a.shape
-    r = (fw.shape[0] - 1) // 2
-    for i0 in nb.prange(H):
-        i = np.int64(i0)
-        w0 = fw[r]
-        for j in range(W):
-            out[i, j] = a[i, j] * w0
-        for jj in range(-r, 0):
-            wt = fw[r + jj]
-            if axis == 0:
-                lo, hi = i + jj, i - jj
-                lo_in = lo >= 0
-                hi_in = hi < H
-                for j in range(W):
-                    x = a[lo, j] if lo_in else 0.0
-                    y = a[hi, j] if hi_in else 0.0
-                    out[i, j] += (x + y) * wt
-            else:
-                for j in range(W):
-                    x = a[i, j + jj] if j + jj >= 0 else 0.0
-                    y = a[i, j - jj] if j - jj < W else 0.0
-                    out[i, j] += (x + y) * wt
-
-
-def _gaussian_filter_constant(a, sigma):
-    """``scipy.ndimage.gaussian_filter(a, sigma, mode="constant")`` of a 2-D float64 map, bit for bit,
-    on every thread (axis 0, then axis 1, as SciPy filters them)."""
-    fw = _gaussian_taps(sigma)
-    r = (len(fw) - 1) // 2
-    if r == 0 or np.any(np.abs(fw[r + 1:] - fw[:r][::-1]) > np.finfo(np.float64).eps):
-        from scipy.ndimage import gaussian_filter
-
-        return gaussian_filter(a, sigma, mode="constant")
-    tmp = np.empty(a.shape)
-    _correlate_symmetric(np.ascontiguousarray(a), fw, 0, tmp)
-    out = np.empty(a.shape)
-    _correlate_symmetric(tmp, fw, 1, out)
-    return out
 
 
 def relative_l1(test, ref, mask=None, blur=1.0):
@@ -141,9 +96,18 @@ def relative_l1(test, ref, mask=None, blur=1.0):
     blur : float
         Standard deviation of the Gaussian blur in texels (0: none).
 
-    The blur is SciPy's ``gaussian_filter(.., mode="constant")``, computed by a
-    parallel kernel with SciPy's operations in SciPy's order (the same bits
-    whatever the thread count); the sums are NumPy's.
+    Returns
+    -------
+    float
+        The relative L1 error; when ``ref`` is zero everywhere, 0 if ``test``
+        is too and 1 otherwise.
+
+    Notes
+    -----
+    The blur is SciPy's ``gaussian_filter(.., mode="constant")``, computed by
+    :func:`refraction_ref.filters.gaussian_filter_zero` (a parallel kernel with
+    SciPy's operations in SciPy's order: the same bits whatever the thread
+    count); the sums are NumPy's.
     """
     a = np.nan_to_num(np.asarray(test, dtype=np.float64))
     b = np.nan_to_num(np.asarray(ref, dtype=np.float64))
@@ -152,7 +116,7 @@ def relative_l1(test, ref, mask=None, blur=1.0):
         a, b = np.where(m, a, 0.0), np.where(m, b, 0.0)
     if blur > 0:
         if a.ndim == 2 and b.ndim == 2:
-            a, b = _gaussian_filter_constant(a, blur), _gaussian_filter_constant(b, blur)
+            a, b = gaussian_filter_zero(a, blur), gaussian_filter_zero(b, blur)
         else:
             from scipy.ndimage import gaussian_filter
 

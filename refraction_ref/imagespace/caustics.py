@@ -1,0 +1,297 @@
+"""The image-space method's caustic stages (Chaudhari 2008, §4.1): its photon trace and final pass.
+
+==========================  =====================================================  ===========
+stage (``timings_ms``)      pass                                                   section
+==========================  =====================================================  ===========
+``receivers``               receiver triangles and their caustic-map frames         §4.1
+``receiver_depth``          the receivers' depth image from the camera              §4.1
+``photon_trace``            per light: its camera, then min/max, voxelization,      §3.3-3.8
+                            peeling, reduction (``photon_trace.minmax`` ...) and
+                            one photon per texel through every layer
+``receiver_hit``            eye-space march (Krüger 2006) or Embree                 §4.1
+``splat``                   bilinear splat of irradiance into each receiver's map   §2.3.2
+``gather``                  Gaussian gathering in a window (Wyman & Davis 2006)     §2.3.2
+``caustic_final``           receivers lit directly (shadow test) and by caustics;   §4.1
+                            the object with single-surface and multi-layer passes
+==========================  =====================================================  ===========
+
+``photon_trace`` and ``caustic_final`` are this method's own; the other
+stages are the caustics service's (:mod:`refraction_ref.caustics.pipeline`),
+shared with the volumetric method and the exact reference. The knobs:
+``imagespace.photons`` and ``imagespace.receiver_hit`` here, the maps' size
+and gathering window in the ``caustics`` block (``caustics.map_size``,
+``caustics.gather``). Outputs: see :mod:`refraction_ref.caustics.pipeline`.
+
+Threads: the final pass's row gathers and scatters (receiver pixels, the
+object's pixels, the front points) are kernels that write only their own
+rows, so the bits do not depend on the number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..caustics.light import texel_flux
+from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
+                                 put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
+from ..caustics.shade import shadow_map_visibility, take_rows
+from ..environment import environment_lookup
+from ..graph import Stage
+from ..lights import light_camera
+from ..optics import beer_lambert, refract
+from ..status import EXITED
+from .normals import layer_normals
+
+__all__ = ["imagespace_caustic_stages"]
+
+
+@nb.njit(cache=True, parallel=True)
+def _mul_rows_kernel(a, idx, vals):
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        for c in range(a.shape[1]):
+            a[idx[k], c] *= vals[k, c]
+
+
+def _mul_rows(a, idx, vals):
+    """``a[idx] *= vals`` (rows of an (N, C) float64 array), on every thread."""
+    if len(idx):
+        _mul_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
+
+
+@nb.njit(cache=True, parallel=True)
+def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
+    # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        s = rdepth[i] / (rdir[i, 0] * fwd[0] + rdir[i, 1] * fwd[1] + rdir[i, 2] * fwd[2])
+        for c in range(3):
+            out[k, c] = origin[i, c] + rdir[i, c] * s
+
+
+def _depth_points(origin, rdir, rdepth, idx, fwd):
+    out = np.empty((len(idx), 3))
+    if len(idx):
+        _depth_points_kernel(origin, rdir, rdepth, np.ascontiguousarray(idx, np.int64),
+                             np.ascontiguousarray(fwd, dtype=np.float64), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _front_points_kernel(t, dv, oi, zfront, W, H, sx, sy, ortho, pv):
+    # t = where(all(isfinite(t)), t, dv) in place; pv: _final_imagespace's NumPy expressions
+    for k0 in nb.prange(oi.shape[0]):
+        k = np.int64(k0)
+        if not (math.isfinite(t[k, 0]) and math.isfinite(t[k, 1]) and math.isfinite(t[k, 2])):
+            for c in range(3):
+                t[k, c] = dv[k, c]
+        p = oi[k]
+        ii = p // W
+        jj = p - ii * W
+        xs = jj + 0.5
+        ys = ii + 0.5
+        x = (xs / W * 2.0 - 1.0) * sx
+        y = (1.0 - ys / H * 2.0) * sy
+        dfront = zfront[p]
+        if ortho:
+            pv[k, 0] = x
+            pv[k, 1] = y
+        else:
+            pv[k, 0] = x * dfront
+            pv[k, 1] = y * dfront
+        pv[k, 2] = -dfront
+
+
+def _st_photon_trace(ctx, layered_trace):
+    """Per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)."""
+    d = ctx.scene.data
+    p = d["imagespace"]
+    g = ctx.buf["geometry"]
+    geom, ior, outside, absorption = g["geom"], g["ior"], g["outside_ior"], g["absorption"]
+    out = {"lights": [], **dict.fromkeys(photon_buffer_names(len(d["lights"]), True))}
+    for l, light in enumerate(d["lights"]):
+        lcam = light_camera(light, geom.vertices, int(p["photons"])) if len(geom.faces) else None
+        if lcam is None:
+            out["lights"].append(None)
+            continue
+        lt = {}
+        tv = layered_trace(geom, lcam, p, ior, outside, lt, [])
+        for k, v in lt.items():
+            ctx.timings[k] = ctx.timings.get(k, 0.0) + v
+        tr = tv["trace"]
+        st = tr["status"].ravel()
+        N = lcam.width
+        cols = np.tile(np.arange(N) + 0.5, N)
+        rows = np.repeat(np.arange(N) + 0.5, N)
+        flux0 = texel_flux(lcam, cols, rows)
+        ex = np.flatnonzero(st == EXITED)
+        trans = beer_lambert(absorption, tr["path_length"].ravel()[ex], ior)
+        o = tr["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
+        dd = tr["exit_dir"].reshape(-1, 3)[ex]
+        bias = 1e-3 * (lcam.far - lcam.near) + 2.0 * 2.0 * lcam.sy / N
+        out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": trans, "o": o, "d": dd,
+                              "shadow": (lcam, tv["zmin"], bias)})
+        out[f"camera_{l}"] = camera_array(lcam)
+        out[f"ldi_{l}"] = tv["ldi"] if 0 not in tv["ldi"].strides else None
+        out[f"exit_pos_{l}"] = o
+        out[f"exit_dir_{l}"] = dd
+    ctx.note(f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1)")
+    return out
+
+
+def _st_final(ctx):
+    """Receivers lit directly (shadow map) and by the caustics, seen through the object (§4.1)."""
+    d = ctx.scene.data
+    p = d["imagespace"]
+    b = ctx.buf
+    g = b["geometry"]
+    rs = b["receivers"]["rs"]
+    rd = b["receiver_depth"]
+    shadow = [None if L is None else L["shadow"] for L in b["photon_trace"]["lights"]]
+
+    def vis(l, pts, nrm):
+        if shadow[l] is None:
+            return np.ones(len(pts))
+        lcam, zmin, bias = shadow[l]
+        return shadow_map_visibility(lcam, zmin, pts, bias)
+
+    eye = {"trace": b["trace"], "zmin": b["minmax"]["zmin"]}
+    img, img1 = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"], vis,
+                                  p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
+    ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
+             "single-surface (the thesis's) final passes")
+    return {"image_caustics": img, "image_caustics_single": img1}
+
+
+def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
+    """The caustic stages the image-space method adds for a scene with lights and receivers (§4.1).
+
+    The photon trace runs the method's own passes of chapter 3 in each
+    light's view (``layered_trace``, given by the caller so that this module
+    needs no import of :mod:`refraction_ref.imagespace.pipeline`); the
+    receivers, receiver hits, splat and gathering are the caustics service's
+    generic stages (:mod:`refraction_ref.caustics.pipeline`).
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene with at least one light and one receiver
+        (:func:`refraction_ref.caustics.pipeline.has_caustics`).
+    layered_trace : callable
+        ``layered_trace(geom, cam, p, ior, outside_ior, timings, plan) -> dict``:
+        min/max, voxelization, peeling, reduction and the multi-layer trace
+        from a camera (:func:`refraction_ref.imagespace.pipeline.layered_trace`).
+    trace_knobs : tuple of str
+        The ``imagespace`` knobs ``layered_trace`` reads, in order (the photon
+        trace declares them, after ``photons``, in its ``Stage.reads``).
+
+    Returns
+    -------
+    tuple of Stage
+        ``receivers``, ``receiver_depth``, ``photon_trace``, ``receiver_hit``,
+        ``splat``, ``gather``, ``caustic_final``, in execution order.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1 (caustics), §3.3-3.8 (the
+       passes in the light's view).
+    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
+       Approximating Caustics", I3D 2006 (the Gaussian gathering).
+    """
+    nl, nr = len(scene.data["lights"]), len(scene.data["receivers"])
+    eyespace = scene.data["imagespace"]["receiver_hit"] == "eyespace"
+    knobs = tuple(dict.fromkeys(("photons",) + tuple(trace_knobs)))
+    return receiver_stages(nr) + (
+        Stage("photon_trace", lambda ctx: _st_photon_trace(ctx, layered_trace), reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs),
+              after=("geometry",),
+              makes=photon_buffer_names(nl, True),
+              doc="per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)"),
+        Stage("receiver_hit", lambda ctx: receiver_hit_stage(ctx, eyespace),
+              reads=("imagespace.receiver_hit",),
+              after=("receivers", "photon_trace") + (("receiver_depth",) if eyespace else ()),
+              makes=per_light_names("hit_pos", nl) + per_light_names("hit_face", nl),
+              doc="where exiting photons meet the receivers (§4.1)"),
+        Stage("splat", lambda ctx: splat_stage(ctx, False), reads=("caustics.map_size",),
+              after=("receivers", "photon_trace", "receiver_hit"), makes=per_light_names("splat", nr),
+              doc="bilinear splat of each photon's irradiance (§2.3.2)"),
+        Stage("gather", lambda ctx: gather_stage(ctx, True), reads=("caustics.gather", "lights"),
+              after=("receivers", "splat"), makes=gather_names(nr),
+              doc="Gaussian gathering (Wyman & Davis 2006)"),
+        Stage("caustic_final", _st_final,
+              reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
+                     "imagespace.receiver_hit"),
+              after=("geometry", "minmax", "trace", "receivers", "receiver_depth", "photon_trace", "gather"),
+              makes=("image_caustics", "image_caustics_single"),
+              doc="receivers lit directly and by caustics, seen through the object (§4.1)"),
+    )
+
+
+def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
+    """The final pass (§4.1): ``image_caustics`` (multi-layer) and ``image_caustics_single`` (the thesis's)."""
+    H, W = cam.shape
+    tr = eye["trace"]
+    zfront = eye["zmin"]
+    rdepth, rtri = eyebuf
+    origin, rdir = cam.primary_rays()
+    env = scene.data["environment"]
+    obj = np.isfinite(zfront)
+    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
+    obj &= ~rec
+    base = np.zeros((H, W, 3))
+    # receivers seen directly: shaded with the object's rays below (one call); the rows of
+    # the boolean masks (row-major) gathered by kernels on every thread
+    ri = np.flatnonzero(rec)
+    rdir_f = np.ascontiguousarray(rdir.reshape(-1, 3))
+    dirs = take_rows(rdir_f, ri)
+    fwd = -cam.basis[2]
+    # origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None]
+    direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
+                            np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
+              rtri.reshape(-1)[ri], dirs)
+    bg = ~rec & ~obj
+    if bg.any():
+        base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
+    if not obj.any():
+        _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
+                                   direct)
+        return base.astype(np.float32), base.astype(np.float32)
+    # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
+    st = tr["status"]
+    ex = obj & (st == 1)
+    oi = np.flatnonzero(obj)
+    xi = np.flatnonzero(ex)
+    trans = beer_lambert(absorption, tr["path_length"].reshape(-1)[oi], ior)  # per pixel: only the object's
+    o_full = take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
+    d_full = take_rows(tr["exit_dir"].reshape(-1, 3), xi)
+    # the thesis's final pass: refraction at the front surface only
+    nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
+    dv = take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
+    t, _ = refract(dv, take_rows(nrm.reshape(-1, 3), oi), outside / ior)
+    # np.where(all(isfinite(t), axis=1), t, dv), and the front points in view space (pixel
+    # centres (jj + .5, ii + .5) at depth zfront), on every thread
+    pv = np.empty((len(oi), 3))
+    _front_points_kernel(t, dv, oi, np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), W, H,
+                         float(cam.sx), float(cam.sy), bool(cam.ortho), pv)
+    # both passes' rays in one march and one shading: each ray's colour is its own, and one call
+    # instead of two halves the serial work around the kernels
+    n_full = len(o_full)
+    c, cd = shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
+                        np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
+    base = base.reshape(-1, 3)
+    put_rows(base, ri, cd)
+    full = base.copy()
+    single = base.copy()
+    if n_full:
+        put_rows(full, xi, c[:n_full])
+    stuck = obj & (st != 1)
+    if stuck.any():
+        full[stuck.reshape(-1)] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
+    _mul_rows(full, oi, trans)  # full[obj] *= trans
+    put_rows(single, oi, c[n_full:])
+    full, single = full.reshape(H, W, 3), single.reshape(H, W, 3)
+    return full.astype(np.float32), single.astype(np.float32)
