@@ -143,3 +143,43 @@ def test_chaudhari_quality_normals_and_bounds():
     assert all(np.isfinite(x["normal_median"]) and np.isfinite(x["exit_p90"]) and x["pixels"] > 500
                for x in rows.values())
     assert rows["forward (eq. 3.1)"]["normal_median"] > 2 * rows["central delta=2 (thesis)"]["normal_median"]
+
+
+def test_time_rounds_median_and_spread_with_a_fake_timer():
+    import numba
+
+    from refraction_ref.tables.common import TABLE_THREADS, Spread, ratio_spread, spread, time_rounds
+
+    # a fake clock: each call of a callable advances it by the next of its scripted durations
+    clock = [0.0]
+    seen_threads = []
+
+    def make(durations):
+        it = iter(durations)
+
+        def fn():
+            seen_threads.append(numba.get_num_threads())
+            clock[0] += next(it)
+            return clock[0]
+        return fn
+
+    # one warm-up call each (its 100 s is not a sample), then 5 interleaved rounds
+    a = make([100.0, 3.0, 1.0, 2.0, 9.0, 4.0])
+    b = make([100.0, 1.0, 1.0, 1.0, 3.0, 2.0])
+    before = numba.get_num_threads()
+    ta, tb = time_rounds([a, b], repeats=5, warmup=1, timer=lambda: clock[0])
+    assert numba.get_num_threads() == before                      # restored after
+    assert set(seen_threads) == {min(TABLE_THREADS, numba.config.NUMBA_NUM_THREADS)}
+    assert ta == [3.0, 1.0, 2.0, 9.0, 4.0] and tb == [1.0, 1.0, 1.0, 3.0, 2.0]
+    assert spread(ta) == Spread(3.0, 1.0, 9.0, 5)
+    # per-round ratios 3, 1, 2, 3, 2: median 2 (the ratio of the medians would be 3 / 1)
+    assert ratio_spread(ta, tb) == Spread(2.0, 1.0, 3.0, 5)
+    assert spread(ta).text("x", 1) == "3.0x (1.0-9.0, n = 5)"
+    # the sample read from the return value (a stage's own time) instead of the clock
+    stage_ms = iter([50.0, 8.0, 6.0, 7.0])
+    assert time_rounds([lambda: {"march": next(stage_ms)}], repeats=3, warmup=1, sample=lambda r: r["march"],
+                       timer=lambda: clock[0]) == [[8.0, 6.0, 7.0]]
+    with pytest.raises(ValueError, match="repeats"):
+        time_rounds([a], repeats=0)
+    with pytest.raises(ValueError, match="rounds"):
+        ratio_spread([1.0], [1.0, 2.0])

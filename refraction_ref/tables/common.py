@@ -17,12 +17,15 @@ measured (:class:`LoadProbe`), its timing verdicts are reported as unreliable.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import statistics
 import time
 from dataclasses import dataclass, field
 
 __all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BUSY", "LoadProbe",
-           "cpu_jiffies", "other_load", "TABLE_THREADS", "table_threads"]
+           "cpu_jiffies", "other_load", "TABLE_THREADS", "table_threads", "Spread", "spread", "ratio_spread",
+           "time_rounds"]
 
 HELD, NOT_HELD, NOT_MEASURED, NOT_COMPARABLE = "held", "not held", "not measured", "not comparable"
 
@@ -190,3 +193,114 @@ class LoadProbe:
             return max(0.0, (os.getloadavg()[0] - 1.0) / n)
         except (OSError, AttributeError):
             return 0.0
+
+
+@dataclass(frozen=True)
+class Spread:
+    """A timing (or a ratio of timings) over repeats: the median and the run-to-run spread.
+
+    Attributes
+    ----------
+    median, low, high : float
+        Median, smallest and largest of the samples.
+    n : int
+        Number of samples.
+    """
+
+    median: float
+    low: float
+    high: float
+    n: int
+
+    def text(self, unit="", nd=2):
+        """``'<median><unit> (<low>-<high>, n = <n>)'``, e.g. ``'1.50x (1.20-1.90, n = 5)'``."""
+        return f"{self.median:.{nd}f}{unit} ({self.low:.{nd}f}-{self.high:.{nd}f}, n = {self.n})"
+
+
+def spread(samples):
+    """The :class:`Spread` (median, min, max, count) of a non-empty sequence of numbers.
+
+    Parameters
+    ----------
+    samples : sequence of float
+        Per-repeat values.
+
+    Returns
+    -------
+    Spread
+    """
+    x = [float(v) for v in samples]
+    if not x:
+        raise ValueError("spread: no samples (repeats must be at least 1)")
+    return Spread(statistics.median(x), min(x), max(x), len(x))
+
+
+def ratio_spread(a, b):
+    """The :class:`Spread` of the per-round ratios ``a[i] / b[i]`` of two series timed round by round.
+
+    A ratio taken within each round (both sides timed within moments of each
+    other) and then its median leaves out a slow spell of a shared machine,
+    which a ratio of two medians does not.
+
+    Parameters
+    ----------
+    a, b : sequence of float
+        Samples of the same rounds (equal lengths).
+
+    Returns
+    -------
+    Spread
+    """
+    if len(a) != len(b):
+        raise ValueError(f"ratio_spread: {len(a)} against {len(b)} rounds; time both sides in the same rounds")
+    return spread([x / y for x, y in zip(a, b)])
+
+
+def time_rounds(fns, repeats, warmup=1, sample=None, timer=time.perf_counter, threads=True):
+    """Time callables round by round after warm-up, on :data:`TABLE_THREADS` Numba thread.
+
+    Every callable is first called ``warmup`` times untimed (JIT, caches,
+    buffers); then each of ``repeats`` rounds calls every callable in turn,
+    so that a slow spell of the machine lands on all of them alike and the
+    medians (or the per-round ratios, :func:`ratio_spread`) leave it out.
+    Numba's thread count is :data:`TABLE_THREADS` around the whole of it and
+    restored after (:class:`table_threads`).
+
+    Parameters
+    ----------
+    fns : sequence of callable
+        Called with no argument.
+    repeats : int
+        Timed rounds (at least 1).
+    warmup : int
+        Untimed calls of each callable first.
+    sample : callable, optional
+        ``sample(return value) -> float``: the sample is read from what the
+        callable returns (e.g. one stage's milliseconds out of a render's
+        timings); by default it is the wall time of the call, in seconds, by ``timer``.
+    timer : callable
+        A clock in seconds (``time.perf_counter``; tests pass a fake one).
+    threads : bool
+        Set the thread count (False: leave it as it is, e.g. inside a caller's own :class:`table_threads`).
+
+    Returns
+    -------
+    list of list of float
+        Per callable, its ``repeats`` samples in round order (:func:`spread` gives the median and spread).
+    """
+    repeats = int(repeats)
+    if repeats < 1:
+        raise ValueError(f"time_rounds: repeats = {repeats}; give at least 1")
+    ctx = table_threads() if threads else contextlib.nullcontext()
+    with ctx:
+        for fn in fns:
+            for _ in range(max(0, int(warmup))):
+                fn()
+        out = [[] for _ in fns]
+        for _ in range(repeats):
+            for k, fn in enumerate(fns):
+                t0 = timer()
+                r = fn()
+                t1 = timer()
+                out[k].append(float(sample(r)) if sample is not None else t1 - t0)
+    return out
