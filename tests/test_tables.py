@@ -183,3 +183,15 @@ def test_time_rounds_median_and_spread_with_a_fake_timer():
         time_rounds([a], repeats=0)
     with pytest.raises(ValueError, match="rounds"):
         ratio_spread([1.0], [1.0, 2.0])
+
+
+def test_chaudhari_fps_trend_is_a_median_of_per_round_ratios():
+    from refraction_ref.tables.chaudhari_report import _fps_ratio
+
+    # frames = pipeline samples + the cell's photon generation (frame_ms - pipeline_ms, 2 and 5 ms)
+    lo = {"pipeline_ms": 10.0, "frame_ms": 12.0, "samples": [10.0, 11.0, 9.0]}
+    hi = {"pipeline_ms": 40.0, "frame_ms": 45.0, "samples": [40.0, 44.0, 31.0]}
+    s = _fps_ratio(lo, hi)
+    assert (s.n, s.low, s.high) == (3, 36.0 / 11.0, 49.0 / 13.0) and s.median == 45.0 / 12.0
+    # cells not timed in the same rounds: one sample, the ratio of the medians
+    assert _fps_ratio(dict(lo, samples=[10.0]), hi).n == 1 and _fps_ratio(dict(lo, samples=[10.0]), hi).median == 3.75

@@ -413,7 +413,8 @@ def _cells(model, view, keys, time_fn, time_many, cache, log):
                     "stages_ms": dict(t.get("stages_ms", {})), "fps": 1000.0 / float(t["pipeline_ms"]),
                     "dc_max_bitmask": m.get("depth_complexity_max"), "layers_used": m.get("layers_used"),
                     "pixels_over_layer_limit": m.get("pixels_over_layer_limit"), "triangles": m.get("triangles"),
-                    "other_load": float(t.get("other_load", 0.0)), "scene": scene}
+                    "other_load": float(t.get("other_load", 0.0)), "scene": scene,
+                    "samples": [float(x) for x in t.get("samples", ())]}  # pipeline ms per round, in round order
             cache[(id(model), view.name, res, L, mode)] = cell
             if log:
                 log(f"  {view.name} {res}x{res}x256 {L:2d} layers {mode:6s}: {cell['pipeline_ms']:7.1f} ms "
