@@ -134,7 +134,7 @@ def _cmd_crosscheck(a):
     _check_workers(a.workers)
     parts = tuple(x for x in a.parts.split(",") if x)
     res = run(a.out, only=a.only, parts=parts, workers=a.workers, scheduler=a.scheduler,
-              log=(lambda m: None) if a.quiet else print, report=a.report)
+              log=(lambda m: None) if a.quiet else print, report=a.report, merge=a.merge)
     print(f"{len(res['cases'])} cases; wrote {a.report or os.path.join(a.out, 'crosscheck.md')}")
     return 0 if "**FAIL**" not in report_markdown(res).split("\n## ")[0] else 1
 
@@ -300,6 +300,8 @@ def main(argv=None):
                                                      "figure links relative to it)")
     x.add_argument("--workers", type=int, metavar="N", help="run the cases on a LocalCluster of N worker processes")
     x.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the cases on this Dask cluster")
+    x.add_argument("--merge", metavar="FILE.json", help="keep the cases of this earlier crosscheck.json that this "
+                                                        "run does not redo (the report then lists them all)")
     x.add_argument("--quiet", action="store_true", help="no progress lines")
     x.set_defaults(fn=_cmd_crosscheck)
     g = sub.add_parser("golden", help="the conformance kit's golden suite")

@@ -25,6 +25,14 @@ with an exact reference, the scene is exported to Mitsuba
     Our exact caustic maps against Mitsuba's particle tracer on the same
     receivers in our map frames.
 
+Water scenes (the exact water reference, :mod:`refraction_ref.exact.water`):
+the water is the exported dense height-field mesh with the analytic normals
+at its vertices; ``paths`` compares the eye rays refracted at the water
+(our ``water_dir`` at the analytic surface against Snell at Mitsuba's hit),
+``caustics`` Mitsuba's photons through the mesh (:func:`mitsuba_water_photons`)
+against our K batches. The volumetric cases are skipped: a graded-index
+volume bends rays continuously, and no Mitsuba plugin does.
+
 Every case is one Dask task when ``workers`` (a ``LocalCluster``) or a
 ``scheduler`` is given, as ``golden build`` runs its cases.
 
@@ -917,8 +925,348 @@ def mitsuba_photons(scene, folder, frames, shapes, n, seed, variant="llvm_ad_rgb
     return [m[..., 0] for m in maps], stats
 
 
+# --------------------------------------------------------------------------- water
+def _load_ply_scene(mi, path, v, f, nrm):
+    """A Mitsuba scene of one PLY (``nrm`` per vertex, or None for face normals)."""
+    from .interop import mitsuba as M
+
+    M.write_ply(path, v, f, nrm)
+    return mi.load_dict({"type": "scene", "all": {"type": "ply", "filename": path, "face_normals": nrm is None}})
+
+
+def _ray(mi, o, d):
+    o32 = np.asarray(o, np.float32).T
+    d32 = np.asarray(d, np.float32).T
+    return mi.Ray3f(mi.Point3f(o32[0], o32[1], o32[2]), mi.Vector3f(d32[0], d32[1], d32[2]))
+
+
+def _map_visibility(mi, rscene, owner, frame, shape, reach):
+    """Receiver ``r``'s map visibility by Mitsuba's ray caster: per texel centre, the first receiver
+    surface along ``-V`` from ``reach`` above the map plane (its owner, or -1) and its depth ``p . V``."""
+    fr = np.asarray(frame, np.float64)
+    Hc, Wc = shape
+    a, b = np.meshgrid(np.arange(Hc), np.arange(Wc), indexing="ij")
+    pts = fr[0] + ((b.ravel() + 0.5) / Wc)[:, None] * fr[1] + ((a.ravel() + 0.5) / Hc)[:, None] * fr[2]
+    Vn = fr[3] / np.linalg.norm(fr[3])
+    si = rscene.ray_intersect(_ray(mi, pts + reach * Vn, np.tile(-Vn, (len(pts), 1))))
+    ok = np.array(si.is_valid(), dtype=bool)
+    own = np.where(ok, owner[np.where(ok, np.array(si.prim_index, dtype=np.int64), 0)], -1)
+    depth = np.where(ok, _np3(si.p) @ Vn, np.nan)
+    return own.reshape(Hc, Wc), depth.reshape(Hc, Wc)
+
+
+def _splat_on_map(col, row, val, shape):
+    """Bilinear splat (texel centres at +0.5) that drops the weights falling off the map, as the exact
+    water reference's maps do."""
+    Hc, Wc = shape
+    c, r = col - 0.5, row - 0.5
+    j0, i0 = np.floor(c).astype(np.int64), np.floor(r).astype(np.int64)
+    fx, fy = c - j0, r - i0
+    acc = np.zeros(Hc * Wc)
+    for di, wy in ((0, 1.0 - fy), (1, fy)):
+        for dj, wx in ((0, 1.0 - fx), (1, fx)):
+            a, b = i0 + di, j0 + dj
+            good = (a >= 0) & (a < Hc) & (b >= 0) & (b < Wc)
+            acc += np.bincount(a[good] * Wc + b[good], weights=(val * wy * wx)[good], minlength=Hc * Wc)
+    return acc.reshape(Hc, Wc)
+
+
+def _water_light_photons(light, water, top, n, rng):
+    """``n`` x ``n`` jittered photons of a light through the horizontal rectangle ``y = top`` over the
+    water (its size plus 2 %): start points, unit directions, flux (the light's mean radiance,
+    ``/ r^2`` for a point light, times the cosine to the plane and the photon's share of the area)."""
+    sx, sz = (1.02 * float(s) for s in water["size"])
+    N = int(n) * int(n)
+    gi, gj = np.divmod(np.arange(N), int(n))
+    x = ((gj + rng.random(N)) / n - 0.5) * sx
+    z = ((gi + rng.random(N)) / n - 0.5) * sz
+    o = np.stack([x, np.full(N, top), z], axis=1)
+    w = float(np.mean(np.asarray(light["radiance"], np.float64)))
+    if light["type"] == "directional":
+        d = np.tile(np.asarray(light["direction"], np.float64), (N, 1))
+        e = np.full(N, w)
+    else:
+        d = o - np.asarray(light["position"], np.float64)
+        e = w / np.sum(d * d, axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return o, d, e * np.abs(d[:, 1]) * (sx * sz / N)
+
+
+def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm_ad_rgb", water_resolution=None):
+    """Caustic maps of a water scene from photons through Mitsuba's intersector, in our map frames.
+
+    An independent photon tracer for the exact water reference
+    (:mod:`refraction_ref.exact.water`): per light ``n`` x ``n`` jittered
+    photons (stream ``np.random.default_rng(seed)``) through a horizontal
+    rectangle just above the waves (the water's size plus 2 %), each carrying
+    the light's flux through its share of that rectangle; the water is the
+    exported dense height-field mesh (:func:`~refraction_ref.interop.mitsuba.export_water_mesh`,
+    the analytic normals at its vertices, Mitsuba's interpolated shading
+    normal at a hit); Snell in float64 at Mitsuba's hit (``outside_ior`` to
+    ``water.ior``; the refracted photon must go down, and does not meet the
+    water again, as in the reference); then Mitsuba's first receiver hit
+    (receivers shadow each other), ``exp(-K t)`` over the distance in water.
+    A photon deposits ``flux exp(-K t) |n_r . V| / A_texel`` bilinearly in
+    the frame ``(origin, u, v, V)``, weights off the map dropped, where the
+    map sees its point: the first receiver surface along ``-V`` through the
+    photon's texel centre, cast by Mitsuba, is the photon's receiver within
+    ``2 texel / max(|n_r . V|, 0.05)`` of its depth (the rule of the maps).
+
+    Parameters
+    ----------
+    scene : Scene
+        A water scene (directional or point lights).
+    folder : str
+        Where the water and receiver PLYs are written.
+    frames : list of (4, 3) arrays
+        Our ``caustic_frame_r`` (the only thing read from our side).
+    shapes : list of (Hc, Wc)
+    n : int
+        Photons per side, per light and batch.
+    seeds : sequence of int
+        One batch per seed.
+    variant : str
+        Mitsuba variant (a vectorised one).
+    water_resolution : int, optional
+        Quads per side of the water mesh (default the export's).
+
+    Returns
+    -------
+    maps : list (per seed) of list (per receiver) of (Hc, Wc) float64
+    stats : dict
+        ``photons``, ``water`` (met the water), ``deposited`` (seen by a map)
+        per batch (means), the mesh's ``resolution``.
+
+    References
+    ----------
+    .. [1] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+       with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+       University, 2006, eq. 2-8, §4.5, eqs. 4-17, 4-18.
+    .. [2] W. Jakob et al., "Mitsuba 3 renderer", 2022, https://mitsuba-renderer.org.
+    """
+    from .interop import mitsuba as M
+    from .meshes import object_mesh
+
+    mi = M.require(variant)
+    d = scene.data
+    w = d["water"]
+    wm, res = M.export_water_mesh(w, water_resolution)
+    os.makedirs(folder, exist_ok=True)
+    wscene = _load_ply_scene(mi, os.path.join(folder, "water.ply"), wm.vertices, wm.faces, wm.normals)
+    recv = [_receiver_soup(*object_mesh(rc, scene.base_dir)) for rc in d["receivers"]]
+    rv, rf, _, owner = _merged_mesh([dict(r, normals=None) for r in recv])
+    rscene = _load_ply_scene(mi, os.path.join(folder, "receivers.ply"), rv, rf, None)
+    rn = np.cross(rv[rf[:, 1]] - rv[rf[:, 0]], rv[rf[:, 2]] - rv[rf[:, 0]])
+    rn /= np.linalg.norm(rn, axis=1, keepdims=True)
+    allv = np.concatenate([wm.vertices, rv])
+    reach = 4.0 * float(np.linalg.norm(allv.max(0) - allv.min(0)))
+    vis = [_map_visibility(mi, rscene, owner, frames[r], shapes[r], reach) for r in range(len(recv))]
+    top = float(wm.vertices[:, 1].max()) + 1e-3 * max(float(s) for s in w["size"])
+    eta = float(d["outside_ior"]) / float(w["ior"])
+    K = float(w["absorption"])
+    out, stats = [], {"photons": 0, "water": 0, "deposited": 0}
+    for seed in seeds:
+        rng = np.random.default_rng(int(seed))
+        maps = [np.zeros(tuple(sh)) for sh in shapes]
+        for lt in d["lights"]:
+            o, dirn, flux = _water_light_photons(lt, w, top, n, rng)
+            si = wscene.ray_intersect(_ray(mi, o, dirn))
+            hit = np.flatnonzero(np.array(si.is_valid(), dtype=bool))
+            stats["photons"] += len(flux)
+            stats["water"] += int(hit.size)
+            t, tir, lost = _interface(dirn[hit], _np3(si.sh_frame.n)[hit], _np3(si.n)[hit], np.full(hit.size, eta))
+            go = ~tir & ~lost & (t[:, 1] < 0)
+            pw, t, f = _np3(si.p)[hit][go], t[go], flux[hit][go]
+            sr = rscene.ray_intersect(_ray(mi, pw, t))
+            ok = np.array(sr.is_valid(), dtype=bool)
+            prim = np.array(sr.prim_index, dtype=np.int64)[ok]
+            p = _np3(sr.p)[ok]
+            val = f[ok] * np.exp(-K * np.linalg.norm(p - pw[ok], axis=1))
+            for r in range(len(recv)):
+                m = owner[prim] == r
+                fr = np.asarray(frames[r], np.float64)
+                Hc, Wc = shapes[r]
+                Vn = fr[3] / np.linalg.norm(fr[3])
+                q = p[m] - fr[0]
+                col = (q @ fr[1]) / (fr[1] @ fr[1]) * Wc
+                row = (q @ fr[2]) / (fr[2] @ fr[2]) * Hc
+                jn = np.clip(np.floor(col).astype(np.int64), 0, Wc - 1)
+                in_ = np.clip(np.floor(row).astype(np.int64), 0, Hc - 1)
+                cosv = np.abs(rn[prim[m]] @ Vn)
+                texel = max(np.linalg.norm(fr[1]) / Wc, np.linalg.norm(fr[2]) / Hc)
+                seen = (vis[r][0][in_, jn] == r) & (np.abs(p[m] @ Vn - vis[r][1][in_, jn])
+                                                   <= 2.0 * texel / np.maximum(cosv, 0.05))
+                area = np.linalg.norm(fr[1]) * np.linalg.norm(fr[2]) / (Wc * Hc)
+                maps[r] += _splat_on_map(col[seen], row[seen], (val[m] * cosv / area)[seen], (Hc, Wc))
+                stats["deposited"] += int(seen.sum())
+        out.append(maps)
+    k = max(len(out), 1)
+    return out, {"photons": stats["photons"] // k, "water": stats["water"] // k,
+                 "deposited": stats["deposited"] // k, "resolution": res}
+
+
+def water_paths_case(case, folder, variant="llvm_ad_rgb", water_resolution=None):
+    """The eye rays of a water scene's ``image``: our refracted direction at the analytic surface
+    (stage buffers ``water_pos``, ``water_dir``) against Snell at Mitsuba's hit on the exported mesh.
+
+    Parameters
+    ----------
+    case : dict
+        A catalogue case with water.
+    folder : str
+        Scratch folder for the scene and Mitsuba's files.
+    variant : str
+        Mitsuba variant (a vectorised one).
+    water_resolution : int, optional
+        Quads per side of the water mesh (default the export's).
+
+    Returns
+    -------
+    num : dict
+        ``kind: 'water'``; pixels meeting the water in either, their
+        agreement (``status_agree``: over all pixels, whether the eye ray
+        meets the water), median / p99 / max angle between the refracted
+        directions where both meet it, hit-point distance p99 (world units),
+        the mesh's resolution and the expected normal error of its
+        interpolated normals.
+    figs : dict
+        ``angle`` (H, W), ``status_ours``, ``status_mitsuba`` (H, W: 1 where
+        the eye ray meets the water).
+
+    References
+    ----------
+    .. [1] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+       with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+       University, 2006, eq. 2-8 (Snell at the water), §4.6 (the view).
+    """
+    import refraction_ref as rr
+
+    from .camera import Camera
+    from .golden.build import case_scene
+    from .interop import mitsuba as M
+    from .status import VIEW_LOST, VIEW_THROUGH, VIEW_TIR
+
+    scene = case_scene(case, os.path.join(folder, "scene"))
+    t0 = time.perf_counter()
+    a = rr.render(scene, method="exact", keep="image").arrays
+    t1 = time.perf_counter()
+    vs = a["stage.image.view_status"]
+    ours = np.isin(vs, (VIEW_THROUGH, VIEW_LOST, VIEW_TIR))
+    mi = M.require(variant)
+    d = scene.data
+    w = d["water"]
+    cam = Camera.from_dict(d["camera"])
+    H, W = cam.height, cam.width
+    wm, res = M.export_water_mesh(w, water_resolution)
+    os.makedirs(folder, exist_ok=True)
+    wscene = _load_ply_scene(mi, os.path.join(folder, "water.ply"), wm.vertices, wm.faces, wm.normals)
+    sensor = mi.load_dict({"type": "perspective", "fov": float(cam.fov_y), "fov_axis": "y", "near_clip": 1e-4,
+                           "far_clip": 1e4,
+                           "to_world": mi.ScalarTransform4f().look_at(origin=list(cam.eye), target=list(cam.target),
+                                                                      up=list(cam.up)),
+                           "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}}})
+    idx = np.arange(H * W)
+    pos = np.stack([(idx % W + 0.5) / W, (idx // W + 0.5) / H]).astype(np.float32)
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[0], pos[1]), mi.Point2f(0.5, 0.5))
+    si = wscene.ray_intersect(mi.Ray3f(ray))
+    t2 = time.perf_counter()
+    mit = np.array(si.is_valid(), dtype=bool)
+    dd = _np3(ray.d)
+    dd /= np.linalg.norm(dd, axis=1, keepdims=True)
+    eta = np.full(len(dd), float(d["outside_ior"]) / float(w["ior"]))
+    t, tir, _ = _interface(dd, _np3(si.sh_frame.n), _np3(si.n), eta)
+    both = ours.ravel() & mit & ~tir & np.all(np.isfinite(a["stage.image.water_dir"].reshape(-1, 3)), axis=1)
+    ang = np.full(H * W, np.nan)
+    ang[both] = angular_error_deg(a["stage.image.water_dir"].reshape(-1, 3)[both], t[both])
+    dp = np.linalg.norm(a["stage.image.water_pos"].reshape(-1, 3)[both] - _np3(si.p)[both], axis=1)
+    x = ang[both]
+    num = {"kind": "water", "pixels": int(H * W), "water_ours": int(ours.sum()), "water_mitsuba": int(mit.sum()),
+           "both": int(both.sum()), "status_agree": float(np.mean(ours.ravel() == mit)),
+           "median_deg": float(np.median(x)) if x.size else float("nan"),
+           "p99_deg": float(np.percentile(x, 99)) if x.size else float("nan"),
+           "max_deg": float(x.max()) if x.size else float("nan"),
+           "water_pos_p99": float(np.percentile(dp, 99)) if dp.size else float("nan"),
+           "resolution": res, "normal_error_deg": water_mesh_normal_error_deg(w, res),
+           "ours_s": t1 - t0, "mitsuba_s": t2 - t1}
+    figs = {"angle": ang.reshape(H, W), "status_ours": ours.astype(np.int8),
+            "status_mitsuba": mit.reshape(H, W).astype(np.int8)}
+    return num, figs
+
+
+def water_mesh_normal_error_deg(water, resolution):
+    """The expected largest angle between the mesh's interpolated normal and the analytic one (degrees).
+
+    Linear interpolation of the normal over a triangle errs by ``e^2 / 8``
+    (``e = sqrt(2) h``, its longest edge, ``h`` the quad side) times the
+    normal's second derivative, at most ``sum_k A_k k^3``
+    for waves ``A sin(k x + phase)`` (``k = 2 pi / wavelength``); the
+    refracted direction errs by ``1 - 1 / n`` of that at normal incidence.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block.
+    resolution : int
+        Quads per side of the mesh.
+
+    Returns
+    -------
+    float
+        The bound on the normal's angle, degrees.
+    """
+    h = max(float(s) for s in water["size"]) / int(resolution)
+    third = sum(float(wv["amplitude"]) * (2 * np.pi / float(wv["wavelength"])) ** 3 for wv in water.get("waves", []))
+    return float(np.degrees(2.0 * h * h / 8.0 * third))
+
+
 #: batches of each side in the caustics cross-check (the golden suite's exact_caustics_sphere uses 8)
 CAUSTIC_BATCHES = 8
+
+
+def _mesh_batches(scene, folder, frames, shapes, K, q, oversample):
+    """Mitsuba's K batches of mesh caustics (:func:`mitsuba_photons`), ``oversample`` times our
+    photon density over its own window; (maps per batch, numbers for the report)."""
+    from .caustics.receivers import receiver_set
+    from .interop.mitsuba import object_meshes
+
+    texel_min = min(b.texel_area for b in receiver_set(scene, scene.data["lights"][0],
+                                                       int(scene.data["caustics"]["map_size"])).boxes)
+    flux_ours = q * texel_min / max([float(np.max(lt.get("radiance", [1.0]))) for lt in scene.data["lights"]]
+                                   + [1.0])
+    # photons per side for Mitsuba's window at `oversample` times our density
+    ov = np.concatenate([m["vertices"] for m in object_meshes(scene)])
+    L = np.asarray(scene.data["lights"][0]["direction"], np.float64)
+    L /= np.linalg.norm(L)
+    a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(L, a)
+    area = 1.02 ** 2 * np.ptp(ov @ a) * np.ptp(ov @ b)
+    n = int(np.ceil(np.sqrt(oversample * area / flux_ours)))
+    mit, st = [], []
+    for k in range(K):
+        m, s_ = mitsuba_photons(scene, folder, frames, shapes, n, 1000 + k)
+        mit.append(m)
+        st.append(s_)
+    return mit, {"photons_ours": int(scene.data["exact"]["photons"]) ** 2, "photons_mitsuba": n * n,
+                 "photon_flux_ours": flux_ours, "photon_flux_mitsuba": area / (n * n),
+                 "deposited_mitsuba": int(np.mean([x["deposited"] for x in st])),
+                 "limit_mitsuba": int(np.mean([x["limit"] for x in st]))}
+
+
+def _water_batches(scene, folder, frames, shapes, K, q, oversample):
+    """Mitsuba's K batches of water caustics (:func:`mitsuba_water_photons`), ``oversample`` times
+    our sample density over the water; (maps per batch, numbers for the report)."""
+    w = scene.data["water"]
+    M_ = int(scene.data["exact"]["water_samples"])
+    sx, sz = (float(v) for v in w["size"])
+    flux_ours = sx * sz / (M_ * M_)  # one water sample's area (per unit light, as photon_flux_mitsuba)
+    area = 1.02 ** 2 * sx * sz
+    n = int(np.ceil(np.sqrt(oversample * area / flux_ours)))
+    mit, st = mitsuba_water_photons(scene, folder, frames, shapes, n, [1000 + k for k in range(K)])
+    return mit, {"photons_ours": M_ * M_, "photons_mitsuba": n * n, "photon_flux_ours": flux_ours,
+                 "photon_flux_mitsuba": area / (n * n), "deposited_mitsuba": st["deposited"],
+                 "water_mitsuba": st["water"], "limit_mitsuba": 0, "water_resolution": st["resolution"],
+                 "normal_error_deg": water_mesh_normal_error_deg(w, st["resolution"])}
 
 
 def caustics_case(case, folder, batches=None, oversample=2.0):
@@ -960,6 +1308,10 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     from .metrics import relative_l1
 
     K = int(batches or case.get("batches") or CAUSTIC_BATCHES)
+    water = case["scene"].get("water") is not None
+    if water:  # the maps do not read the camera: a small one keeps our K renders' image stage short
+        case = copy.deepcopy(case)
+        case["scene"]["camera"] = dict(case["scene"]["camera"], width=8, height=8)
     scene = case_scene(case, os.path.join(folder, "scene"))
     sk = _seed_key(scene)
     t0 = time.perf_counter()
@@ -969,36 +1321,15 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
     frames = [ours[0][f"caustic_frame_{r}"] for r in range(R)]
     shapes = [ours[0][f"caustic_map_{r}"].shape for r in range(R)]
     q = photon_quantum(scene)
-    from .caustics.receivers import receiver_set
-
-    texel_min = min(b.texel_area for b in receiver_set(scene, scene.data["lights"][0],
-                                                       int(scene.data["caustics"]["map_size"])).boxes)
-    flux_ours = q * texel_min / max([float(np.max(lt.get("radiance", [1.0]))) for lt in scene.data["lights"]]
-                                   + [1.0])
-    # photons per side for Mitsuba's window at `oversample` times our density
-    from .interop.mitsuba import object_meshes
-
-    ov = np.concatenate([m["vertices"] for m in object_meshes(scene)])
-    L = np.asarray(scene.data["lights"][0]["direction"], np.float64)
-    L /= np.linalg.norm(L)
-    a = np.cross(L, [0.0, 1.0, 0.0] if abs(L[1]) < 0.9 else [1.0, 0.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(L, a)
-    area = 1.02 ** 2 * np.ptp(ov @ a) * np.ptp(ov @ b)
-    n = int(np.ceil(np.sqrt(oversample * area / flux_ours)))
-    mit, st = [], []
-    for k in range(K):
-        m, s_ = mitsuba_photons(scene, os.path.join(folder, "mitsuba"), frames, shapes, n, 1000 + k)
-        mit.append(m)
-        st.append(s_)
+    batches_of = _water_batches if water else _mesh_batches
+    mit, info = batches_of(scene, os.path.join(folder, "mitsuba"), frames, shapes, K, q, oversample)
     t2 = time.perf_counter()
-    num = {"batches": K, "photons_ours": int(scene.data["exact"]["photons"]) ** 2, "photons_mitsuba": n * n,
-           "photon_flux_ours": flux_ours, "photon_flux_mitsuba": area / (n * n), "quantum": q,
-           "deposited_mitsuba": int(np.mean([x["deposited"] for x in st])),
-           "limit_mitsuba": int(np.mean([x["limit"] for x in st])), "ours_s": t1 - t0, "mitsuba_s": t2 - t1,
-           "receivers": []}
+    num = dict(info, batches=K, quantum=q, ours_s=t1 - t0, mitsuba_s=t2 - t1, receivers=[])
     figs = []
     spec = dict(ZTEST, quantum=q)
+    # texel area of each map over the smallest (the golden quantum is for the smallest)
+    texel = [float(np.linalg.norm(np.cross(f[1], f[2]))) / (sh[0] * sh[1]) for f, sh in zip(frames, shapes)]
+    texel = [min(texel) / t for t in texel]
     for r in range(R):
         ob = np.stack([o[f"caustic_map_{r}"].astype(np.float64) for o in ours])
         mb = np.stack([m[r] for m in mit])
@@ -1006,6 +1337,9 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
         h = K // 2
         verd = [judge(mb[k], om, spec, batches=ob) for k in range(K)]
         back = [judge(ob[k], mm, spec, batches=mb) for k in range(K)]
+        # the golden quantum is one photon on the smallest texel of all the maps: on a receiver of larger
+        # texels its floor p q^2 swamps the batch variance; the same test with this map's own quantum is stricter
+        own = [judge(mb[k], om, dict(ZTEST, quantum=q * texel[r] / max(texel)), batches=ob) for k in range(K)]
         num["receivers"].append({
             "rel_l1": float(relative_l1(mm, om)),
             "rel_l1_ours_halves": float(relative_l1(ob[:h].mean(0), ob[h:].mean(0))),
@@ -1015,6 +1349,8 @@ def caustics_case(case, folder, batches=None, oversample=2.0):
             "ztest_max_abs_z": float(max(v["error"]["max_abs_z"] for v in verd)),
             "ztest_threshold": float(verd[0]["error"]["threshold"]),
             "ztest_reverse_pass": int(sum(v["ok"] for v in back)),
+            "ztest_own_quantum_pass": int(sum(v["ok"] for v in own)),
+            "ztest_own_quantum_max_abs_z": float(max(v["error"]["max_abs_z"] for v in own)),
         })
         figs.append({"ours": om, "mitsuba": mm})
     return num, figs
@@ -1060,7 +1396,7 @@ def _caustics_figure(figs, path, name):
 # --------------------------------------------------------------------------- cases, report, cluster
 def _has_caustics(case):
     s = case["scene"]
-    return bool(s.get("lights")) and bool(s.get("receivers")) and s.get("water") is None and (
+    return bool(s.get("lights")) and bool(s.get("receivers")) and (
         case["method"] == "exact" or case.get("reference") == "exact")
 
 
@@ -1069,10 +1405,6 @@ def _skip_reason(case):
     if case["method"] == "volumetric":
         return ("volumetric: a graded-index volume (continuous refraction) has no Mitsuba plugin (media "
                 "scatter and absorb, they do not bend rays); no exact mesh reference to cross-check")
-    if s.get("water") is not None:
-        return ("water: the exact water reference's maps are photons of the analytic surface deposited "
-                "through the level-map boxes (eq. 4-19); the dense water mesh exports (scene --to mitsuba), "
-                "but its photon cross-check is not built")
     if case["method"] == "exact" and not _has_caustics(case):
         return "exact method without receivers: nothing beyond the image-space cases' references"
     return None
@@ -1083,7 +1415,10 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
 
     Paths and images run on the cases with an exact per-pixel reference
     (``reference: exact``), caustics on every case with lights and receivers
-    whose method or reference is exact.
+    whose method or reference is exact. A water scene's paths are its eye
+    rays refracted at the water (:func:`water_paths_case`), its caustics
+    Mitsuba's photons through the water mesh (:func:`mitsuba_water_photons`);
+    its image is not cross-checked.
 
     Parameters
     ----------
@@ -1109,8 +1444,15 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
         entry["skipped"] = why
         return entry
     os.makedirs(folder, exist_ok=True)
-    pixels = case.get("reference") == "exact"
+    water = case["scene"].get("water") is not None
+    pixels = case.get("reference") == "exact" and not water
     with tempfile.TemporaryDirectory(prefix="crosscheck-") as tmp:
+        if "paths" in parts and water:  # the eye rays refracted at the water (the images are not cross-checked)
+            num, pf = water_paths_case(case, os.path.join(tmp, "paths"))
+            entry["paths"] = num
+            if figures:
+                entry["paths"]["figure"] = _paths_figure(pf, os.path.join(folder, "paths.png"), case["name"],
+                                                         "meets the water")
         if "paths" in parts and pixels:
             num, pf = paths_case(case, os.path.join(tmp, "paths"))
             entry["paths"] = num
@@ -1131,14 +1473,14 @@ def run_case(case, folder, parts=("paths", "images", "caustics"), figures=True):
     return entry
 
 
-def _paths_figure(f, path, name):
+def _paths_figure(f, path, name, what="status"):
     fig, ax = _panels(3)
     ax[0].imshow(f["status_ours"], vmin=0, vmax=4, cmap="tab10", interpolation="nearest")
-    ax[0].set_title("A: status, ours (exact)")
+    ax[0].set_title(f"A: {what}, ours (exact)")
     ax[1].imshow(f["status_mitsuba"], vmin=0, vmax=4, cmap="tab10", interpolation="nearest")
-    ax[1].set_title("B: status, Mitsuba paths")
+    ax[1].set_title(f"B: {what}, Mitsuba paths")
     im = ax[2].imshow(np.log10(np.maximum(f["angle"], 1e-7)), vmin=-6, vmax=1, cmap="magma", interpolation="nearest")
-    ax[2].set_title("A-B: exit angle, log10 deg")
+    ax[2].set_title("A-B: " + ("refracted" if what != "status" else "exit") + " angle, log10 deg")
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     return _save_panels(fig, ax, path, name)
 
@@ -1176,7 +1518,7 @@ def _case_task(case, parts, threads=1):
 
 
 def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, scheduler=None, log=print,
-        client=None, report=None):
+        client=None, report=None, merge=None):
     """Cross-check the catalogue (or ``only`` those cases) into ``out``: ``crosscheck.json``,
     ``crosscheck.md`` (or the Markdown file ``report``, its figure links relative to it) and ``<case>/*.png``. Cases run as Dask tasks with ``workers``
     (a LocalCluster) or ``scheduler`` (as ``golden build``), else here one by one.
@@ -1199,6 +1541,9 @@ def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, sch
         An open Dask client to use.
     report : str, optional
         Path of the Markdown report (default ``out/crosscheck.md``).
+    merge : str, optional
+        An earlier ``crosscheck.json``: its cases that this run does not redo
+        are kept (their figures are not copied: give the same ``out``).
 
     Returns
     -------
@@ -1209,8 +1554,11 @@ def run(out, only=None, parts=("paths", "images", "caustics"), workers=None, sch
     from .files import atomic_open
 
     cases = crosscheck_cases(only)
-    os.makedirs(out, exist_ok=True)
     entries = {}
+    if merge:
+        with open(merge) as fh:
+            entries.update(json.load(fh)["cases"])
+    os.makedirs(out, exist_ok=True)
 
     def done(name, entry, files=None):
         entries[name] = entry
@@ -1303,7 +1651,8 @@ def _summary(result):
     T = result["targets"]
     c = result["cases"]
     ran = {k: e for k, e in c.items() if "skipped" not in e}
-    P = {k: e["paths"] for k, e in ran.items() if "paths" in e}
+    P = {k: e["paths"] for k, e in ran.items() if "paths" in e and e["paths"].get("kind") != "water"}
+    Wp = {k: e["paths"] for k, e in ran.items() if "paths" in e and e["paths"].get("kind") == "water"}
     I = {k: e["images"] for k, e in ran.items() if "images" in e}
     C = {k: e["caustics"] for k, e in ran.items() if "caustics" in e}
     out = ["**Findings.**", ""]
@@ -1331,17 +1680,51 @@ def _summary(result):
                    "The envmap bitmap's bilinear blend across checker edges is the rest of the all-pixel "
                    "error (column *envmap bitmap*). `volpath` (absorption) is a stochastic estimator: its "
                    "difference is compared with its own noise.")
+    if Wp:
+        out.append(f"* Water paths ({len(Wp)} cases): the eye rays refracted at the water, ours at the analytic "
+                   f"surface against Snell at Mitsuba's hit on the exported height-field mesh "
+                   f"({', '.join(sorted({str(p['resolution']) for p in Wp.values()}))} quads a side, the analytic "
+                   f"normals at its vertices, interpolated by Mitsuba): median at most "
+                   f"{_fmt(max(p['median_deg'] for p in Wp.values()))} deg, p99 at most "
+                   f"{_fmt(max(p['p99_deg'] for p in Wp.values()))} deg (bound of the interpolated normal's error "
+                   f"at most {_fmt(max(p['normal_error_deg'] for p in Wp.values()))} deg), hit points within "
+                   f"{_fmt(max(p['water_pos_p99'] for p in Wp.values()))} (p99, world units); the pixels meeting "
+                   f"the water agree on at least {_fmt(100 * min(p['status_agree'] for p in Wp.values()), 5)} % "
+                   "of the pixels. The water images are not cross-checked (their shading reads our maps).")
     if C:
         out.append("* Caustics: " + "; ".join(
-            f"{k}: rel L1 {_fmt(100 * r['rel_l1'])} % (each side's own half-vs-half noise "
+            f"{k}{f' receiver {i}' if len(e['receivers']) > 1 else ''}: rel L1 {_fmt(100 * r['rel_l1'])} % "
+            f"(each side's own half-vs-half noise "
             f"{_fmt(100 * r['rel_l1_ours_halves'])} / {_fmt(100 * r['rel_l1_mitsuba_halves'])} %), power ratio "
             f"{_fmt(r['power_ratio'], 5)}, Z-test {r['ztest_pass']} of {r['batches']} Mitsuba batches pass "
             f"(reverse {r['ztest_reverse_pass']} of {r['batches']})"
-            for k, e in C.items() for r in e["receivers"]) + ".")
-    skipped = sorted({e["skipped"].split(":")[0] for e in c.values() if "skipped" in e})
-    if skipped:
-        out.append("* Skipped (reasons in the table): " + ", ".join(skipped) + ".")
+            for k, e in C.items() for i, r in enumerate(e["receivers"])) + ".")
+    skipped = {}
+    for k, e in c.items():
+        if "skipped" in e:
+            skipped.setdefault(e["skipped"], []).append(k)
+    for why, names in sorted(skipped.items()):
+        out.append(f"* Skipped, {', '.join(sorted(names))}: {why}.")
     return out
+
+
+def _water_paths_rows(name, e, T, link):
+    """The report's table of a water case's eye rays (:func:`water_paths_case`)."""
+    p = e["paths"]
+    v = verdicts(name, e)
+    return ["| paths (eye rays refracted at the water) | value | target |", "|---|---|---|",
+            f"| pixels / meeting the water: ours, Mitsuba, both | {p['pixels']} / {p['water_ours']}, "
+            f"{p['water_mitsuba']}, {p['both']} | |",
+            f"| which pixels meet the water: agreement | {_fmt(100 * p['status_agree'], 6)} % | >= "
+            f"{T['status_agree']:.0%} {_mark(v['status_agree'])} |",
+            f"| refracted direction median | {_fmt(p['median_deg'])} deg | <= {T['median_deg']} "
+            f"{_mark(v['median_deg'])} |",
+            f"| refracted direction p99; max | {_fmt(p['p99_deg'])}; {_fmt(p['max_deg'])} deg | <= {T['p99_deg']} "
+            f"{_mark(v['p99_deg'])} |",
+            f"| water hit point p99 (world units) | {_fmt(p['water_pos_p99'])} | |",
+            f"| water mesh: quads a side; bound of its interpolated normal's error | {p['resolution']}; "
+            f"{_fmt(p['normal_error_deg'])} deg | |",
+            "", f"![paths {name}]({link}{name}/{p.get('figure', 'paths.png')})"]
 
 
 def report_markdown(result, link=""):
@@ -1398,7 +1781,9 @@ def report_markdown(result, link=""):
             continue
         lines += ["", f"## {name}", "", e["purpose"], ""]
         p = e.get("paths")
-        if p:
+        if p and p.get("kind") == "water":
+            lines += _water_paths_rows(name, e, T, link)
+        elif p:
             v = verdicts(name, e)
             lines += ["| paths | value | target |", "|---|---|---|",
                       f"| primary rays, largest angle to ours | {_fmt(p['primary_ray_max_deg'])} deg | float32 |",
@@ -1453,9 +1838,13 @@ def report_markdown(result, link=""):
             lines += ["", "| caustics | value |", "|---|---|",
                       f"| batches each side; photons per batch ours / Mitsuba (flux per photon) | {c['batches']}; "
                       f"{c['photons_ours']} / {c['photons_mitsuba']} ({_fmt(c['photon_flux_ours'])} / "
-                      f"{_fmt(c['photon_flux_mitsuba'])}) |",
-                      f"| Mitsuba photons on the receivers through the object; at the bounce limit | "
-                      f"{c['deposited_mitsuba']}; {c['limit_mitsuba']} |"]
+                      f"{_fmt(c['photon_flux_mitsuba'])}) |"]
+            lines += [f"| Mitsuba photons on the receivers through the object; at the bounce limit | "
+                      f"{c['deposited_mitsuba']}; {c['limit_mitsuba']} |"] if "water_resolution" not in c else [
+                      f"| Mitsuba photons meeting the water; seen by a map | {c['water_mitsuba']}; "
+                      f"{c['deposited_mitsuba']} |",
+                      f"| water mesh: quads a side; bound of its interpolated normal's error | "
+                      f"{c['water_resolution']}; {_fmt(c['normal_error_deg'])} deg |"]
             for r, x in enumerate(c["receivers"]):
                 lines += [f"| receiver {r}: rel L1 of the K-batch means (blur 1 texel) | {_fmt(100 * x['rel_l1'])} % |",
                           f"| receiver {r}: own noise, half vs half of the batches: ours / Mitsuba | "
@@ -1466,5 +1855,9 @@ def report_markdown(result, link=""):
                           f"{_fmt(x['ztest_max_abs_z'])} ({_fmt(x['ztest_threshold'])}) |",
                           f"| receiver {r}: reverse, our batches against Mitsuba's | {x['ztest_reverse_pass']} of "
                           f"{x['batches']} |"]
+                if "ztest_own_quantum_pass" in x:
+                    lines.append(f"| receiver {r}: Z-test with this map's own quantum (one photon on its texel); max "
+                                 f"abs z | {x['ztest_own_quantum_pass']} of {x['batches']}; "
+                                 f"{_fmt(x['ztest_own_quantum_max_abs_z'])} |")
             lines += ["", f"![caustics {name}]({link}{name}/{c.get('figure', 'caustics.png')})"]
     return "\n".join(lines) + "\n"

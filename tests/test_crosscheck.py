@@ -196,3 +196,77 @@ def test_sphere_caustic_passes_the_ztest_against_mitsuba_photons(tmp_path):
     assert r["ztest_pass"] == 3
     assert abs(r["power_ratio"] - 1.0) < 0.01
     assert r["rel_l1"] < 2 * max(r["rel_l1_ours_halves"], r["rel_l1_mitsuba_halves"])
+
+
+def _small_water(name, map_size=32, samples=128):
+    # the water case with small caustic maps and few water samples (seconds)
+    c = copy.deepcopy(catalogue([name])[0])
+    c["scene"]["levelmap"] = dict(c["scene"].get("levelmap") or {}, map_size=map_size, exact_samples=samples)
+    return c
+
+
+def test_water_caustics_pass_the_ztest_against_mitsuba_photons(tmp_path):
+    """lm_steep (small maps): photons of Mitsuba's intersector through the exported water mesh (analytic vertex
+    normals), in our map frames, pass the golden Z-test against our K batches on both receivers, also with each
+    map's own quantum; the same power."""
+    from refraction_ref.crosscheck import caustics_case
+
+    num, _ = caustics_case(_small_water("lm_steep"), str(tmp_path), batches=4)
+    assert num["water_resolution"] == 512 and num["normal_error_deg"] < 0.1
+    for r in num["receivers"]:
+        assert r["ztest_pass"] == r["ztest_reverse_pass"] == r["ztest_own_quantum_pass"] == 4
+        assert abs(r["power_ratio"] - 1.0) < 0.03
+    floor = num["receivers"][0]
+    assert floor["rel_l1"] < 2 * max(floor["rel_l1_ours_halves"], floor["rel_l1_mitsuba_halves"])
+
+
+def test_water_caustics_crosscheck_sees_a_wrong_surface(tmp_path, monkeypatch):
+    """The same check with the exported waves 50 % higher than the analytic surface: the floor's maps differ by
+    more than twice either side's own noise (the criterion the check above passes)."""
+    from refraction_ref.crosscheck import caustics_case
+
+    orig = M.export_water_mesh
+
+    def taller(water, resolution=None):
+        return orig({**water, "waves": [dict(w, amplitude=1.5 * w["amplitude"]) for w in water["waves"]]},
+                    resolution)
+
+    monkeypatch.setattr(M, "export_water_mesh", taller)
+    num, _ = caustics_case(_small_water("lm_steep"), str(tmp_path), batches=4)
+    floor = num["receivers"][0]
+    assert floor["rel_l1"] > 2 * max(floor["rel_l1_ours_halves"], floor["rel_l1_mitsuba_halves"])
+
+
+def test_water_eye_rays_agree_with_mitsuba(tmp_path):
+    """lm_steep at 32x32: our refracted eye directions at the analytic surface against Snell at Mitsuba's hit on
+    the exported mesh: the same pixels meet the water, and the directions agree within the mesh's normal bound."""
+    from refraction_ref.crosscheck import water_paths_case
+
+    num, figs = water_paths_case(_small("lm_steep"), str(tmp_path))
+    assert num["kind"] == "water" and num["both"] > 500
+    assert num["status_agree"] == 1.0
+    assert num["max_deg"] <= num["normal_error_deg"]
+    assert num["median_deg"] <= 0.01
+    assert num["water_pos_p99"] < 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [c["name"] for c in catalogue() if c["scene"].get("water") is not None])
+def test_golden_water_case_crosschecks(name, tmp_path):
+    """Every golden water case at its catalogue size: eye rays within 0.01 deg at the median, the same pixels meet
+    the water, every caustic map passes the Z-test (K = 8) both ways."""
+    from refraction_ref.crosscheck import run_case, verdicts
+
+    e = run_case(catalogue([name])[0], str(tmp_path), figures=False)
+    assert "skipped" not in e and "images" not in e
+    v = verdicts(name, e)
+    assert v and all(v.values()), v
+
+
+@pytest.mark.parametrize("name", [c["name"] for c in catalogue() if c["method"] == "volumetric"])
+def test_volumetric_cases_are_skipped_with_their_reason(name, tmp_path):
+    """A graded-index volume has no Mitsuba plugin: the volumetric cases get a row with that reason, nothing run."""
+    from refraction_ref.crosscheck import run_case
+
+    e = run_case(catalogue([name])[0], str(tmp_path))
+    assert e["skipped"].startswith("volumetric: a graded-index volume") and "no Mitsuba plugin" in e["skipped"]

@@ -51,7 +51,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 __all__ = ["require", "export", "to_dict", "to_xml", "write_xml", "load", "object_meshes",
-           "envmap_bitmap", "register_refract_bsdf", "REFRACT_PLUGIN", "write_ply", "ENV_WIDTH"]
+           "envmap_bitmap", "register_refract_bsdf", "REFRACT_PLUGIN", "write_ply", "ENV_WIDTH",
+           "export_water_mesh"]
 
 #: name under which :func:`register_refract_bsdf` registers the Fresnel-free BSDF
 REFRACT_PLUGIN = "refraction_ref_refract"
@@ -208,6 +209,30 @@ def envmap_bitmap(env, width=ENV_WIDTH, base_dir="."):
     return environment_lookup(env, d, base_dir).astype(np.float32)
 
 
+def export_water_mesh(water, resolution=None):
+    """The water surface as exported: a dense height-field mesh with the analytic normals at its vertices.
+
+    Parameters
+    ----------
+    water : dict
+        The scene's resolved ``water`` block.
+    resolution : int, optional
+        Quads per side (default ``max(512, 4 * water.resolution)``).
+
+    Returns
+    -------
+    mesh : WaterMesh
+        ``vertices``, ``faces`` and the analytic unit ``normals`` per vertex
+        (:func:`refraction_ref.levelmap.water.water_mesh`).
+    resolution : int
+        The quads per side used.
+    """
+    from ..levelmap.water import water_mesh
+
+    res = int(resolution) if resolution else max(512, 4 * int(water["resolution"]))
+    return water_mesh({**water, "resolution": res}), res
+
+
 def _lookat(eye, target, up):
     return {"lookat": {"origin": [float(x) for x in eye], "target": [float(x) for x in target],
                        "up": [float(x) for x in up]}}
@@ -301,10 +326,7 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
                                           "reflectance": {"type": "rgb", "value": [float(a) for a in rc["albedo"]]}}}
     w = d.get("water")
     if w is not None:
-        from ..levelmap.water import water_mesh
-
-        res = int(water_resolution) if water_resolution else max(512, 4 * int(w["resolution"]))
-        wm = water_mesh({**w, "resolution": res})
+        wm, res = export_water_mesh(w, water_resolution)
         write_ply(os.path.join(folder, "water.ply"), wm.vertices, wm.faces, wm.normals)
         e = {"type": "ply", "file": "water.ply", "face_normals": False,
              "bsdf": _bsdf(bsdf, float(w["ior"]), out_ior), "resolution": res}
