@@ -110,12 +110,17 @@ def test_view_differs_from_direct_view_and_tir_is_defined():
 
 
 def test_thesis_box_and_planes_eqs_4_3_and_4_7_to_4_9():
-    sc = pool(planes=7)
+    # eq. 4-3 read literally (caustics.placement = thesis, the default of contract_version 4): centred on the
+    # floor's origin, each extent twice the whole length of the farthest vertex: a corner, sqrt(2) from the centre
+    sc = pool(planes=7, placement="thesis")
     ctx = prepare(sc)
     box = ctx["pairs"][0][0].box
-    # eq. 4-3: centred on the floor's origin, each extent twice the distance of the farthest vertex: a corner
     assert np.allclose(box.center, [0, FLOOR_Y, 0])
     assert np.allclose([box.w, box.h, box.d], 2 * math.sqrt(2), rtol=1e-12)
+    # the default (component, contract_version 5): the farthest vertex's coordinate along each axis; under a
+    # vertical sun the flat floor's box is its own 2 x 2 square, about as thin as the floor (floored at 1e-6)
+    comp = prepare(pool(planes=7))["pairs"][0][0].box
+    assert np.allclose(comp.center, [0, FLOOR_Y, 0]) and np.allclose([comp.w, comp.d], 2.0) and comp.h < 1e-5
     lat = plane_lattice(box, 7, "thesis")
     # 7 planes = 6 slices; D_i = h/2 - s (i - 1), s = h / 6 (eqs. 4-7 to 4-9): first and last on the faces
     assert np.allclose(lat.zeta, -box.h / 2 + box.h / 6 * np.arange(7), atol=1e-15) and lat.s == box.h / 6
@@ -140,7 +145,7 @@ def _teapot(**lm):
 
 
 def test_culling_changes_no_bit_and_lattice_smart_slicing_no_texel():
-    base = _teapot()
+    base = _teapot(smart_spacing="lattice")  # the default re-slices (eq. 4-22); lattice keeps the normal planes
     a, _ = render_levelmap(load_scene(base, {"levelmap.smart_slicing": False}))
     b, ib = render_levelmap(load_scene(base, {"levelmap.smart_slicing": True}))
     c, _ = render_levelmap(load_scene(base, {"levelmap.smart_slicing": True, "levelmap.culling": "bounds"}))
@@ -155,10 +160,11 @@ def test_respaced_smart_slicing_eq_4_22():
     res = rr.render(base, method="levelmap", keep="caustics")
     zeta = res["stage.caustics.planes_0_0"]
     assert np.all(np.diff(zeta) > 0)
-    # eq. 4-22: n_i = hr_i / (2 eps) slices per sub-box, n_i + 1 planes each; the total stays near the request
+    # eq. 4-22: n_i = hr_i / (2 eps) planes per sub-box (Table 5-4 counts planes; contract_version 4 drew
+    # n_i + 1); the total stays near hr times the normal slicing's 12 slices
     st = res.meta["stats"][0]
     n_i = [sb[2] for sb in st["smart"]["sub_boxes"]]
-    assert len(zeta) == sum(k + 1 for k in n_i)
+    assert len(zeta) == sum(n_i) and min(n_i) >= 1
     hr = sum(sb[1] for sb in st["smart"]["sub_boxes"])
     assert abs(sum(n_i) - hr * 12) <= len(n_i)
     lat = rr.render(load_scene(base, {"levelmap.smart_spacing": "lattice"}), method="levelmap")
@@ -191,3 +197,5 @@ def test_tables_quick_report(tmp_path):
     assert e43["component along each axis"][6] < e43["full norm"][6]
     t55 = rep.tables[3]
     assert all(r[2] == 0.0 for r in t55.rows)  # lattice smart slicing changes no pixel (Table 5-5)
+    # Table 5-4 with the default re-slicing: the sphere lit from above fills half its depth levels, 3 -> 1 planes
+    assert [r[3] for r in rep.tables[2].rows if r[0].startswith("sphere") and r[1] == 3] == [1]

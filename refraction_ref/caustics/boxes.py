@@ -4,9 +4,9 @@ A receiver's caustic map lies on the face of a box aligned with the refracted
 light ``T0`` (axes ``U, V = -T0, W``, eq. 4-1; extents ``w, h, d``, eq. 4-3):
 the level map's position maps and planes (:mod:`refraction_ref.levelmap.planes`),
 the exact water reference's maps and the caustic frames (``caustic_frame_r``)
-are all laid in it. Conventions (map coordinates, placement ``"thesis"`` and
-``"tight"``): :mod:`refraction_ref.levelmap.planes`'s docstring and
-``docs/oracle.md``.
+are all laid in it. Conventions (map coordinates, placement ``"component"``,
+``"thesis"`` and ``"tight"``): :mod:`refraction_ref.levelmap.planes`'s
+docstring and ``docs/oracle.md``.
 
 References
 ----------
@@ -23,10 +23,16 @@ import numpy as np
 
 from ..vec3 import affine, dot
 
-__all__ = ["Box", "PLACEMENTS", "box_axes", "reference_box", "to_map", "dir_to_map", "from_map", "frame_of"]
+__all__ = ["Box", "PLACEMENTS", "CENTRED", "box_axes", "reference_box", "to_map", "dir_to_map", "from_map", "frame_of"]
 
-#: where a receiver's box sits (``caustics.placement``): eq. 4-3 as the thesis gives it, or the tight box
-PLACEMENTS = ("thesis", "tight")
+#: where a receiver's box sits (``caustics.placement``): eq. 4-3 read per axis (the component of ``P_a``
+#: along the axis, the default since contract_version 5), eq. 4-3 read literally (the whole vector's length
+#: ``|P_a|``, the default of contract_version 4), or the tight box
+PLACEMENTS = ("component", "thesis", "tight")
+
+#: the placements of eqs. 4-2/4-3: box centred on the receiver's origin ``P_0``, the thesis's plane lattice
+#: of eqs. 4-6 to 4-9 (planes on the box faces); ``"tight"`` has slab-centred planes
+CENTRED = ("component", "thesis")
 
 
 class Box(NamedTuple):
@@ -101,11 +107,17 @@ def reference_box(vertices, T0, size, placement="tight", origin=None):
         Refracted light direction (:func:`refracted_axis`).
     size : int or (Hc, Wc)
         Texels of the maps.
-    placement : {"tight", "thesis"}
-        ``"tight"``: the tight box of the vertices; ``"thesis"``: centred on
-        ``origin`` with extents ``2 |P_a|`` (eq. 4-3; module docstring).
+    placement : {"tight", "component", "thesis"}
+        ``"tight"``: the tight box of the vertices; ``"component"``: centred
+        on ``origin`` with extents ``2 max |(P - P_0) . a|`` along each axis
+        ``a`` (eq. 4-3 with ``|P_a|`` the component of the farthest vertex
+        along ``a``: the smallest box centred on ``P_0`` that encloses the
+        receiver); ``"thesis"``: centred on ``origin`` with extents twice the
+        whole length ``|P_a - P_0|`` of that vertex (eq. 4-3 read literally,
+        larger; module docstring).
     origin : (3,) array_like, optional
-        ``P_0`` (``"thesis"`` only; default the vertices' bounding-box centre).
+        ``P_0`` (``"component"``, ``"thesis"``; default the vertices'
+        bounding-box centre).
 
     Returns
     -------
@@ -120,11 +132,15 @@ def reference_box(vertices, T0, size, placement="tight", origin=None):
     v = np.asarray(vertices, dtype=np.float64)
     U, V, W = box_axes(T0)
     R = np.stack([U, V, W])
-    if placement == "thesis":
+    if placement in CENTRED:
         o = (v.min(axis=0) + v.max(axis=0)) / 2.0 if origin is None else np.asarray(origin, dtype=np.float64)
         loc = affine(v - o, R.T)
         far = np.argmax(np.abs(loc), axis=0)  # v_x, v_y, v_z: farthest along each local axis
-        ext = 2.0 * np.linalg.norm(loc[far], axis=1)  # w, h, d = 2 |P_x|, 2 |P_y|, 2 |P_z| (eq. 4-3)
+        if placement == "component":
+            # w, h, d = 2 |P_x . U|, 2 |P_y . V|, 2 |P_z . W| (eq. 4-3 per axis): encloses the receiver, no more
+            ext = 2.0 * np.abs(loc[far, np.arange(3)])
+        else:
+            ext = 2.0 * np.linalg.norm(loc[far], axis=1)  # w, h, d = 2 |P_x|, 2 |P_y|, 2 |P_z| (eq. 4-3 literally)
         centre = o
     else:
         loc = affine(v, R.T)

@@ -12,9 +12,13 @@ reference share, so their settings live in one block read by all of them:
     Gaussian gathering window in texels (Wyman & Davis 2006), odd, 1..63;
     1 = none (was ``imagespace.gather``; the image-space method's maps).
 ``placement``
-    ``thesis`` | ``tight``: the level map's reference box and planes of
-    eqs. 4-2/4-3, 4-7 to 4-9, or the tight box with planes at slab centres
-    (was ``levelmap.placement``).
+    ``component`` | ``thesis`` | ``tight``: the level map's reference box and
+    planes. ``component`` (the default since contract_version 5): eq. 4-3
+    read per axis, extents twice the farthest vertex's component along each
+    box axis, centred on the receiver's origin, planes of eqs. 4-7 to 4-9;
+    ``thesis`` (the default of contract_version 4): the same with eq. 4-3's
+    ``|P_a|`` read as the whole vector's length (a larger box); ``tight``:
+    the tight box with planes at slab centres (was ``levelmap.placement``).
 ``shadows``
     Receivers occlude each other in the level map's position maps (bool;
     was ``levelmap.shadows``).
@@ -38,12 +42,12 @@ __all__ = ["CAUSTICS_DEFAULTS", "PLACEMENTS", "validate_caustics", "BLOCK"]
 CAUSTICS_DEFAULTS = {
     "map_size": 512,          # texels per side of each receiver's caustic map (every method, exact reference too)
     "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
-    "placement": "thesis",    # level map's reference box and planes: 'thesis' (eqs. 4-2/4-3, 4-7..4-9) | 'tight'
+    "placement": "component",  # reference box: 'component' (eq. 4-3 per axis) | 'thesis' (full |P_a|) | 'tight'
     "shadows": True,          # receivers occlude each other (level map's position maps)
     "ambient": 0.1,           # eq. 4-19's I_a as a fraction of the albedo
 }
 
-PLACEMENTS = ("thesis", "tight")
+PLACEMENTS = ("component", "thesis", "tight")  # as caustics.boxes.PLACEMENTS (this module imports no kernels)
 
 
 def validate_caustics(data, base_dir="."):

@@ -11,9 +11,9 @@ outside's for light to enter), ``absorption`` K (>= 0, per unit length),
 
 Level-map knobs: ``planes`` (1..4096), ``smart_slicing`` (bool),
 ``depth_levels`` (1..65536), ``variant`` (``levelmap`` | ``volumetric`` |
-``per_ray``), ``smart_spacing`` (``lattice`` | ``respace``: smart slicing drops the normal
-slicing's empty planes, or re-spaces ``n_i`` planes in each sub-box by
-eq. 4-22), ``culling`` (``none`` | ``bounds``: every intersection triangle over
+``per_ray``), ``smart_spacing`` (``respace`` | ``lattice``: smart slicing re-spaces
+``n_i`` planes in each sub-box by eq. 4-22, the thesis's and the default since
+contract_version 5, or drops the normal slicing's empty planes), ``culling`` (``none`` | ``bounds``: every intersection triangle over
 the whole map on every plane, the thesis's cost, or §6.1's bounding-volume
 test and a scissor per plane; the same maps).
 
@@ -39,7 +39,7 @@ CULLINGS = ("none", "bounds")
 
 LEVELMAP_DEFAULTS = {
     "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
-    "smart_spacing": "lattice", "culling": "none",
+    "smart_spacing": "respace", "culling": "none",
 }
 
 #: Water block (merged only when a scene has one; "water": null means no water).

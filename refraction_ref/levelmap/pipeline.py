@@ -48,7 +48,7 @@ from .illumination import illumination_volumes
 from .intersection import plane_index_map, plane_rects
 from .maps import level_map
 from .per_ray import per_ray_caustics
-from .planes import frame_of, plane_lattice, receiver_origin, reference_box, refracted_axis
+from .planes import CENTRED, frame_of, plane_lattice, receiver_origin, reference_box, refracted_axis
 from .smart_slicing import respaced_planes, smart_planes
 from .volumetric import volumetric_caustics
 from .water import water_mesh
@@ -134,8 +134,8 @@ def water_pass(scene):
 def planes_pass(scene):
     """Receivers and one reference box per (receiver, light) (eqs. 4-1 to 4-9).
 
-    With ``caustics.placement = "thesis"`` each box is centred on the
-    receiver's origin (eqs. 4-2, 4-3), and a point light's axis aims at that
+    With ``caustics.placement = "component"`` or ``"thesis"`` each box is
+    centred on the receiver's origin (eqs. 4-2, 4-3), and a point light's axis aims at that
     origin (Fig. 4-7); with ``"tight"`` on the tight box's centre.
     """
     water = scene.data["water"]
@@ -145,7 +145,7 @@ def planes_pass(scene):
     rec = receivers_of(scene)
     boxes = []
     for r, v in enumerate(rec.vertices):
-        if placement == "thesis":
+        if placement in CENTRED:
             centre = receiver_origin(scene.data["receivers"][r])
         else:
             centre = (v.min(axis=0) + v.max(axis=0)) / 2.0

@@ -21,15 +21,19 @@ Frames used by every pass of the level-map method:
 Placement (``levelmap.placement``; ``levelmap.planes`` counts **planes**, the
 thesis's "Num Plane" of Tables 5-1 to 5-5):
 
-* ``"thesis"`` (the default): the box of eqs. 4-2/4-3 is centred on the
-  receiver's own origin ``P_0`` (its ``transform.translate``: the point the
-  mesh's local origin is placed at; a fitted mesh is centred on its bounding
-  box first), and each extent is twice the distance ``|P_a|`` from ``P_0`` of
-  the vertex lying farthest along axis ``a`` (largest ``|coordinate|``),
-  ``w = 2 |P_x|``, ``h = 2 |P_y|``, ``d = 2 |P_z|`` (eq. 4-3, the distance of
-  eq. 4-2 read literally: the whole vector's length, not only its ``a``
-  component, so the box always encloses the receiver and is larger than the
-  tight box). ``planes = n + 1`` planes slice the box into ``n`` slices
+* ``"component"`` (the default since contract_version 5) and ``"thesis"``:
+  the box of eqs. 4-2/4-3 is centred on the receiver's own origin ``P_0``
+  (its ``transform.translate``: the point the mesh's local origin is placed
+  at; a fitted mesh is centred on its bounding box first), and each extent is
+  twice ``|P_a|`` for the vertex ``P_a`` lying farthest from ``P_0`` along
+  axis ``a`` (largest ``|coordinate|``), ``w = 2 |P_x|``, ``h = 2 |P_y|``,
+  ``d = 2 |P_z|`` (eq. 4-3). ``"component"`` reads ``|P_a|`` as that vertex's
+  coordinate along ``a`` (the box's stated purpose: the smallest box about
+  ``P_0`` that encloses the receiver along ``U``, ``V``, ``W``; the tight box
+  when ``P_0`` is the receiver's middle); ``"thesis"`` reads it as the whole
+  vector's length (eq. 4-2's distance literally: a larger box, e.g. a flat
+  floor's ``h`` several times its tight depth, so fewer planes fall on the
+  receiver). ``planes = n + 1`` planes slice the box into ``n`` slices
   (eq. 4-6): ``D_i = D_max - s (i - 1)``, ``s = h / n``, ``D_max = h / 2``
   (eqs. 4-7 to 4-9), i.e. ``zeta_i = -h/2 + s (i - 1)``, ``i = 1 .. n + 1``,
   the first and last planes on the box's faces; one plane (``n = 0``) sits
@@ -59,11 +63,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..caustics.boxes import PLACEMENTS, Box, dir_to_map, frame_of, from_map, reference_box, to_map
+from ..caustics.boxes import CENTRED, PLACEMENTS, Box, dir_to_map, frame_of, from_map, reference_box, to_map
 from ..optics import refract
 from ..validation import SceneError
 
-__all__ = ["Box", "Lattice", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
+__all__ = ["Box", "Lattice", "CENTRED", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
            "plane_lattice", "to_map", "dir_to_map", "from_map", "frame_of"]
 # Box, PLACEMENTS, reference_box and the map frame (to_map, dir_to_map, from_map, frame_of) live in
 # caustics.boxes: every receiver's caustic map uses them, the level map's planes are laid in them.
@@ -178,7 +182,7 @@ def plane_lattice(box, n, placement="tight"):
     Tipprasert (2006), eqs. 4-6 to 4-9, 4-15.
     """
     n = int(n)
-    if placement == "thesis":
+    if placement in CENTRED:
         if n == 1:
             return Lattice(np.zeros(1), box.h, -box.h / 2.0)
         s = box.h / (n - 1)  # n planes, n - 1 slices (eq. 4-8)

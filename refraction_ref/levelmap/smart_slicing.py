@@ -11,20 +11,29 @@
 
 Two ways to place the sub-boxes' planes (``levelmap.smart_spacing``):
 
-* ``"lattice"`` (the default): the planes of the normal slicing whose
-  acceptance slab meets a sub-box (about ``n_i`` of them) are kept and the
-  others dropped, rather than re-spaced: every texel is then accepted by
-  the very plane that accepts it under normal slicing, and smart slicing
-  provably changes no texel. This is what the thesis's Table 5-5 reports
-  (intensity difference 0: "the development of smart slicing is intended for
-  eliminating unnecessary plane", §5.2.4).
-* ``"respace"``: eq. 4-22 as written: each sub-box ``i`` is sliced anew by
-  the plane slicing of §4.2.1 (eqs. 4-6 to 4-9 on the sub-box) into
-  ``n_i = round(hr_i / (2 eps))`` slices, ``eps = s / (2 h)`` the normal
-  slicing's acceptance threshold as a fraction of ``h`` (``n_i = hr_i`` times
-  the normal slicing's slice count); a texel is accepted by the nearest
-  plane of its own sub-box. The planes move, so texels change (measured by
-  eq. 2-9 in the Tipprasert tables).
+* ``"respace"`` (the default since contract_version 5): eq. 4-22 as the
+  thesis means it: each sub-box ``i`` is sliced anew by the plane slicing of
+  §4.2.1 (eqs. 4-6 to 4-9 on the sub-box) with ``n_i = round(hr_i / (2
+  eps))`` **planes** (at least one), ``eps = s / (2 h)`` the normal slicing's
+  acceptance threshold as a fraction of ``h``, so ``n_i = hr_i`` times the
+  normal slicing's slice count (``planes - 1`` on the thesis's lattice).
+  ``n_i`` counts planes, as the thesis's Table 5-4 does: a sphere lit from
+  above fills about half of its box's depth levels (``hr = 1/2``) and the
+  table gives 3 -> 1 and 101 -> 50 planes, i.e. ``hr (planes - 1)``; read as
+  a slice count (``n_i + 1`` planes, contract_version 4) it gave 2 and 51.
+  On the thesis's lattice (placement ``component`` or ``thesis``) the
+  ``n_i`` planes run from the sub-box's top face to its bottom face,
+  spacing ``h_i / (n_i - 1)`` (one plane at its centre when ``n_i = 1``);
+  on the ``tight`` lattice they sit at the centres of ``n_i`` equal slabs. A
+  texel is accepted by the nearest plane of its own sub-box. The planes
+  move, so texels change (measured by eq. 2-9 in the Tipprasert tables).
+* ``"lattice"``: the planes of the normal slicing whose acceptance slab
+  meets a sub-box (about ``n_i`` of them) are kept and the others dropped,
+  rather than re-spaced: every texel is then accepted by the very plane
+  that accepts it under normal slicing, and smart slicing provably changes
+  no texel (what the thesis's Table 5-5 reports, intensity difference 0,
+  "the development of smart slicing is intended for eliminating unnecessary
+  plane", §5.2.4; the default of contract_version 4).
 
 References
 ----------
@@ -38,7 +47,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .planes import plane_lattice
+from .planes import CENTRED, plane_lattice
 
 __all__ = ["depth_profile", "sub_boxes", "smart_planes", "respaced_planes", "SPACINGS"]
 
@@ -62,7 +71,10 @@ def _profile(depth, own, zlo, h, levels, counts):
 
 @nb.njit(cache=True, parallel=True)
 def _respaced_index(depth, own, zlo, h, levels, sub_of, z0, si, n_i, first, thesis, out):
-    """out[i, j]: the plane of the texel's own sub-box nearest to it (eq. 4-22's slicing), -1 for none."""
+    """out[i, j]: the plane of the texel's own sub-box nearest to it (eq. 4-22's slicing), -1 for none.
+
+    ``n_i[b]``: the sub-box's planes; ``thesis``: planes on the faces (index ``0 .. n_i - 1`` nearest),
+    else slab centres (slab index)."""
     H, W = depth.shape
     for i in nb.prange(H):
         for j in range(W):
@@ -78,7 +90,7 @@ def _respaced_index(depth, own, zlo, h, levels, sub_of, z0, si, n_i, first, thes
                 continue
             if thesis:
                 q = np.int64(np.floor((z - z0[b]) / si[b] + 0.5))
-                q = min(max(q, 0), n_i[b])
+                q = min(max(q, 0), n_i[b] - 1)
             else:
                 q = np.int64(np.floor((z - z0[b]) / si[b]))
                 q = min(max(q, 0), n_i[b] - 1)
@@ -161,7 +173,7 @@ def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
     pidx : (Hc, Wc) int32, optional
         The plane index map; planes it uses are always kept (a guard against
         rounding at level boundaries; they are within the sub-boxes anyway).
-    placement : {"tight", "thesis"}
+    placement : {"tight", "component", "thesis"}
         The normal slicing's lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
 
     Returns
@@ -201,11 +213,11 @@ def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
 
 def _slices(n, placement):
     """Slices of the normal slicing: ``planes - 1`` (thesis, eq. 4-6) or ``planes`` (tight slabs)."""
-    return max(int(n) - 1, 1) if placement == "thesis" else int(n)
+    return max(int(n) - 1, 1) if placement in CENTRED else int(n)
 
 
 def respaced_planes(lm, box, n, levels, placement="tight"):
-    """Eq. 4-22: each sub-box sliced anew into ``n_i = round(hr_i / (2 eps))`` slices (``"respace"``).
+    """Eq. 4-22: each sub-box sliced anew with ``n_i = round(hr_i / (2 eps))`` planes (``"respace"``).
 
     Parameters
     ----------
@@ -215,10 +227,11 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
         Planes requested (the normal slicing; its ``eps`` sets ``n_i``).
     levels : int
         Depth levels of the profile.
-    placement : {"tight", "thesis"}
-        ``"thesis"``: ``n_i + 1`` planes from the sub-box's top face to its
-        bottom face, spacing ``h_i / n_i`` (one plane at its centre when
-        ``n_i = 0``); ``"tight"``: ``max(n_i, 1)`` planes at slab centres.
+    placement : {"tight", "component", "thesis"}
+        ``"component"``, ``"thesis"``: ``max(n_i, 1)`` planes from the
+        sub-box's top face to its bottom face, spacing ``h_i / (n_i - 1)``
+        (one plane at its centre when ``n_i = 1``); ``"tight"``:
+        ``max(n_i, 1)`` planes at slab centres.
 
     Returns
     -------
@@ -227,7 +240,7 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
     pidx : (Hc, Wc) int32
         The plane accepting each texel (the nearest of its sub-box), -1 for none.
     info : dict
-        As :func:`smart_planes`, ``n_i`` the slices actually used.
+        As :func:`smart_planes`, ``n_i`` the planes actually used.
 
     References
     ----------
@@ -237,7 +250,7 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
     prof = depth_profile(lm, box, levels)
     boxes = sub_boxes(prof)
     slices = _slices(n, placement)
-    thesis = placement == "thesis"
+    thesis = placement in CENTRED
     sub_of = np.full(levels, -1, np.int64)
     z0 = np.zeros(max(len(boxes), 1))
     si = np.ones(max(len(boxes), 1))
@@ -249,18 +262,18 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
         lo = -box.h / 2.0 + box.h * a / levels
         hi = -box.h / 2.0 + box.h * e / levels
         hr = (e - a) / levels
-        k = int(round(hr * slices))  # n_i = hr_i / (2 eps) (eq. 4-22)
+        # n_i = hr_i / (2 eps) planes (eq. 4-22; Table 5-4 counts planes), at least one per sub-box
+        k = max(int(round(hr * slices)), 1)
         first[b] = len(zeta)
         z0[b] = lo
         if thesis:
-            if k == 0:  # one plane at the sub-box's centre, accepting all of it
+            if k == 1:  # one plane at the sub-box's centre, accepting all of it
                 zeta.append((lo + hi) / 2.0)
                 z0[b], si[b] = (lo + hi) / 2.0, 2.0 * (hi - lo) + 1.0
             else:
-                si[b] = (hi - lo) / k
-                zeta.extend(lo + si[b] * np.arange(k + 1))
+                si[b] = (hi - lo) / (k - 1)  # k planes on the sub-box's faces and between (eqs. 4-6 to 4-9)
+                zeta.extend(lo + si[b] * np.arange(k))
         else:
-            k = max(k, 1)
             si[b] = (hi - lo) / k
             zeta.extend(lo + si[b] * (np.arange(k) + 0.5))
         n_i[b] = k
