@@ -545,15 +545,14 @@ def placement_table(rows, ms, es):
                             f"{v[comp]['rel_l1']:.3f} component, {v[tight]['rel_l1']:.3f} tight" for k, v in by.items())
                 + "). ")
     note = (f"Eq. 4-3 sets the box extents w, h, d = 2|P_x|, 2|P_y|, 2|P_z| for the vertices farthest along U, V, W "
-            "from the receiver's origin P_0. Read as the whole vector's length (our default, levelmap.placement = "
-            "thesis) the box of a flat floor is as tall as it is wide and most texels and planes fall outside the "
+            "from the receiver's origin P_0. Read as the whole vector's length (caustics.placement = thesis, the "
+            "default of contract_version 4) the box of a flat floor is as tall as it is wide and most texels and planes fall outside the "
             "receiver; read as the coordinate along each axis (the box's stated purpose: enclose the receiver along "
-            "U, V, W) it is the receiver's own extent about P_0. " + sentence +
+            "U, V, W) it is the receiver's own extent about P_0 (caustics.placement = component, the default "
+            "from contract_version 5). " + sentence +
             f"Level-map caustic maps against the exact water reference rendered in the same box: rel L1 of both "
             f"blurred by one texel over the receiver's own texels, peak = the level map's blurred maximum over the "
-            f"exact one's; {ms}^2 maps, {es}^2 exact samples, 50 planes, the default 128x128 water. A measurement "
-            "only: the component-wise box is swapped in here (tables.tipprasert.component_box), the levelmap "
-            "defaults are unchanged.")
+            f"exact one's; {ms}^2 maps, {es}^2 exact samples, 50 planes, the default 128x128 water.")
     return Table("tipprasert_eq4_3", "Eq. 4-3 read two ways: the level map's caustic map against the exact reference",
                  ["scene", "receiver", "eq. 4-3 reading", "box w x h x d", "map texels on the receiver",
                   "planes in use", "rel L1 vs exact", "peak / exact peak"],
@@ -681,7 +680,7 @@ def claims(rows):
                      "plane': that is what our lattice option does (equal maps), not what eq. 4-22 does."
                      if not ok else "Re-slicing each sub-box moved no texel's image by a visible amount here.",
                      rule="The thesis's own smart slicing (levelmap.smart_spacing = respace, eqs. 4-21/4-22, n_i read "
-                          "as slices per sub-box): held if the eq. 2-9 Luv difference from normal slicing stays below "
+                          "as planes per sub-box, the default): held if the eq. 2-9 Luv difference from normal slicing stays below "
                           "0.01 for every model and plane count (the thesis's Table 5-5 prints 0 throughout)."))
     top_rows = [r for r in rows if r["planes"] == top]
     mem = min(r["memory_volumetric_b"] / r["memory_levelmap_b"] for r in top_rows)
