@@ -971,12 +971,22 @@ def _splat_on_map(col, row, val, shape):
     return acc.reshape(Hc, Wc)
 
 
-def _water_light_photons(light, water, top, n, rng):
-    """``n`` x ``n`` jittered photons of a light through the horizontal rectangle ``y = top`` over the
-    water (its size plus 2 %): start points, unit directions, flux (the light's mean radiance,
-    ``/ r^2`` for a point light, times the cosine to the plane and the photon's share of the area)."""
-    sx, sz = (1.02 * float(s) for s in water["size"])
-    N = int(n) * int(n)
+def _water_light_photons(light, water, top, low, density, rng):
+    """Jittered photons of a light through the horizontal rectangle ``y = top`` over the water, ``density``
+    per unit area (``n`` x ``n``): start points, unit directions, flux (the light's mean radiance, ``/ r^2``
+    for a point light, times the cosine to the plane and the photon's share of the area).
+
+    The rectangle is the water's plus 2 %, widened by the light's horizontal travel from ``top`` down to
+    the lowest water ``low`` (a slanted ray that meets a trough at the edge starts that far outside)."""
+    sx, sz = (float(s) for s in water["size"])
+    cx, cz = np.meshgrid([-sx / 2, sx / 2], [-sz / 2, sz / 2])
+    corners = np.stack([cx.ravel(), np.full(4, low), cz.ravel()], axis=1)
+    dc = (np.tile(np.asarray(light["direction"], np.float64), (4, 1)) if light["type"] == "directional"
+          else corners - np.asarray(light["position"], np.float64))
+    shift = float(np.max(np.hypot(dc[:, 0], dc[:, 2]) / np.abs(dc[:, 1]))) * (top - low)
+    sx, sz = 1.02 * sx + 2 * shift, 1.02 * sz + 2 * shift
+    n = max(int(np.ceil(np.sqrt(density * sx * sz))), 1)
+    N = n * n
     gi, gj = np.divmod(np.arange(N), int(n))
     x = ((gj + rng.random(N)) / n - 0.5) * sx
     z = ((gi + rng.random(N)) / n - 0.5) * sz
@@ -989,16 +999,19 @@ def _water_light_photons(light, water, top, n, rng):
         d = o - np.asarray(light["position"], np.float64)
         e = w / np.sum(d * d, axis=1)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return o, d, e * np.abs(d[:, 1]) * (sx * sz / N)
+    return o, d, e * np.abs(d[:, 1]) * (sx * sz / N), sx * sz
 
 
-def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm_ad_rgb", water_resolution=None):
+def mitsuba_water_photons(scene, folder, frames, shapes, density, seeds, variant="llvm_ad_rgb",
+                          water_resolution=None):
     """Caustic maps of a water scene from photons through Mitsuba's intersector, in our map frames.
 
     An independent photon tracer for the exact water reference
     (:mod:`refraction_ref.exact.water`): per light ``n`` x ``n`` jittered
-    photons (stream ``np.random.default_rng(seed)``) through a horizontal
-    rectangle just above the waves (the water's size plus 2 %), each carrying
+    photons (stream ``np.random.default_rng(seed)``, ``density`` per unit
+    area) through a horizontal rectangle just above the waves (the water's
+    size plus 2 %, widened by the light's horizontal travel down to the
+    lowest water), each carrying
     the light's flux through its share of that rectangle; the water is the
     exported dense height-field mesh (:func:`~refraction_ref.interop.mitsuba.export_water_mesh`,
     the analytic normals at its vertices, Mitsuba's interpolated shading
@@ -1021,8 +1034,8 @@ def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm
     frames : list of (4, 3) arrays
         Our ``caustic_frame_r`` (the only thing read from our side).
     shapes : list of (Hc, Wc)
-    n : int
-        Photons per side, per light and batch.
+    density : float
+        Photons per unit area of the rectangle, per light and batch.
     seeds : sequence of int
         One batch per seed.
     variant : str
@@ -1035,7 +1048,8 @@ def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm
     maps : list (per seed) of list (per receiver) of (Hc, Wc) float64
     stats : dict
         ``photons``, ``water`` (met the water), ``deposited`` (seen by a map)
-        per batch (means), the mesh's ``resolution``.
+        per batch (means), ``window`` (the rectangles' area, summed over the
+        lights), the mesh's ``resolution``.
 
     References
     ----------
@@ -1062,17 +1076,19 @@ def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm
     reach = 4.0 * float(np.linalg.norm(allv.max(0) - allv.min(0)))
     vis = [_map_visibility(mi, rscene, owner, frames[r], shapes[r], reach) for r in range(len(recv))]
     top = float(wm.vertices[:, 1].max()) + 1e-3 * max(float(s) for s in w["size"])
+    low = float(wm.vertices[:, 1].min())
     eta = float(d["outside_ior"]) / float(w["ior"])
     K = float(w["absorption"])
-    out, stats = [], {"photons": 0, "water": 0, "deposited": 0}
+    out, stats = [], {"photons": 0, "water": 0, "deposited": 0, "window": 0.0}
     for seed in seeds:
         rng = np.random.default_rng(int(seed))
         maps = [np.zeros(tuple(sh)) for sh in shapes]
         for lt in d["lights"]:
-            o, dirn, flux = _water_light_photons(lt, w, top, n, rng)
+            o, dirn, flux, window = _water_light_photons(lt, w, top, low, density, rng)
             si = wscene.ray_intersect(_ray(mi, o, dirn))
             hit = np.flatnonzero(np.array(si.is_valid(), dtype=bool))
             stats["photons"] += len(flux)
+            stats["window"] += window
             stats["water"] += int(hit.size)
             t, tir, lost = _interface(dirn[hit], _np3(si.sh_frame.n)[hit], _np3(si.n)[hit], np.full(hit.size, eta))
             go = ~tir & ~lost & (t[:, 1] < 0)
@@ -1102,7 +1118,7 @@ def mitsuba_water_photons(scene, folder, frames, shapes, n, seeds, variant="llvm
         out.append(maps)
     k = max(len(out), 1)
     return out, {"photons": stats["photons"] // k, "water": stats["water"] // k,
-                 "deposited": stats["deposited"] // k, "resolution": res}
+                 "deposited": stats["deposited"] // k, "window": stats["window"] / k, "resolution": res}
 
 
 def water_paths_case(case, folder, variant="llvm_ad_rgb", water_resolution=None):
@@ -1260,11 +1276,10 @@ def _water_batches(scene, folder, frames, shapes, K, q, oversample):
     M_ = int(scene.data["exact"]["water_samples"])
     sx, sz = (float(v) for v in w["size"])
     flux_ours = sx * sz / (M_ * M_)  # one water sample's area (per unit light, as photon_flux_mitsuba)
-    area = 1.02 ** 2 * sx * sz
-    n = int(np.ceil(np.sqrt(oversample * area / flux_ours)))
-    mit, st = mitsuba_water_photons(scene, folder, frames, shapes, n, [1000 + k for k in range(K)])
-    return mit, {"photons_ours": M_ * M_, "photons_mitsuba": n * n, "photon_flux_ours": flux_ours,
-                 "photon_flux_mitsuba": area / (n * n), "deposited_mitsuba": st["deposited"],
+    mit, st = mitsuba_water_photons(scene, folder, frames, shapes, oversample / flux_ours,
+                                    [1000 + k for k in range(K)])
+    return mit, {"photons_ours": M_ * M_, "photons_mitsuba": st["photons"], "photon_flux_ours": flux_ours,
+                 "photon_flux_mitsuba": st["window"] / st["photons"], "deposited_mitsuba": st["deposited"],
                  "water_mitsuba": st["water"], "limit_mitsuba": 0, "water_resolution": st["resolution"],
                  "normal_error_deg": water_mesh_normal_error_deg(w, st["resolution"])}
 
@@ -1612,6 +1627,11 @@ def _fmt(x, nd=3):
     return f"{x:.{nd}g}"
 
 
+def _counts(d):
+    """Status counts as ``{0: n, ...}`` (integer keys, also after a JSON round trip: ``--merge``)."""
+    return str({int(k): int(v) for k, v in sorted(d.items(), key=lambda kv: int(kv[0]))})
+
+
 def _mark(ok):
     return "pass" if ok else "**FAIL**"
 
@@ -1800,7 +1820,7 @@ def report_markdown(result, link=""):
                       f"| status agreement (all / object pixels) | {_fmt(100 * p['status_agree'], 6)} % / "
                       f"{_fmt(100 * p['status_agree_object_pixels'], 6)} % | >= {T['status_agree']:.0%} "
                       f"{_mark(v['status_agree'])} |",
-                      f"| status counts ours / Mitsuba | {p['status_ours']} / {p['status_mitsuba']} | |",
+                      f"| status counts ours / Mitsuba | {_counts(p['status_ours'])} / {_counts(p['status_mitsuba'])} | |",
                       f"| interface count agreement (both exit) | {_fmt(100 * p['interfaces_agree_both_exit'], 6)} % | |",
                       f"| p99 (pixels over 0.5 deg) by TIR events on the path: none / 1-2 / 3+ | "
                       f"{_fmt(p['p99_deg_no_tir'])} ({p['over_0_5_no_tir']} of {p['paths_no_tir']}) / "
