@@ -51,7 +51,8 @@ MUTATIONS = {
                    "bound_margin": 0.05, "blend": "or", "endpoint": "bracket", "filter": "nearest",
                    "peel_all": True, "depth": "float", "slicing": "global",
                    "peeling": "lut", "normals": "cross", "delta": 1, "exit_threshold": 2.0, "tir": True,
-                   "max_interfaces": 3, "record": 2, "photons": 12, "receiver_hit": "exact"},
+                   "max_interfaces": 3, "record": 2, "photons": 12, "receiver_hit": "exact",
+                   "grid": [12, 12]},  # CAUSTICS's 24x24 image on a half-size grid
     "exact": {"normals": "face", "crease_deg": 30.0, "max_bounces": 2, "photons": 12, "photon_seed": 1,
               "record": 2, "water_samples": 20},
     "levelmap": {"planes": 7, "smart_slicing": False, "depth_levels": 8, "variant": "volumetric",

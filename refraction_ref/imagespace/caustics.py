@@ -43,6 +43,7 @@ from ..graph import Stage
 from ..lights import light_camera
 from ..optics import beer_lambert, refract
 from ..status import EXITED
+from .grid import at_pixels
 from .normals import layer_normals
 
 __all__ = ["imagespace_caustic_stages"]
@@ -159,7 +160,8 @@ def _st_final(ctx):
         lcam, zmin, bias = shadow[l]
         return shadow_map_visibility(lcam, zmin, pts, bias)
 
-    eye = {"trace": b["trace"], "zmin": b["minmax"]["zmin"]}
+    # the eye's front depth per image pixel (the grid texel under it when imagespace.grid differs)
+    eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape)}
     img, img1 = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"], vis,
                                   p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
     ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "

@@ -45,6 +45,7 @@ IMAGESPACE_DEFAULTS = {
     "tir": False,             # follow total internal reflection back to preceding layers
     "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)
     "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
+    "grid": None,             # the voxel grid's x-y size [width, height]; null: the image's (§3.3, §4.1-4.2)
     # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
     "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
     "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
@@ -87,25 +88,49 @@ def validate_imagespace(data, base_dir="."):
         if not isinstance(im[key], bool):
             raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
     check_number(im["photons"], "imagespace.photons", 1, 8192, integer=True)
+    _check_grid(im["grid"], data["camera"])
     return data
+
+
+def _check_grid(grid, camera):
+    """``imagespace.grid``: null, or [width, height] of integers 1..16384 with the image's aspect."""
+    from ..validation import SceneError, check_number
+
+    if grid is None:
+        return
+    if not isinstance(grid, (list, tuple)) or len(grid) != 2:
+        raise SceneError(f"scene: 'imagespace.grid' is {grid!r}; give [width, height] (integers) or null "
+                         "(the image's size)")
+    for k, v in zip(("width", "height"), grid):
+        check_number(v, f"imagespace.grid ({k})", 1, 16384, integer=True)
+    W, H = int(camera["width"]), int(camera["height"])  # checked before the method blocks
+    if int(grid[0]) * H != int(grid[1]) * W:
+        raise SceneError(f"scene: 'imagespace.grid' is {list(grid)}, aspect {grid[0]}:{grid[1]}, but the image is "
+                         f"{W}x{H}; the grid must keep the image's aspect (same view): give a grid "
+                         f"[w, h] with w * {H} == h * {W}, or null for the image's size")
 
 
 def check_memory(scene):
     """The image-space method's buffers must fit: refuse before any work (a method precondition).
 
-    Per pixel: S/8 bytes of bitmask, 8 bytes per layer of the LDI and the
-    trace's outputs and temporaries (about 24 more 8-byte words).
+    Per grid texel (``imagespace.grid``, the image's size by default): S/8
+    bytes of bitmask and 8 bytes per layer of the LDI; per image pixel the
+    trace's outputs and temporaries (about 24 8-byte words).
     """
     from ..validation import SceneError
+
+    from .grid import grid_size
 
     im = scene.data["imagespace"]
     c = scene.data["camera"]
     W, H = c["width"], c["height"]
-    need = W * H * (im["slices"] // 8 + 8 * (im["layers"] + 24))
+    gw, gh = grid_size(im["grid"], W, H)
+    # the bitmask and the layers on the grid, the trace's outputs on the image
+    need = gw * gh * (im["slices"] // 8 + 8 * im["layers"]) + W * H * 8 * 24
     if need > 16 * 2**30:
-        raise SceneError(f"imagespace: {W}x{H} pixels with {im['slices']} slices and {im['layers']} layers need "
-                         f"about {need / 2**30:.1f} GiB; lower camera.width and camera.height, imagespace.slices "
-                         "or imagespace.layers")
+        raise SceneError(f"imagespace: {W}x{H} pixels (a {gw}x{gh} grid) with {im['slices']} slices and "
+                         f"{im['layers']} layers need about {need / 2**30:.1f} GiB; lower camera.width and "
+                         "camera.height, imagespace.grid, imagespace.slices or imagespace.layers")
 
 
 #: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)

@@ -36,6 +36,7 @@ from ..raster import raster_setup
 from ..validation import SceneError
 from ..warm import warmer
 from .depth_bounds import depth_bounds, global_bounds
+from .grid import at_pixels, grid_camera
 from .knobs import check_memory
 from .normals import layer_normals
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
@@ -327,7 +328,7 @@ def pass_reduce(mm, peel, p):
     return Bounds(bhi, blo, why)
 
 
-def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
+def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0, image=None):
     """Every pixel's ray through the layers (§3.6-3.7), world space (:func:`trace_layers`).
 
     Parameters
@@ -348,11 +349,14 @@ def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
         Object and surrounding indices.
     record : int, default 0
         Events kept per path (``path_pos``, ``path_dir``).
+    image : Camera, optional
+        The image casting one ray per pixel when the grid (``cam``) has another size
+        (``imagespace.grid``); default ``cam``.
 
     Returns
     -------
     dict
-        :func:`~refraction_ref.imagespace.trace.trace_layers`'s output, world space.
+        :func:`~refraction_ref.imagespace.trace.trace_layers`'s output, world space, per image pixel.
 
     References
     ----------
@@ -365,7 +369,7 @@ def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0):
                         cam, ior=ior, outside_ior=outside, world=True, iterations=int(p["iterations"]),
                         normals=p["normals"], delta=int(p["delta"]), tir=bool(p["tir"]),
                         max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel.lut,
-                        endpoint=p["endpoint"], filter=p["filter"], **kw)
+                        endpoint=p["endpoint"], filter=p["filter"], image=image, **kw)
 
 
 def layered_trace(geom, cam, p, ior, outside, timings, plan):
@@ -451,9 +455,12 @@ def _st_minmax(ctx):
         raise SceneError("imagespace: the camera is inside a refractive object; the image-space method "
                          "needs the viewer outside (its first layer is the front face). Move camera.eye "
                          "outside the objects")
-    mm = pass_minmax(g["geom"], cam, ctx.scene.data["imagespace"])
-    ctx.note("per-pixel Zmin/Zmax (§3.3)")
-    return dict(mm._asdict(), cam=cam)
+    p = ctx.scene.data["imagespace"]
+    gcam = grid_camera(cam, p["grid"])  # the grid's passes: the image's view, the grid's pixel count
+    mm = pass_minmax(g["geom"], gcam, p)
+    ctx.note("per-pixel Zmin/Zmax (§3.3)" if gcam is cam else
+             f"per-texel Zmin/Zmax of a {gcam.width}x{gcam.height} grid (§3.3; imagespace.grid)")
+    return dict(mm._asdict(), cam=gcam, image_cam=cam)
 
 
 def _st_voxelize(ctx):
@@ -506,7 +513,7 @@ def _st_trace(ctx):
     b = ctx.buf
     tr = pass_trace(from_buffers(MinMax, b["minmax"]), from_buffers(Voxels, b["voxelize"]),
                     from_buffers(Layers, b["peel"]), from_buffers(Bounds, b["reduce"]), b["minmax"]["cam"], p,
-                    g["ior"], g["outside_ior"], record=int(p["record"]))
+                    g["ior"], g["outside_ior"], record=int(p["record"]), image=b["minmax"]["image_cam"])
     ctx.note(f"{p['iterations']} binary-search iterations per interface ending at the "
              + ("last probe's texel (§3.6)" if p["endpoint"] == "probe" else "final bracket's midpoint")
              + f", {p['filter']} depth sampling, {p['normals']} normals"
@@ -547,9 +554,9 @@ def eye_stages():
               doc="every pixel's primary ray, world space (the output keys ray_origin, ray_dir)"),
         Stage("geometry", _st_geometry, reads=("objects", "outside_ior"), makes=("geom", "ior", "absorption"),
               doc="the objects' triangles, one material (§3.2, §4.1)"),
-        Stage("minmax", _st_minmax, reads=("camera",) + _k(*MINMAX_KNOBS), after=("geometry",),
+        Stage("minmax", _st_minmax, reads=("camera",) + _k(*MINMAX_KNOBS, "grid"), after=("geometry",),
               makes=("zmin", "zmax"), doc="per-pixel Zmin/Zmax (§3.3)"),
-        Stage("voxelize", _st_voxelize, reads=("camera",) + _k(*VOXELIZE_KNOBS), after=("minmax",),
+        Stage("voxelize", _st_voxelize, reads=("camera",) + _k(*VOXELIZE_KNOBS, "grid"), after=("minmax",),
               makes=("bits", "zlo", "zhi"), doc="bitmask voxelization (§3.3)"),
         Stage("peel", _st_peel, reads=_k(*PEEL_KNOBS), after=("minmax", "voxelize"),
               makes=("ldi", "depth_complexity"), doc="layered depth images (§3.4)"),
@@ -558,7 +565,7 @@ def eye_stages():
         Stage("normals", _st_normals, reads=_k("normals", "delta", "slices", "layers", "peel_all"),
               after=("minmax", "voxelize", "peel"), makes=("normals",), diagnostic=True,
               doc="per-layer normal maps, view space (§3.5); only when kept"),
-        Stage("trace", _st_trace, reads=_k(*TRACE_KNOBS, "record"),
+        Stage("trace", _st_trace, reads=_k(*TRACE_KNOBS, "record", "grid"),
               after=("geometry", "minmax", "voxelize", "peel", "reduce"),
               makes=("exit_pos", "exit_dir", "last_dir", "interfaces", "path_length", "status", "path_pos",
                      "path_dir"), doc="binary search + Snell at every interface (§3.6-3.7)"),
@@ -594,7 +601,8 @@ def _assemble(scene, bufs, stats):
         "path_length": tr["path_length"],
         "status": tr["status"],
         "image": bufs["shade"]["image"],
-        "depth_complexity": bufs["peel"]["depth_complexity"],
+        # per image pixel: the grid texel under its centre (imagespace.grid)
+        "depth_complexity": at_pixels(bufs["peel"]["depth_complexity"], bufs["rays"]["ray_dir"].shape[:2]),
     }
     info = {k: stats[k] for k in ("layers_used", "pixels_over_layer_limit", "depth_complexity_max", "triangles")}
     if "caustic_final" in bufs:
@@ -609,7 +617,8 @@ def _assemble(scene, bufs, stats):
 
 def _tiny(scene):
     """Warm-up overrides (:attr:`~refraction_ref.graph.Method.tiny`): a few pixels and photons, same kernels."""
-    return {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "caustics.map_size": 8}
+    return {"camera.width": 16, "camera.height": 16, "imagespace.photons": 8, "caustics.map_size": 8,
+            "imagespace.grid": None}  # a grid of the tiny image's size: the same kernels
 
 
 METHOD = register_method(Method(

@@ -242,11 +242,30 @@ def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filt):
     return True, qx, qy, qz, rq, cq
 
 
+@nb.njit(cache=True, inline="always")
+def _first_layer(ldi, i, j, image, grid, lut, filt):
+    """Layer 0 where pixel (i, j)'s primary ray meets it: ``(depth, row, col)`` of the grid position.
+
+    On a grid of the image's size the pixel's own texel; on another grid
+    (``imagespace.grid``) the layer sampled at the pixel centre's grid
+    position.
+    """
+    if ldi.shape[0] == 0:
+        return np.inf, i + 0.5, j + 0.5
+    if image.W == grid.W and image.H == grid.H:
+        return layer_depth(ldi, np.int64(0), i, j, lut), i + 0.5, j + 0.5  # int64: one signature
+    rg = (i + 0.5) * grid.H / image.H
+    cg = (j + 0.5) * grid.W / image.W
+    return sample_depth(ldi, np.int64(0), rg, cg, lut, filt), rg, cg
+
+
 @nb.njit(cache=True, parallel=True)
-def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
+def _trace_kernel(layers, dirs, own_dirs, image, grid, knobs, frame, out):
     # the named tuples unpacked by name (a reordered field cannot swap two arguments)
     ldi, total, zback, thr, lut = layers.ldi, layers.total, layers.zback, layers.thr, layers.lut
     bhi, blo = layers.bounds_hi, layers.bounds_lo
+    # the rays are the image's pixels; the layers, projections and normals are the grid's
+    Wi, Hi, isx, isy = image.W, image.H, image.sx, image.sy
     W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     ior, outside_ior, iterations, nmethod = knobs.ior, knobs.outside_ior, knobs.iterations, knobs.nmethod
     delta, tir, max_events, layer_limit, rec = knobs.delta, knobs.tir, knobs.max_events, knobs.layer_limit, knobs.record
@@ -255,18 +274,18 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
     exit_pos, exit_dir, last_dir, status = out.exit_pos, out.exit_dir, out.last_dir, out.status
     interfaces, path_len, path_pos, path_dir = out.interfaces, out.path_len, out.path_pos, out.path_dir
     L = ldi.shape[0]
-    step = coprime_stride(H)
-    for r in nb.prange(H):
-        i = strided(r, step, H)  # rows spread over the threads (see ..schedule)
-        for j0 in range(W):
+    step = coprime_stride(Hi)
+    for r in nb.prange(Hi):
+        i = strided(r, step, Hi)  # rows spread over the threads (see ..schedule)
+        for j0 in range(Wi):
             j = np.int64(j0)
             if own_dirs:
-                vx, vy, vz = primary_dir(i, j, W, H, sx, sy, ortho)
+                vx, vy, vz = primary_dir(i, j, Wi, Hi, isx, isy, ortho)
             else:
                 vx = dirs[i, j, 0]
                 vy = dirs[i, j, 1]
                 vz = dirs[i, j, 2]
-            d0 = layer_depth(ldi, np.int64(0), i, j, lut) if L > 0 else np.inf  # int64: one signature
+            d0, r0, c0 = _first_layer(ldi, i, j, image, grid, lut, filt)
             if not math.isfinite(d0):
                 status[i, j] = MISSED
                 interfaces[i, j] = 0
@@ -279,15 +298,15 @@ def _trace_kernel(layers, dirs, own_dirs, grid, knobs, frame, out):
                     _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
                 continue
             if ortho:  # parallel rays from the window plane z = 0
-                qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, W, H, sx, sy, True)
+                qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, Wi, Hi, isx, isy, True)
             else:
                 s = d0 / (-vz)
                 # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
                 qx, qy, qz = vx * s, vy * s, vz * s
             px, py, pz = qx, qy, qz
             t = np.int64(0)  # not a literal 0: callees compile for int64 only
-            ti, tj = i, j
-            rq, cq = i + 0.5, j + 0.5  # screen position of the pending hit (the normal is read there)
+            ti, tj = np.int64(math.floor(r0)), np.int64(math.floor(c0))  # the grid texel of the hit
+            rq, cq = r0, c0  # grid position of the pending hit (the normal is read there)
             g = -1
             forward = True
             events = 0
@@ -430,7 +449,8 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
 
 def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
                  iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
-                 layer_limit=None, lut=None, world=False, record=0, endpoint="probe", filter="bilinear"):
+                 layer_limit=None, lut=None, world=False, record=0, endpoint="probe", filter="bilinear",
+                 image=None):
     """Trace every pixel's ray through the layered depth images.
 
     Parameters
@@ -445,9 +465,10 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         Early-termination threshold in depth units.
     bounds_hi, bounds_lo : (L,) float64
         Forward and backward search bounds per layer (:func:`search_bounds`).
-    dirs_view : (H, W, 3) float64 or None
-        Unit primary ray directions in view space; None for the camera's
-        own primary rays (computed per pixel in the kernel).
+    dirs_view : (Hi, Wi, 3) float64 or None
+        Unit primary ray directions in view space, one per image pixel;
+        None for the image's own primary rays (computed per pixel in the
+        kernel).
     camera : Camera
         The view of the layers: the eye's, or a light's (perspective for a
         point light, orthographic for a directional light: every ray then
@@ -490,10 +511,15 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         the four texels around the position when all four hold the layer,
         the nearest texel where any of them lacks it; ``nearest``: the
         texel under the position, normals at its centre.
+    image : Camera, optional
+        The image casting one ray per pixel (``imagespace.grid``; default ``camera``): ``camera``'s
+        view, its own pixel count. Positions project to ``camera``'s grid; a primary ray's first
+        hit is layer 0 sampled at its pixel centre's grid position.
 
     Returns
     -------
     dict
+        Per image pixel (H, W: ``image``'s size):
         ``exit_pos``, ``exit_dir`` (NaN unless status ``EXITED``),
         ``last_dir`` (H, W, 3) in view space (world space with ``world``),
         ``interfaces`` (H, W) int16, ``path_length`` (H, W) float64,
@@ -533,15 +559,19 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     if int(record) != record or record < 0:
         raise ValueError(f"trace_layers: record must be an integer >= 0, got {record!r}")
     record = int(record)
-    H, W = total.shape
+    Hg, Wg = total.shape
+    image = camera if image is None else image
+    H, W = image.shape
     L = ldi.shape[0]
     shape = (H, W, record, 3) if record else (1, 1, 1, 3)
     out = _Outputs(exit_pos=np.empty((H, W, 3)), exit_dir=np.empty((H, W, 3)), last_dir=np.empty((H, W, 3)),
                    interfaces=np.empty((H, W), np.int16), path_len=np.empty((H, W)),
                    status=np.empty((H, W), np.int8), path_pos=np.empty(shape), path_dir=np.empty(shape))
     Wc, Hc, sx, sy = camera.kernel_args()
-    if (Hc, Wc) != (H, W):
-        raise ValueError(f"trace_layers: the layers are {(H, W)}, the camera is {(Hc, Wc)}")
+    if (Hc, Wc) != (Hg, Wg):
+        raise ValueError(f"trace_layers: the layers are {(Hg, Wg)}, the camera is {(Hc, Wc)}")
+    if dirs_view is not None and np.shape(dirs_view)[:2] != (H, W):
+        raise ValueError(f"trace_layers: the ray directions are {np.shape(dirs_view)[:2]}, the image {(H, W)}")
     own = dirs_view is None
     dirs = np.zeros((1, 1, 3)) if own else np.ascontiguousarray(dirs_view, dtype=np.float64)
     if world:
@@ -555,10 +585,11 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
                      np.ascontiguousarray(bounds_lo, dtype=np.float64),
                      no_lut(None) if lut is None else lut)
     grid = ViewGrid(Wc, Hc, sx, sy, bool(camera.ortho))
+    view = ViewGrid(*image.kernel_args(), bool(camera.ortho))
     knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
                    int(max_interfaces), int(L if layer_limit is None else layer_limit), record,
                    ENDPOINTS[endpoint], FILTERS[filter])
-    _trace_kernel(layers, dirs, own, grid, knobs, _Frame(bool(world), m, t), out)
+    _trace_kernel(layers, dirs, own, view, grid, knobs, _Frame(bool(world), m, t), out)
     res = {"exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "last_dir": out.last_dir,
            "interfaces": out.interfaces, "path_length": out.path_len, "status": out.status}
     if record:
