@@ -221,6 +221,9 @@ def test_zero_area_water_triangles():
 # --- identities --------------------------------------------------------------------------------
 
 def test_smart_slicing_changes_no_pixel_and_uses_fewer_planes():
+    """Lattice smart slicing (levelmap.smart_spacing = lattice, the default of contract_version 4) keeps the
+    normal slicing's planes: no texel changes. The default re-slicing (respace) moves planes: see
+    test_levelmap_thesis.py and Table 5-5."""
     base = {
         "camera": {"width": 48, "height": 48, "eye": [0, 1.5, 1.5], "target": [0, -0.6, 0]},
         "objects": [], "lights": [{"type": "directional", "direction": [0.02, -1, 0.01]}],
@@ -229,7 +232,7 @@ def test_smart_slicing_changes_no_pixel_and_uses_fewer_planes():
                       {"mesh": "sphere", "fit": 0.3, "transform": {"translate": [0.35, -0.45, 0.1]}}],
         "water": {"size": [2, 2], "resolution": 32, "absorption": 0.1,
                   "waves": [{"amplitude": 0.01, "wavelength": 0.5, "direction": [1, 0.4]}]},
-        "levelmap": {"planes": 24, "map_size": 96, "depth_levels": 32}}
+        "levelmap": {"planes": 24, "map_size": 96, "depth_levels": 32, "smart_spacing": "lattice"}}
     a, ia = render_levelmap(load_scene(base, {"levelmap.smart_slicing": False}))
     b, ib = render_levelmap(load_scene(base, {"levelmap.smart_slicing": True}))
     for r in range(3):
