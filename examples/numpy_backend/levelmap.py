@@ -13,9 +13,10 @@ the golden key names, shapes and dtypes, ready for ``refraction-ref check``.
 ``bugs=`` plants mistakes porters really make (see ``BUGS``), to show that
 ``check`` names the pass that holds them.
 
-Only the default knobs of the contract are ported (``variant = levelmap``,
-``placement = thesis``, ``smart_slicing`` on, ``smart_spacing = lattice``);
-the ``image`` pass (the view through the water) is not.
+Only the default knobs of the contract (contract_version 5) and their
+predecessors are ported (``variant = levelmap``, ``placement = component``
+or ``thesis``, ``smart_slicing`` on or off, ``smart_spacing = respace`` or
+``lattice``); the ``image`` pass (the view through the water) is not.
 
 References
 ----------
@@ -36,7 +37,7 @@ import numpy as np
 #: Planted bugs, each a mistake a porter really makes (``run(..., bugs=...)``).
 BUGS = {
     "half_slice": "plane offsets off by half a slice (tight placement's "
-                  "slab centres with the thesis's spacing)",
+                  "slab centres with the thesis's spacing; in each sub-box when re-sliced)",
     "inverted_eta": "the relative index inverted at the water: water.ior / "
                     "outside_ior instead of outside_ior / water.ior",
     "other_diagonal": "the water quads split on the other diagonal",
@@ -129,14 +130,15 @@ def resolve(scene):
     water["waves"] = [dict({"amplitude": 0.02, "wavelength": 0.5, "direction": [1, 0],
                             "phase": 0.0}, **w) for w in water["waves"]]
     lm = {"planes": 50, "map_size": 512, "smart_slicing": True, "depth_levels": 32,
-          "placement": "thesis", "smart_spacing": "lattice", "variant": "levelmap",
+          "placement": "component", "smart_spacing": "respace", "variant": "levelmap",
           "shadows": True}
     lm.update(scene.get("levelmap") or {})
     # the caustic maps' knobs moved to the "caustics" block (levelmap.map_size etc. are its aliases)
     lm.update({k: v for k, v in (scene.get("caustics") or {}).items() if k in ("map_size", "placement", "shadows")})
-    if (lm["placement"], lm["smart_spacing"], lm["variant"]) != ("thesis", "lattice", "levelmap"):
-        raise ValueError("numpy_backend.levelmap ports only levelmap.placement='thesis', "
-                         "smart_spacing='lattice', variant='levelmap'")
+    if (lm["placement"] not in ("component", "thesis") or lm["smart_spacing"] not in ("respace", "lattice")
+            or lm["variant"] != "levelmap"):
+        raise ValueError("numpy_backend.levelmap ports only caustics.placement='component' or 'thesis', "
+                         "levelmap.smart_spacing='respace' or 'lattice', variant='levelmap'")
     lights = [dict({"type": "directional", "direction": [0, -1, 0], "position": None,
                     "radiance": [1, 1, 1]}, **l)
               for l in scene.get("lights", [{}])]
@@ -328,7 +330,7 @@ def water_pass(water, light, eta, bugs=()):
 # ----------------------------------------------------------------------------
 
 
-def planes_pass(rverts, p0, light, eta, n_planes, bugs=()):
+def planes_pass(rverts, p0, light, eta, n_planes, bugs=(), placement="component"):
     """Pass `planes`: the reference box of one (receiver, light) and its planes.
 
     Returns ``box`` (5, 3) ``[centre, U, V, W, (w, h, d)]``, ``zeta``
@@ -337,8 +339,10 @@ def planes_pass(rverts, p0, light, eta, n_planes, bugs=()):
 
     References
     ----------
-    Tipprasert 2006 eq. 4-1 (axes from T0), eqs. 4-2/4-3 (box about P0),
-    eqs. 4-6 to 4-9 (n + 1 planes bounding n slices, ``D_i = h/2 - s (i-1)``).
+    Tipprasert 2006 eq. 4-1 (axes from T0), eqs. 4-2/4-3 (box about P0:
+    ``component`` twice the largest |coordinate| on each axis, ``thesis``
+    twice the whole length of the vertex farthest along it), eqs. 4-6 to 4-9
+    (n + 1 planes bounding n slices, ``D_i = h/2 - s (i-1)``).
     """
     if light["type"] == "point":
         L = _normalize(p0 - np.asarray(light["position"], dtype=np.float64))
@@ -352,8 +356,11 @@ def planes_pass(rverts, p0, light, eta, n_planes, bugs=()):
     W = _normalize(np.cross(U, V))
     q = rverts - p0
     loc = np.stack([_dot(q, U), _dot(q, V), _dot(q, W)], axis=-1)
-    far = np.argmax(np.abs(loc), axis=0)
-    ext = 2 * np.linalg.norm(loc[far], axis=1)
+    if placement == "component":
+        ext = 2 * np.abs(loc).max(axis=0)
+    else:
+        far = np.argmax(np.abs(loc), axis=0)
+        ext = 2 * np.linalg.norm(loc[far], axis=1)
     ext = np.maximum(ext, 1e-6 * ext.max())
     h = ext[1]
     if n_planes == 1:           # one plane at the centre accepts the whole box
@@ -367,7 +374,7 @@ def planes_pass(rverts, p0, light, eta, n_planes, bugs=()):
         zeta = zeta + s / 2
         zlo = zeta[0] - s / 2.0
     box = np.stack([p0, U, V, W, ext])
-    return {"box": box, "zeta": zeta, "s": s, "zlo": zlo}
+    return {"box": box, "zeta": zeta, "s": s, "zlo": zlo, "half": np.full(len(zeta), s / 2.0)}
 
 
 # ----------------------------------------------------------------------------
@@ -433,17 +440,58 @@ def acceptance(position, own, pl, n_planes):
     return np.where(ok, k, -1).astype(np.int64)
 
 
+def sub_boxes(position, own, h, levels):
+    """Depth profile's runs of non-empty levels ``[a, e)`` (§4.7.2, eq. 4-21), and each texel's level."""
+    with np.errstate(invalid="ignore"):
+        lev = np.floor((position + h / 2) / h * levels)
+    ok = own & np.isfinite(lev) & (lev >= 0) & (lev < levels)
+    lev = np.where(ok, lev, -1).astype(np.int64)
+    busy = np.bincount(lev[ok], minlength=levels) > 0
+    edges = np.diff(np.concatenate([[0], busy.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))), lev
+
+
+def respace(position, own, pl, n_planes, levels, bugs=()):
+    """Smart slicing's re-slicing (§4.7.2, ``smart_spacing = respace``): each sub-box's own planes.
+
+    Returns ``pl`` with ``zeta`` (the planes of every sub-box, nearest the
+    light first), ``half`` (each plane's half slice) and ``plane_index``
+    (the nearest plane of the texel's own sub-box, -1 where none).
+
+    References
+    ----------
+    Tipprasert 2006 eqs. 4-21, 4-22 (``n_i = hr_i / (2 eps)`` planes per
+    sub-box), eqs. 4-6 to 4-9 on the sub-box.
+    """
+    h = pl["box"][4, 1]
+    runs, lev = sub_boxes(position, own, h, levels)
+    slices = max(n_planes - 1, 1)
+    zeta, half = [], []
+    index = np.full(position.shape, -1, dtype=np.int64)
+    for a, e in runs:
+        z0, z1 = -h / 2 + h * a / levels, -h / 2 + h * e / levels
+        k = max(int(round((e - a) / levels * slices)), 1)
+        sb = (z1 - z0) / (k - 1) if k > 1 else z1 - z0
+        first = z0 + sb / 2 if "half_slice" in bugs else z0     # planted: off by half the sub-box's slice
+        if k == 1 and "half_slice" not in bugs:
+            first = (z0 + z1) / 2
+        mine = (lev >= a) & (lev < e)
+        with np.errstate(invalid="ignore"):
+            q = np.floor((position - first) / sb + 0.5) if k > 1 else np.zeros(position.shape)
+        q = np.clip(np.nan_to_num(q), 0, k - 1).astype(np.int64)
+        index[mine] = len(zeta) + q[mine]
+        zeta.extend(first + sb * np.arange(k))
+        half.extend([sb / 2.0] * k)
+    return dict(pl, zeta=np.asarray(zeta, dtype=np.float64), half=np.asarray(half), plane_index=index)
+
+
 def smart_slicing(position, own, plane_index, pl, n_planes, levels):
     """Planes kept by smart slicing (§4.7.2, lattice spacing), increasing."""
     h = pl["box"][4, 1]
     zlo, s = pl["zlo"], pl["s"]
-    z = position[own & np.isfinite(position)]
-    lev = np.floor((z + h / 2) / h * levels)
-    lev = lev[(lev >= 0) & (lev < levels)].astype(np.int64)
-    busy = np.bincount(lev, minlength=levels) > 0
+    runs, _ = sub_boxes(position, own, h, levels)
     keep = np.zeros(n_planes, dtype=bool)
-    edges = np.diff(np.concatenate([[0], busy.astype(np.int8), [0]]))
-    for a, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+    for a, e in runs:
         z0, z1 = -h / 2 + h * a / levels, -h / 2 + h * e / levels
         lo = max(int(math.floor((z0 - zlo) / s)), 0)
         hi = min(int(math.ceil((z1 - zlo) / s)), n_planes)
@@ -500,7 +548,7 @@ def caustics_pass(wat, pl, lm, used, absorption, Hc, Wc, bugs=()):
     pp = P[tri]
     if "two_comparisons" in bugs:   # planted: a texel on a slab boundary lands in two planes
         zt = position[i, j]
-        hit = (lm["own"][i, j] & (zt >= zeta[pp] - pl["s"] / 2) & (zt < zeta[pp] + pl["s"] / 2))
+        hit = (lm["own"][i, j] & (zt >= zeta[pp] - pl["half"][pp]) & (zt < zeta[pp] + pl["half"][pp]))
     else:
         hit = plane_index[i, j] == pp              # the depth test: this plane owns the texel
     tri, i, j, wk, A, pp = tri[hit], i[hit], j[hit], wk[hit], A[hit], pp[hit]
@@ -584,12 +632,16 @@ def render(scene, bugs=()):
         maps, boxes, lms = [], [], []
         for l, light in enumerate(lights):
             tag = f"{r}_{l}"
-            pl = planes_pass(rv, p0, light, eta, n_planes, bugs)
+            pl = planes_pass(rv, p0, light, eta, n_planes, bugs, lmk["placement"])
             # shadows: every receiver occludes; otherwise receiver r's own triangles only
             mine = slice(None) if lmk["shadows"] else owner == r
             lm = level_map_pass(tris[mine], owner[mine], r, albedo, pl["box"], Hc, Wc, bugs)
             lm["plane_index"] = acceptance(lm["position"], lm["own"], pl, n_planes)
-            if lmk["smart_slicing"]:
+            if lmk["smart_slicing"] and lmk["smart_spacing"] == "respace":
+                pl = respace(lm["position"], lm["own"], pl, n_planes, int(lmk["depth_levels"]), bugs)
+                lm["plane_index"] = pl["plane_index"]
+                used = np.arange(len(pl["zeta"]), dtype=np.int64)
+            elif lmk["smart_slicing"]:
                 used = smart_slicing(lm["position"], lm["own"], lm["plane_index"], pl,
                                      n_planes, int(lmk["depth_levels"]))
             else:
