@@ -56,7 +56,7 @@ MUTATIONS = {
     "exact": {"normals": "face", "crease_deg": 30.0, "max_bounces": 2, "photons": 12, "photon_seed": 1,
               "record": 2, "water_samples": 20},
     "levelmap": {"planes": 7, "smart_slicing": False, "depth_levels": 8, "variant": "volumetric",
-                 "smart_spacing": "respace", "culling": "bounds"},
+                 "smart_spacing": "lattice", "culling": "bounds"},  # respace is the default (contract_version 5)
     "caustics": {"map_size": 20, "gather": 5, "placement": "tight", "shadows": False, "ambient": 0.3},
     "water": {"ior": 1.4, "height": 0.05, "resolution": 6, "absorption": 0.2, "size": [2.2, 2.0],
               "waves": [{"amplitude": 0.03, "wavelength": 0.5}]},
