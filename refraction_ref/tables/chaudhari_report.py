@@ -785,18 +785,21 @@ def _quality_claims(ns, bs, res, rows41, cols):
               "default camera, tight bound, 5 iterations.")))
 
     grids = sorted({r for _, r in cols})
-    pairs = [(row["model"], g, row["cells"][(16, g, "thesis")]["frame_fps"] / row["cells"][(32, g, "thesis")]["frame_fps"],
+    # per pair the median over the rounds of each round's FPS 16 / FPS 32 (both cells timed in the same rounds)
+    pairs = [(row["model"], g, _fps_ratio(row["cells"][(16, g, "thesis")], row["cells"][(32, g, "thesis")]),
               row["thesis_fps"][(16, g)] / row["thesis_fps"][(32, g)]) for row in rows41 for g in grids
              if (16, g, "thesis") in row["cells"] and (32, g, "thesis") in row["cells"]]
-    ok = bool(pairs) and all(x > 1.0 for _, _, x, _ in pairs)
+    ok = bool(pairs) and all(x.median > 1.0 for _, _, x, _ in pairs)
     out.append(Claim(
         PAPER, "Table 4.1", Q_LAYERS, HELD if ok else NOT_HELD,
-        f"FPS 16 / FPS 32 layers (thesis mode): {min(p[2] for p in pairs):.2f}-{max(p[2] for p in pairs):.2f} over "
-        f"{len(pairs)} (model, grid) cells (thesis: {min(p[3] for p in pairs):.2f}-{max(p[3] for p in pairs):.2f})",
+        f"FPS 16 / FPS 32 layers (thesis mode): medians {min(p[2].median for p in pairs):.2f}-"
+        f"{max(p[2].median for p in pairs):.2f} over {len(pairs)} (model, grid) cells, single rounds "
+        f"{min(p[2].low for p in pairs):.2f}-{max(p[2].high for p in pairs):.2f} ({pairs[0][2].n if pairs else 0} "
+        f"rounds each; thesis: {min(p[3] for p in pairs):.2f}-{max(p[3] for p in pairs):.2f})",
         ("Peeling and reducing 16 channels instead of 32 is cheaper in every row, as the thesis's table shows."
          if ok else "Some row is not faster with 16 layers."),
         rule=("Table 4.1 states no sentence on the layer count; its numbers say fewer layers render faster. Held if "
               "every row and grid of Table 4.1 renders more frames per second with 16 layers than with 32 (thesis "
-              "mode: all layers peeled; frames incl. photon generation; medians of interleaved repeats, "
-              f"{TABLE_THREADS} thread)."), timing=True))
+              "mode: all layers peeled; frames incl. photon generation; the median over interleaved repeats after "
+              f"warm-up of each round's FPS ratio above 1, {TABLE_THREADS} thread)."), timing=True))
     return out
