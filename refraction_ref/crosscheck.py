@@ -1416,7 +1416,6 @@ def _has_caustics(case):
 
 
 def _skip_reason(case):
-    s = case["scene"]
     if case["method"] == "volumetric":
         return ("volumetric: a graded-index volume (continuous refraction) has no Mitsuba plugin (media "
                 "scatter and absorb, they do not bend rays); no exact mesh reference to cross-check")
