@@ -78,6 +78,7 @@ def test_decimate_lands_near_target():
     assert np.allclose(next_, ext, rtol=0.05)
 
 
+@pytest.mark.slow  # CI runs `refraction-ref tables --quick` itself (its own step); this checks the report's content
 def test_cli_tables_quick_chaudhari(tmp_path):
     from refraction_ref.cli import main
 
