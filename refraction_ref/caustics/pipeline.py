@@ -81,16 +81,12 @@ __all__ = ["has_caustics", "caustic_arrays", "receiver_hits", "collect_maps",
 
 
 @nb.njit(cache=True, parallel=True)
-def _put_rows_kernel(a, idx, vals, scale):
-    # a[idx] = vals (scale False) or a[idx] *= vals[idx] (scale True)
+def _put_rows_kernel(a, idx, vals):
     for k0 in nb.prange(idx.shape[0]):
         k = np.int64(k0)
         i = idx[k]
         for c in range(a.shape[1]):
-            if scale:
-                a[i, c] *= vals[i, c]
-            else:
-                a[i, c] = vals[k, c]
+            a[i, c] = vals[k, c]
 
 
 def put_rows(a, idx, vals):
@@ -104,7 +100,7 @@ def put_rows(a, idx, vals):
     vals : (M, C) array_like
     """
     if len(idx):
-        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64), False)
+        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
 
 
 @nb.njit(cache=True, parallel=True)
