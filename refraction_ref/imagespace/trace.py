@@ -120,7 +120,12 @@ def _store(out, i, j, x, y, z, frame, m, t, point):
 
 
 class _Layers(NamedTuple):
-    """The layered depth images and what the search reads beside them (§3.3-3.7)."""
+    """The layered depth images and what the search reads beside them (§3.3-3.7).
+
+    The on-the-fly peeling inputs (``lut``) travel beside it, not in it: a
+    parallel loop's outlined body takes a tuple argument's fields one level
+    deep, and ``lut`` is itself a tuple.
+    """
 
     ldi: np.ndarray  # (L, H, W) layer depths, +inf where absent
     total: np.ndarray  # (H, W) int32 layers per pixel
@@ -128,7 +133,6 @@ class _Layers(NamedTuple):
     thr: np.ndarray  # (H, W) early-termination threshold
     bounds_hi: np.ndarray  # (L,) forward search bounds
     bounds_lo: np.ndarray  # (L,) backward search bounds
-    lut: tuple  # on-the-fly peeling inputs (normals.no_lut when unused)
 
 
 class _Knobs(NamedTuple):
@@ -260,13 +264,27 @@ def _first_layer(ldi, i, j, image, grid, lut, filt):
 
 
 @nb.njit(cache=True, parallel=True)
-def _trace_kernel(layers, dirs, own_dirs, image, grid, knobs, frame, out):
+def _trace_kernel(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out):
+    Hi = image.H
+    step = coprime_stride(Hi)
+    for r in nb.prange(Hi):
+        # rows spread over the threads (see ..schedule); a row is an ordinary call, not inlined into the
+        # parallel loop: Numba's parfor passes on the inlined search and normals took minutes to compile
+        _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, strided(r, step, Hi))
+
+
+# _nrt=False: the row allocates nothing, and the kernel's caller holds every array it reads. With reference
+# counting, each array taken out of a tuple or sliced in the search's inner loops is an atomic incref/decref
+# pair (the parallel loop's outlined body gets arrays without them): the row ran 4x slower.
+@nb.njit(cache=True, _nrt=False)
+def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
+    """Trace the primary rays of image row ``i`` (see :func:`trace_layers`); the helpers inline here."""
     # the named tuples unpacked by name (a reordered field cannot swap two arguments)
-    ldi, total, zback, thr, lut = layers.ldi, layers.total, layers.zback, layers.thr, layers.lut
+    ldi, total, zback, thr = layers.ldi, layers.total, layers.zback, layers.thr
     bhi, blo = layers.bounds_hi, layers.bounds_lo
     # the rays are the image's pixels; the layers, projections and normals are the grid's
     Wi, Hi, isx, isy = image.W, image.H, image.sx, image.sy
-    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
+    ortho = grid.ortho
     ior, outside_ior, iterations, nmethod = knobs.ior, knobs.outside_ior, knobs.iterations, knobs.nmethod
     delta, tir, max_events, layer_limit, rec = knobs.delta, knobs.tir, knobs.max_events, knobs.layer_limit, knobs.record
     endpoint, filt = knobs.endpoint, knobs.filt
@@ -274,134 +292,131 @@ def _trace_kernel(layers, dirs, own_dirs, image, grid, knobs, frame, out):
     exit_pos, exit_dir, last_dir, status = out.exit_pos, out.exit_dir, out.last_dir, out.status
     interfaces, path_len, path_pos, path_dir = out.interfaces, out.path_len, out.path_pos, out.path_dir
     L = ldi.shape[0]
-    step = coprime_stride(Hi)
-    for r in nb.prange(Hi):
-        i = strided(r, step, Hi)  # rows spread over the threads (see ..schedule)
-        for j0 in range(Wi):
-            j = np.int64(j0)
-            if own_dirs:
-                vx, vy, vz = primary_dir(i, j, Wi, Hi, isx, isy, ortho)
-            else:
-                vx = dirs[i, j, 0]
-                vy = dirs[i, j, 1]
-                vz = dirs[i, j, 2]
-            d0, r0, c0 = _first_layer(ldi, i, j, image, grid, lut, filt)
-            if not math.isfinite(d0):
-                status[i, j] = MISSED
-                interfaces[i, j] = 0
-                path_len[i, j] = 0.0
-                _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
-                _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
-                _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
-                for e in range(rec):
-                    _store(path_pos[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, True)
-                    _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
-                continue
-            if ortho:  # parallel rays from the window plane z = 0
-                qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, Wi, Hi, isx, isy, True)
-            else:
-                s = d0 / (-vz)
-                # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
-                qx, qy, qz = vx * s, vy * s, vz * s
-            px, py, pz = qx, qy, qz
-            t = np.int64(0)  # not a literal 0: callees compile for int64 only
-            ti, tj = np.int64(math.floor(r0)), np.int64(math.floor(c0))  # the grid texel of the hit
-            rq, cq = r0, c0  # grid position of the pending hit (the normal is read there)
-            g = -1
-            forward = True
-            events = 0
-            nint = 0
-            plen = 0.0
-            st = LOST
-            last_tir = False
-            while True:
-                # ---- interface at layer t: advance, refract (§3.6) --------------
-                if g % 2 == 0:
-                    plen += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
-                px, py, pz = qx, qy, qz
-                g2 = t if forward else t - 1
-                n1 = ior if g % 2 == 0 else outside_ior
-                n2 = ior if g2 % 2 == 0 else outside_ior
-                # nearest: the texel's own normal (at its centre); bilinear: filtered reads at the hit's
-                # texture coordinate
-                rn, cn = (ti + 0.5, tj + 0.5) if filt == 0 else (rq, cq)
-                nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, grid, filt)
-                wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
-                if events < rec:  # event `events`: where, and the direction Snell gave
-                    _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
-                    _store(path_dir[i], j, events, wx, wy, wz, world, rot, t0, False)
-                events += 1
-                last_tir = is_tir
-                if is_tir and not tir:
-                    st = TIR
-                    break
-                vx, vy, vz = wx, wy, wz
-                if not is_tir:
-                    g = g2
-                    nint += 1
-                    if g == -1:  # back out through the front layer
-                        st = EXITED
-                        break
-                    if forward and (t >= total[ti, tj] - 1
-                                    or zback[ti, tj] - layer_depth(ldi, t, ti, tj, lut) <= thr[ti, tj]):
-                        st = EXITED  # early termination at the backmost depth (§3.7)
-                        break
-                if events >= max_events:
-                    st = TIR if last_tir else LIMIT
-                    break
-                # ---- next search: which layer, which bound (§3.7) ---------------
-                dd = -vz  # rate of change of depth along the ray
-                outside = g % 2 != 0
-                if dd > _PARALLEL_EPS:
-                    forward = True
-                    t = g + 1
-                    if t >= layer_limit:
-                        st = LIMIT
-                        break
-                    zb = bhi[t] if t < L else -np.inf
-                elif dd < -_PARALLEL_EPS and tir:
-                    forward = False
-                    t = g
-                    zb = blo[t]
-                else:
-                    st = EXITED if outside and dd < 0.0 else LOST
-                    break
-                depth_p = -pz
-                if not math.isfinite(zb) or (forward and zb <= depth_p) or (not forward and zb >= depth_p):
-                    st = EXITED if outside else LOST  # no layer ahead: escaped, or lost inside
-                    break
-                k = (zb - depth_p) / dd
-                ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
-                # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
-                a, b, m, found = _bisect(ldi, t, (px, py, pz), (ex, ey, ez), forward, lut, grid, filt,
-                                         iterations)
-                if endpoint == 0:
-                    # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there
-                    ok, qx, qy, qz, rq, cq = _probe_hit(ldi, t, (px, py, pz), (ex, ey, ez), m, lut, grid, filt)
-                    if not ok:
-                        st = EXITED if outside else LOST  # the last probe's texel lacks the layer
-                        break
-                    ti, tj = np.int64(math.floor(rq)), np.int64(math.floor(cq))
-                    continue
-                ok, qx, qy, qz, rq, cq = _bracket_hit(ldi, t, (px, py, pz), (ex, ey, ez), (a, b), found, forward,
-                                                      lut, grid, filt)
-                if not ok:
-                    st = EXITED if outside else LOST
-                    break
-                ti, tj = np.int64(rq), np.int64(cq)
-            status[i, j] = st
-            interfaces[i, j] = nint
-            path_len[i, j] = plen
+    for j0 in range(Wi):
+        j = np.int64(j0)
+        if own_dirs:
+            vx, vy, vz = primary_dir(i, j, Wi, Hi, isx, isy, ortho)
+        else:
+            vx = dirs[i, j, 0]
+            vy = dirs[i, j, 1]
+            vz = dirs[i, j, 2]
+        d0, r0, c0 = _first_layer(ldi, i, j, image, grid, lut, filt)
+        if not math.isfinite(d0):
+            status[i, j] = MISSED
+            interfaces[i, j] = 0
+            path_len[i, j] = 0.0
             _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
-            if st == EXITED:
-                _store(exit_pos, i, j, px, py, pz, world, rot, t0, True)
-                _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
-            else:
-                _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
-                _store(exit_dir, i, j, np.nan, np.nan, np.nan, False, rot, t0, False)
-            for e in range(min(events, rec), rec):  # rows past the path's last event
+            _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
+            _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
+            for e in range(rec):
                 _store(path_pos[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, True)
                 _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
+            continue
+        if ortho:  # parallel rays from the window plane z = 0
+            qx, qy, qz = unproject_pixel(j + 0.5, i + 0.5, d0, Wi, Hi, isx, isy, True)
+        else:
+            s = d0 / (-vz)
+            # the pending hit: layer t at texel (ti, tj), point q, reached from gap g
+            qx, qy, qz = vx * s, vy * s, vz * s
+        px, py, pz = qx, qy, qz
+        t = np.int64(0)  # not a literal 0: callees compile for int64 only
+        ti, tj = np.int64(math.floor(r0)), np.int64(math.floor(c0))  # the grid texel of the hit
+        rq, cq = r0, c0  # grid position of the pending hit (the normal is read there)
+        g = -1
+        forward = True
+        events = 0
+        nint = 0
+        plen = 0.0
+        st = LOST
+        last_tir = False
+        while True:
+            # ---- interface at layer t: advance, refract (§3.6) --------------
+            if g % 2 == 0:
+                plen += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
+            px, py, pz = qx, qy, qz
+            g2 = t if forward else t - 1
+            n1 = ior if g % 2 == 0 else outside_ior
+            n2 = ior if g2 % 2 == 0 else outside_ior
+            # nearest: the texel's own normal (at its centre); bilinear: filtered reads at the hit's
+            # texture coordinate
+            rn, cn = (ti + 0.5, tj + 0.5) if filt == 0 else (rq, cq)
+            nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, grid, filt)
+            wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
+            if events < rec:  # event `events`: where, and the direction Snell gave
+                _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
+                _store(path_dir[i], j, events, wx, wy, wz, world, rot, t0, False)
+            events += 1
+            last_tir = is_tir
+            if is_tir and not tir:
+                st = TIR
+                break
+            vx, vy, vz = wx, wy, wz
+            if not is_tir:
+                g = g2
+                nint += 1
+                if g == -1:  # back out through the front layer
+                    st = EXITED
+                    break
+                if forward and (t >= total[ti, tj] - 1
+                                or zback[ti, tj] - layer_depth(ldi, t, ti, tj, lut) <= thr[ti, tj]):
+                    st = EXITED  # early termination at the backmost depth (§3.7)
+                    break
+            if events >= max_events:
+                st = TIR if last_tir else LIMIT
+                break
+            # ---- next search: which layer, which bound (§3.7) ---------------
+            dd = -vz  # rate of change of depth along the ray
+            outside = g % 2 != 0
+            if dd > _PARALLEL_EPS:
+                forward = True
+                t = g + 1
+                if t >= layer_limit:
+                    st = LIMIT
+                    break
+                zb = bhi[t] if t < L else -np.inf
+            elif dd < -_PARALLEL_EPS and tir:
+                forward = False
+                t = g
+                zb = blo[t]
+            else:
+                st = EXITED if outside and dd < 0.0 else LOST
+                break
+            depth_p = -pz
+            if not math.isfinite(zb) or (forward and zb <= depth_p) or (not forward and zb >= depth_p):
+                st = EXITED if outside else LOST  # no layer ahead: escaped, or lost inside
+                break
+            k = (zb - depth_p) / dd
+            ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
+            # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
+            a, b, m, found = _bisect(ldi, t, (px, py, pz), (ex, ey, ez), forward, lut, grid, filt,
+                                     iterations)
+            if endpoint == 0:
+                # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there
+                ok, qx, qy, qz, rq, cq = _probe_hit(ldi, t, (px, py, pz), (ex, ey, ez), m, lut, grid, filt)
+                if not ok:
+                    st = EXITED if outside else LOST  # the last probe's texel lacks the layer
+                    break
+                ti, tj = np.int64(math.floor(rq)), np.int64(math.floor(cq))
+                continue
+            ok, qx, qy, qz, rq, cq = _bracket_hit(ldi, t, (px, py, pz), (ex, ey, ez), (a, b), found, forward,
+                                                  lut, grid, filt)
+            if not ok:
+                st = EXITED if outside else LOST
+                break
+            ti, tj = np.int64(rq), np.int64(cq)
+        status[i, j] = st
+        interfaces[i, j] = nint
+        path_len[i, j] = plen
+        _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
+        if st == EXITED:
+            _store(exit_pos, i, j, px, py, pz, world, rot, t0, True)
+            _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
+        else:
+            _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
+            _store(exit_dir, i, j, np.nan, np.nan, np.nan, False, rot, t0, False)
+        for e in range(min(events, rec), rec):  # rows past the path's last event
+            _store(path_pos[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, True)
+            _store(path_dir[i], j, e, np.nan, np.nan, np.nan, False, rot, t0, False)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -582,14 +597,14 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     layers = _Layers(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
                      np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
                      np.ascontiguousarray(bounds_hi, dtype=np.float64),
-                     np.ascontiguousarray(bounds_lo, dtype=np.float64),
-                     no_lut(None) if lut is None else lut)
+                     np.ascontiguousarray(bounds_lo, dtype=np.float64))
     grid = ViewGrid(Wc, Hc, sx, sy, bool(camera.ortho))
     view = ViewGrid(*image.kernel_args(), bool(camera.ortho))
     knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
                    int(max_interfaces), int(L if layer_limit is None else layer_limit), record,
                    ENDPOINTS[endpoint], FILTERS[filter])
-    _trace_kernel(layers, dirs, own, view, grid, knobs, _Frame(bool(world), m, t), out)
+    _trace_kernel(layers, no_lut(None) if lut is None else lut, dirs, own, view, grid, knobs,
+                  _Frame(bool(world), m, t), out)
     res = {"exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "last_dir": out.last_dir,
            "interfaces": out.interfaces, "path_length": out.path_len, "status": out.status}
     if record:
