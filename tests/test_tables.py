@@ -51,6 +51,21 @@ def test_busy_machine_marks_timing_verdicts_unreliable(tmp_path):
     assert "busy" not in (tmp_path / "tables.md").read_text()
 
 
+def test_a_verdict_whose_rounds_straddle_its_threshold_says_so(tmp_path):
+    from refraction_ref.tables.chaudhari_report import _straddles
+
+    assert _straddles((1.02, 0.97, 1.08), 1.0) and not _straddles((1.05, 1.01, 1.08), 1.0)
+    assert _straddles((1.0, 0.6, 0.9), 0.67, 1.5) and not _straddles((1.0, 0.8, 1.2), 0.67, 1.5)
+    c = [Claim("P 2000", "§1", "It is fast.", HELD, "1.02x", "because", rule="held if > 1", timing=True,
+               straddles=True),
+         Claim("P 2000", "§2", "It is faster.", HELD, "2.0x", "because", rule="held if > 1", timing=True)]
+    write_report([Report("P 2000", [], c, 1.0)], tmp_path)
+    md = (tmp_path / "tables.md").read_text()
+    assert md.count("a re-run may flip it") == 1 and "1 timing verdicts decided by a median" in md
+    rows = list(csv.DictReader(open(tmp_path / "claims.csv")))
+    assert [r["straddles"] for r in rows] == ["yes", "no"]
+
+
 def test_other_load_share():
     hz = __import__("os").sysconf("SC_CLK_TCK")
     # 2 s of wall on 2 CPUs = 4 CPU-seconds; the machine was busy 3 s of them, 1 s ours: others took 50 %

@@ -305,6 +305,11 @@ def _rs(r):
     return f"{r[0]:.2f}x (rounds {r[1]:.2f}-{r[2]:.2f})"
 
 
+def _straddles(r, *thresholds):
+    """Whether a (median, lowest, highest) spread of rounds has rounds on both sides of any threshold."""
+    return any(r[1] < t < r[2] for t in thresholds)
+
+
 def _f(x, nd=1):
     return None if x is None else round(float(x), nd)
 
@@ -588,7 +593,7 @@ def _claims(rows41, t42, res42, cmp, cols):
               "ratios of interleaved renders: held if 4.7x the triangles at about equal depth complexity cost less "
               "than 1.5x the frame AND twice the depth complexity at equal triangles and silhouette costs at least "
               "1.15x the frame."),
-        timing=True))
+        timing=True, straddles=_straddles(r_dc, 1.15) or _straddles(r_tri, 1.5)))
     t_tri, t_dc = ratio(hi_p, lo_p, "trace"), ratio(two, one, "trace")
     held = t_dc[0] >= 1.15 and 0.67 <= t_tri[0] <= 1.5
     out.append(Claim(
@@ -598,7 +603,8 @@ def _claims(rows41, t42, res42, cmp, cols):
         "The trace walks the LDI's layers per photon: more layers crossed, more interfaces to find; the mesh is "
         "not read." if held else "The trace stage did not follow the depth complexity as stated here.",
         rule=("Held if the trace stage takes at least 1.15x for twice the depth complexity at equal triangles "
-              "and silhouette, and 0.67-1.5x for 4.7x the triangles (median of per-round ratios)."), timing=True))
+              "and silhouette, and 0.67-1.5x for 4.7x the triangles (median of per-round ratios)."), timing=True,
+        straddles=_straddles(t_dc, 1.15) or _straddles(t_tri, 0.67, 1.5)))
 
     ii_a, i_a, ii_b, i_b = cmp["quad"]
     r = [("I-A/I-B", ratio(i_a, i_b, "peel"), ratio(i_a, i_b, "reduce")),
@@ -612,7 +618,8 @@ def _claims(rows41, t42, res42, cmp, cols):
         "full mesh in this view.",
         rule=("Held if peel and reduce of the full-bunny scene are within 0.67-1.5x of the low-poly one's "
               f"(median of per-round ratios), for I-A/I-B and II-A/II-B, one camera ({cmp['one_two_view']}, "
-              "distance 4.8)."), timing=True))
+              "distance 4.8)."), timing=True,
+        straddles=any(_straddles(x, 0.67, 1.5) or _straddles(y, 0.67, 1.5) for _, x, y in r)))
 
     rule_12 = ("One camera for both (distance 4.8, I-A's view of highest depth complexity, II-A = I-A less one "
                "bunny): held if the trace of one full bunny takes at most 0.9x that of two (median of per-round "
@@ -628,19 +635,22 @@ def _claims(rows41, t42, res42, cmp, cols):
         "In one framing the second bunny adds interfaces (and pixels, unless it hides behind the first), and each "
         "is traced work." if r12[0] <= 0.9 else
         "In one framing one bunny's trace is not clearly cheaper than two bunnies' here.",
-        rule=rule_12, timing=True))
+        rule=rule_12, timing=True, straddles=_straddles(r12, 0.9)))
 
     gen = ratio(hi_p, lo_p, "pgen")
-    share = statistics.median(g / f for g, f in zip(hi_p["pgen"], hi_p["frame"]))
+    shares = [g / f for g, f in zip(hi_p["pgen"], hi_p["frame"])]
+    share = statistics.median(shares)
     ok = gen[0] > 2.0 and share >= 0.2
+    close = _straddles(gen, 2.0) or _straddles((share, min(shares), max(shares)), 0.2)
     out.append(Claim(
         PAPER, "§4.2", Q_BOTTLENECK, HELD if ok else NOT_HELD,
         f"photon generation {_rs(gen)} on the full bunny against the low-poly one ({tri:.1f}x the triangles); "
-        f"{100 * share:.0f}% of the full bunny's frame",
+        f"{100 * share:.0f}% of the full bunny's frame (rounds {100 * min(shares):.0f}-{100 * max(shares):.0f}%)",
         "Rasterizing once more costs in proportion to the triangles, unlike the per-pixel passes." if ok
         else "The extra rasterization stays cheap against the per-pixel passes here.",
         rule=("Held if photon generation takes more than 2x as long for 4.6x the triangles (median of per-round "
-              "ratios) and at least 20% of the high-polygon frame."), timing=True))
+              "ratios) and at least 20% of the high-polygon frame (median of per-round shares)."), timing=True,
+        straddles=close))
     return out
 
 
@@ -801,5 +811,6 @@ def _quality_claims(ns, bs, res, rows41, cols):
         rule=("Table 4.1 states no sentence on the layer count; its numbers say fewer layers render faster. Held if "
               "every row and grid of Table 4.1 renders more frames per second with 16 layers than with 32 (thesis "
               "mode: all layers peeled; frames incl. photon generation; the median over interleaved repeats after "
-              f"warm-up of each round's FPS ratio above 1, {TABLE_THREADS} thread)."), timing=True))
+              f"warm-up of each round's FPS ratio above 1, {TABLE_THREADS} thread)."), timing=True,
+        straddles=any(_straddles((p[2].median, p[2].low, p[2].high), 1.0) for p in pairs)))
     return out

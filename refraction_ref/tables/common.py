@@ -84,6 +84,11 @@ class Claim:
         The verdict rule, fixed before measuring: the quantity, the threshold and the set-up.
     timing : bool
         Whether a time decides the verdict (then a loaded machine makes it unreliable).
+    straddles : bool
+        A timing whose single rounds fall on both sides of the rule's
+        threshold decides the verdict: the median decides it, and the report
+        says that a re-run may give the other verdict (the threshold is not
+        moved to avoid it).
     """
 
     paper: str
@@ -94,6 +99,7 @@ class Claim:
     why: str
     rule: str = ""
     timing: bool = False
+    straddles: bool = False
 
 
 @dataclass

@@ -127,6 +127,8 @@ def _verdict(report, claim):
     v = f"**{claim.verdict}**"
     if unreliable(report, claim):
         v += f" (timing unreliable: other load {100 * report.other_load:.0f}%)"
+    if getattr(claim, "straddles", False):
+        v += " (single rounds on both sides of the threshold: a re-run may flip it)"
     return v
 
 
@@ -165,10 +167,13 @@ def markdown(reports, quick=False):
         n_not = sum(c.verdict == NOT_HELD for c in claims)
         n_nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
         n_bad = sum(unreliable(r, c) for r, c in pairs)
+        n_close = sum(bool(getattr(c, "straddles", False)) for c in claims)
         lines += ["## Claims", "",
                   f"{n_held} held, {n_not} not held, {n_nc} not comparable, "
                   f"{len(claims) - n_held - n_not - n_nc} not measured"
-                  + (f"; {n_bad} timing verdicts unreliable (busy machine)." if n_bad else "."), "",
+                  + (f"; {n_bad} timing verdicts unreliable (busy machine)" if n_bad else "")
+                  + (f"; {n_close} timing verdicts decided by a median whose single rounds fall on both sides "
+                     "of the threshold (a re-run may flip them)" if n_close else "") + ".", "",
                   "Each claim's rule (the quantity, the threshold, the set-up) was fixed before measuring.", "",
                   _md_table(["paper", "section", "claim", "rule", "verdict", "measured", "why"],
                             [[c.paper, c.section, f"“{c.quote}”", c.rule or "—", _verdict(r, c), c.measured, c.why]
@@ -213,10 +218,11 @@ def write_report(reports, out, quick=False):
     with atomic_open(os.path.join(out, "claims.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["paper", "section", "quote", "rule", "verdict", "measured", "why", "timing", "other_load",
-                    "reliable"])
+                    "reliable", "straddles"])
         for r in reports:
             for c in r.claims:
                 w.writerow([c.paper, c.section, c.quote, c.rule, c.verdict, c.measured, c.why,
-                            "yes" if c.timing else "no", f"{r.other_load:.2f}", "no" if unreliable(r, c) else "yes"])
+                            "yes" if c.timing else "no", f"{r.other_load:.2f}", "no" if unreliable(r, c) else "yes",
+                            "yes" if getattr(c, "straddles", False) else "no"])
     with atomic_open(os.path.join(out, "tables.md"), "w") as f:
         f.write(markdown(reports, quick))
