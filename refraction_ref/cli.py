@@ -129,14 +129,16 @@ def _cmd_scene(a):
 
 
 def _cmd_crosscheck(a):
-    from .crosscheck import report_markdown, run
+    from .crosscheck import run, verdicts
 
     _check_workers(a.workers)
     parts = tuple(x for x in a.parts.split(",") if x)
     res = run(a.out, only=a.only, parts=parts, workers=a.workers, scheduler=a.scheduler,
               log=(lambda m: None) if a.quiet else print, report=a.report, merge=a.merge)
     print(f"{len(res['cases'])} cases; wrote {a.report or os.path.join(a.out, 'crosscheck.md')}")
-    return 0 if "**FAIL**" not in report_markdown(res).split("\n## ")[0] else 1
+    failed = [name for name, e in res["cases"].items()
+              if "skipped" not in e and any(x is False for x in verdicts(name, e).values())]
+    return 1 if failed else 0
 
 
 def _cmd_golden_build(a):
@@ -360,6 +362,11 @@ def main(argv=None):
             FileNotFoundError, OutputError, NotNpzError, UsageError) as e:
         print(f"refraction-ref: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader left (`refraction-ref scene | head`): stop quietly, as a shell tool does; stdout goes to
+        # devnull so that the interpreter's own flush at exit does not raise again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":

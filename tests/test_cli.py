@@ -337,3 +337,16 @@ def test_the_contract_documents_every_knob_meta_key_and_stage_buffer():
         for key in (k for k in res.arrays if k.startswith("stage.")):
             _, stage, buf = key.split(".", 2)
             assert re.sub(r"(_\d+)+$", "", buf) in documented.get(stage, ()), f"docs/oracle.md: {method} {key}"
+
+
+def test_a_reader_that_leaves_early_gets_no_traceback():
+    """``refraction-ref scene | head``: the pipe closes before the scene is printed."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "refraction_ref.cli", "scene"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()  # the reader is gone before the child writes
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141, err
+    assert "Traceback" not in err and "BrokenPipe" not in err

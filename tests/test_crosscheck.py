@@ -19,7 +19,7 @@ from refraction_ref.compare import angular_error_deg  # noqa: E402
 from refraction_ref.crosscheck import mitsuba_paths, paths_case  # noqa: E402
 from refraction_ref.golden.build import catalogue  # noqa: E402
 from refraction_ref.interop import mitsuba as M  # noqa: E402
-from refraction_ref.status import EXITED, MISSED  # noqa: E402
+from refraction_ref.status import EXITED  # noqa: E402
 
 
 def _small(name, size=32):

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from numba.core.registry import CPUDispatcher
 
-import refraction_ref as rr
 from refraction_ref import warm as warmup
 from refraction_ref.scene import load_scene
 

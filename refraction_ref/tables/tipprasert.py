@@ -546,7 +546,7 @@ def placement_table(rows, ms, es):
                 + "; ".join(f"{k[1]} in {k[0].split(' (')[0]}: {v[full]['rel_l1']:.3f} full norm, "
                             f"{v[comp]['rel_l1']:.3f} component, {v[tight]['rel_l1']:.3f} tight" for k, v in by.items())
                 + "). ")
-    note = (f"Eq. 4-3 sets the box extents w, h, d = 2|P_x|, 2|P_y|, 2|P_z| for the vertices farthest along U, V, W "
+    note = ("Eq. 4-3 sets the box extents w, h, d = 2|P_x|, 2|P_y|, 2|P_z| for the vertices farthest along U, V, W "
             "from the receiver's origin P_0. Read as the whole vector's length (caustics.placement = thesis, the "
             "default of contract_version 4) the box of a flat floor is as tall as it is wide and most texels and planes fall outside the "
             "receiver; read as the coordinate along each axis (the box's stated purpose: enclose the receiver along "

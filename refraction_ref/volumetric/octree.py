@@ -18,8 +18,10 @@ Any grid size works: nodes of level k cover voxels ``[a 2^k, (a + 1) 2^k)``
 clipped to the grid. With ``dilate`` (``volumetric.stepping = 'robust'``)
 the level-0 range of a voxel includes its 26 neighbours, because the
 interpolated n and the central-difference gradient in a voxel depend on
-them: a node marked constant then has an exactly zero gradient everywhere
-inside it. Without it (``stepping = 'paper'``, §4.2 as written) a voxel's
+them: a node is marked constant only when every index its voxels'
+interpolation and differences read lies within the tolerance, so its gradient
+is small there (at most the tolerance over the voxel size), not exactly zero,
+and the march crosses it in one straight step. Without it (``stepping = 'paper'``, §4.2 as written) a voxel's
 level-0 range is its own value (zero), so every voxel is at least a
 constant level-0 node.
 
