@@ -407,7 +407,8 @@ def _claim_linear(t1, M, quick, small):
         ("The cost per step grows with the photons here (the deposit buffers and the photons' state leave the "
          "caches)." if slope.median > LINEAR_BAND else
          "The cost per step falls with the photons here (the fixed costs are not one constant)."),
-        rule=rule, timing=True)
+        rule=rule, timing=True,
+        straddles=any(slope.low < t < slope.high for t in (1.0 / LINEAR_BAND, LINEAR_BAND)))
 
 
 def _claim_adaptive(N, M):
