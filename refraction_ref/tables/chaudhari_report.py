@@ -563,7 +563,7 @@ def _claims(rows41, t42, res42, cmp, cols):
                   f"the {hi_g} grid than at {lo_g}: frame incl. photon generation, the median over interleaved "
                   f"repeats (after warm-up, on {TABLE_THREADS} thread) of each round's frame ratio {hi_g} / {lo_g} "
                   "above 1."),
-            timing=True))
+            timing=True, straddles=any(_straddles((x.median, x.low, x.high), 1.0) for x in sp)))
     else:
         out.append(Claim(PAPER, "§4.1", Q_FPS, NOT_MEASURED, "—", "The quick run measures the 256 grid only.",
                          rule="The trend only: held if every row renders fewer frames per second at the 512 grid "
@@ -774,7 +774,8 @@ def _quality_claims(ns, bs, res, rows41, cols):
         rule=(f"Similar output: the fewest iterations n (5-16) whose exit median and p90 are within 5% of tight(5)'s "
               f"({setup}); held if the frame loose(n) / tight(5) (min/max to trace, reduction only in tight; median "
               f"of per-round ratios, {TABLE_THREADS} thread) is at least {NO_GAIN} on every scene, i.e. no gain "
-              "above 5%; a scene where no n reaches similar output shows no gain."), timing=True))
+              "above 5%; a scene where no n reaches similar output shows no gain."), timing=True,
+        straddles=any(_straddles(r, NO_GAIN) for r in gains.values())))
 
     srch = bs["searches"]
     b = srch.get("bunny")
