@@ -72,6 +72,8 @@ def test_other_load_share():
     assert other_load((0, 0), (3 * hz, 1 * hz), 2.0, cpus=2) == 0.5
     assert other_load((0, 0), (hz, hz), 2.0, cpus=2) == 0.0
     assert other_load(None, (hz, 0), 1.0) == 0.0
+    # a window shorter than one tick of the counters: one tick of another process is not 700 machines' worth
+    assert other_load((0, 0), (1, 0), 1e-5, cpus=2) == 1.0
     assert 0.0 <= LoadProbe().stop() <= 1.0
 
 

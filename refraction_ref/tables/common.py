@@ -141,13 +141,16 @@ def other_load(before, after, wall_s, cpus=None):
     Returns
     -------
     float
-        Fraction in ``[0, ...)``; 0 when either reading is missing.
+        Fraction in ``[0, 1]``; 0 when either reading is missing. The
+        counters tick ``SC_CLK_TCK`` times a second, so over a window of a
+        few ticks one tick is a large share: the result is clipped to the
+        machine's capacity (a paper's run lasts seconds, hundreds of ticks).
     """
     if before is None or after is None or wall_s <= 0:
         return 0.0
     hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
     others = (after[0] - before[0]) - (after[1] - before[1])
-    return max(0.0, others / hz / (wall_s * (cpus or os.cpu_count() or 1)))
+    return min(1.0, max(0.0, others / hz / (wall_s * (cpus or os.cpu_count() or 1))))
 
 
 #: Numba threads every paper's timings are taken with. One: on a shared machine a process on another core
