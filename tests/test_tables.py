@@ -53,9 +53,11 @@ def test_busy_machine_marks_timing_verdicts_unreliable(tmp_path):
 
 def test_a_verdict_whose_rounds_straddle_its_threshold_says_so(tmp_path):
     from refraction_ref.tables.chaudhari_report import _straddles
+    from refraction_ref.tables.common import straddles
 
     assert _straddles((1.02, 0.97, 1.08), 1.0) and not _straddles((1.05, 1.01, 1.08), 1.0)
     assert _straddles((1.0, 0.6, 0.9), 0.67, 1.5) and not _straddles((1.0, 0.8, 1.2), 0.67, 1.5)
+    assert straddles(0.97, 1.08, 1.0) and not straddles(1.01, 1.08, 1.0)
     c = [Claim("P 2000", "§1", "It is fast.", HELD, "1.02x", "because", rule="held if > 1", timing=True,
                straddles=True),
          Claim("P 2000", "§2", "It is faster.", HELD, "2.0x", "because", rule="held if > 1", timing=True)]

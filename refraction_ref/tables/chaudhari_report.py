@@ -24,7 +24,7 @@ import numpy as np
 from . import chaudhari as T
 from . import chaudhari_quality as Q
 from .common import (HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, ratio_spread,
-                     table_threads)
+                     straddles, table_threads)
 
 __all__ = ["run", "decimate", "lowpoly_bunny", "models", "shell_models"]
 
@@ -306,8 +306,8 @@ def _rs(r):
 
 
 def _straddles(r, *thresholds):
-    """Whether a (median, lowest, highest) spread of rounds has rounds on both sides of any threshold."""
-    return any(r[1] < t < r[2] for t in thresholds)
+    """:func:`.common.straddles` of a :func:`ratio` triple (median, lowest, highest)."""
+    return straddles(r[1], r[2], *thresholds)
 
 
 def _f(x, nd=1):
@@ -563,7 +563,7 @@ def _claims(rows41, t42, res42, cmp, cols):
                   f"the {hi_g} grid than at {lo_g}: frame incl. photon generation, the median over interleaved "
                   f"repeats (after warm-up, on {TABLE_THREADS} thread) of each round's frame ratio {hi_g} / {lo_g} "
                   "above 1."),
-            timing=True, straddles=any(_straddles((x.median, x.low, x.high), 1.0) for x in sp)))
+            timing=True, straddles=any(straddles(x.low, x.high, 1.0) for x in sp)))
     else:
         out.append(Claim(PAPER, "§4.1", Q_FPS, NOT_MEASURED, "—", "The quick run measures the 256 grid only.",
                          rule="The trend only: held if every row renders fewer frames per second at the 512 grid "
@@ -641,7 +641,7 @@ def _claims(rows41, t42, res42, cmp, cols):
     shares = [g / f for g, f in zip(hi_p["pgen"], hi_p["frame"])]
     share = statistics.median(shares)
     ok = gen[0] > 2.0 and share >= 0.2
-    close = _straddles(gen, 2.0) or _straddles((share, min(shares), max(shares)), 0.2)
+    close = _straddles(gen, 2.0) or straddles(min(shares), max(shares), 0.2)
     out.append(Claim(
         PAPER, "§4.2", Q_BOTTLENECK, HELD if ok else NOT_HELD,
         f"photon generation {_rs(gen)} on the full bunny against the low-poly one ({tri:.1f}x the triangles); "
@@ -813,5 +813,5 @@ def _quality_claims(ns, bs, res, rows41, cols):
               "every row and grid of Table 4.1 renders more frames per second with 16 layers than with 32 (thesis "
               "mode: all layers peeled; frames incl. photon generation; the median over interleaved repeats after "
               f"warm-up of each round's FPS ratio above 1, {TABLE_THREADS} thread)."), timing=True,
-        straddles=any(_straddles((p[2].median, p[2].low, p[2].high), 1.0) for p in pairs)))
+        straddles=any(straddles(p[2].low, p[2].high, 1.0) for p in pairs)))
     return out

@@ -23,7 +23,7 @@ import statistics
 import time
 from dataclasses import dataclass, field
 
-__all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BUSY", "LoadProbe",
+__all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BUSY", "LoadProbe", "straddles",
            "cpu_jiffies", "other_load", "TABLE_THREADS", "table_threads", "Spread", "spread", "ratio_spread",
            "time_rounds"]
 
@@ -242,6 +242,26 @@ def spread(samples):
     if not x:
         raise ValueError("spread: no samples (repeats must be at least 1)")
     return Spread(statistics.median(x), min(x), max(x), len(x))
+
+
+def straddles(low, high, *thresholds):
+    """Whether single rounds ranging over ``[low, high]`` fall on both sides of any threshold.
+
+    A verdict decided by the median of such rounds could go the other way on
+    a re-run (:attr:`Claim.straddles`).
+
+    Parameters
+    ----------
+    low, high : float
+        The smallest and largest single-round values (a :class:`Spread`'s ``low`` and ``high``).
+    *thresholds : float
+        The rule's thresholds.
+
+    Returns
+    -------
+    bool
+    """
+    return any(low < t < high for t in thresholds)
 
 
 def ratio_spread(a, b):

@@ -127,7 +127,7 @@ def _verdict(report, claim):
     v = f"**{claim.verdict}**"
     if unreliable(report, claim):
         v += f" (timing unreliable: other load {100 * report.other_load:.0f}%)"
-    if getattr(claim, "straddles", False):
+    if claim.straddles:
         v += " (single rounds on both sides of the threshold: a re-run may flip it)"
     return v
 
@@ -167,7 +167,7 @@ def markdown(reports, quick=False):
         n_not = sum(c.verdict == NOT_HELD for c in claims)
         n_nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
         n_bad = sum(unreliable(r, c) for r, c in pairs)
-        n_close = sum(bool(getattr(c, "straddles", False)) for c in claims)
+        n_close = sum(c.straddles for c in claims)
         lines += ["## Claims", "",
                   f"{n_held} held, {n_not} not held, {n_nc} not comparable, "
                   f"{len(claims) - n_held - n_not - n_nc} not measured"
@@ -223,6 +223,6 @@ def write_report(reports, out, quick=False):
             for c in r.claims:
                 w.writerow([c.paper, c.section, c.quote, c.rule, c.verdict, c.measured, c.why,
                             "yes" if c.timing else "no", f"{r.other_load:.2f}", "no" if unreliable(r, c) else "yes",
-                            "yes" if getattr(c, "straddles", False) else "no"])
+                            "yes" if c.straddles else "no"])
     with atomic_open(os.path.join(out, "tables.md"), "w") as f:
         f.write(markdown(reports, quick))

@@ -36,7 +36,8 @@ import time
 
 import numpy as np
 
-from .common import HELD, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, spread, table_threads, time_rounds
+from .common import (HELD, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, spread, straddles,
+                     table_threads, time_rounds)
 
 __all__ = ["run", "PAPER_T1", "PAPER_T2", "luneburg"]
 
@@ -408,7 +409,7 @@ def _claim_linear(t1, M, quick, small):
          "caches)." if slope.median > LINEAR_BAND else
          "The cost per step falls with the photons here (the fixed costs are not one constant)."),
         rule=rule, timing=True,
-        straddles=any(slope.low < t < slope.high for t in (1.0 / LINEAR_BAND, LINEAR_BAND)))
+        straddles=straddles(slope.low, slope.high, 1.0 / LINEAR_BAND, LINEAR_BAND))
 
 
 def _claim_adaptive(N, M):

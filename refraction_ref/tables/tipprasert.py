@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from .common import HELD, NOT_HELD, Claim, Report, Table, ratio_spread
+from .common import HELD, NOT_HELD, Claim, Report, Table, ratio_spread, straddles
 
 __all__ = ["run", "uv_sphere", "model_scene", "thesis_rows", "SUN_TOP"]
 
@@ -615,7 +615,7 @@ def claims(rows):
                      rule="Held if the volumetric baseline is slower than the level map in every (model, planes) cell: "
                           "the median over interleaved repeats (after an untimed render of each, on one thread) of "
                           "each round's volumetric / level-map time above 1.", timing=True,
-                     straddles=any(x.low < 1.0 < x.high for x in vr)))
+                     straddles=any(straddles(x.low, x.high, 1.0) for x in vr)))
     r2s, why, rounds_r2 = [], [], []
     for mesh in dict.fromkeys(r["mesh"] for r in rows):
         rs = [r for r in rows if r["mesh"] == mesh]
@@ -643,7 +643,7 @@ def claims(rows):
                      rule="Held if a straight line in the plane count explains the caustics stage's time (the median "
                           "of interleaved repeats after an untimed render, one thread) with R^2 > 0.9 for both "
                           "algorithms on every model.", timing=True,
-                     straddles=min(rounds_r2) < 0.9 < max(rounds_r2)))
+                     straddles=straddles(min(rounds_r2), max(rounds_r2), 0.9)))
     sr = [ratio_spread(r["rounds"]["normal"], r["rounds"]["respace"]) for r in rows]
     cells = [(r["mesh"], r["planes"], x.median, ratio_spread(r["rounds"]["normal"], r["rounds"]["smart"]).median)
              for r, x in zip(rows, sr)]
