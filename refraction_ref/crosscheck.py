@@ -1665,6 +1665,26 @@ def verdicts(name, e):
     return v
 
 
+def failed_targets(name, e):
+    """The targets a case's entry misses (judged ones only; a skipped case misses none).
+
+    Parameters
+    ----------
+    name : str
+        The case name.
+    e : dict
+        The case's entry (:func:`run_case`).
+
+    Returns
+    -------
+    list of str
+        Target names of :func:`verdicts` whose verdict is False, in its order.
+    """
+    if "skipped" in e:
+        return []
+    return [k for k, x in verdicts(name, e).items() if x is False]
+
+
 def _summary(result):
     """The report's findings, from the numbers."""
     T = result["targets"]
@@ -1782,9 +1802,8 @@ def report_markdown(result, link=""):
             lines.append(f"| {name} | - | - | - | - | - | - | - | - | skipped: {e['skipped']} |")
             continue
         p, i, c = e.get("paths", {}), e.get("images", {}), e.get("caustics", {})
-        v = verdicts(name, e)
-        judged = [x for x in v.values() if x is not None]
-        verdict = ("pass" if all(judged) else "**FAIL**: " + ", ".join(k for k, x in v.items() if x is False))
+        failed = failed_targets(name, e)
+        verdict = "**FAIL**: " + ", ".join(failed) if failed else "pass"
         if name in result["tir_chaos"]:
             verdict += " (TIR chaos: angles reported)"
         cs = "; ".join(f"{_fmt(100 * r['rel_l1'])} %; {r['ztest_pass']}/{r['batches']}" for r in c["receivers"]) \

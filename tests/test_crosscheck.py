@@ -270,3 +270,15 @@ def test_volumetric_cases_are_skipped_with_their_reason(name, tmp_path):
 
     e = run_case(catalogue([name])[0], str(tmp_path))
     assert e["skipped"].startswith("volumetric: a graded-index volume") and "no Mitsuba plugin" in e["skipped"]
+
+
+def test_failed_targets_name_the_missed_targets_and_skip_the_unjudged():
+    """The report's FAIL and the command's exit status come from one list: judged targets that miss."""
+    from refraction_ref.crosscheck import TARGETS, TIR_CHAOS, failed_targets
+
+    paths = {"median_deg": 0.001, "p99_deg": 10 * TARGETS["p99_deg"], "status_agree": 1.0}
+    assert failed_targets("is_sphere_1_5", {"paths": paths}) == ["p99_deg"]
+    assert failed_targets(sorted(TIR_CHAOS)[0], {"paths": paths}) == []  # TIR chaos: angles reported, not judged
+    assert failed_targets("vol_bunny", {"skipped": "volumetric"}) == []
+    caustics = {"receivers": [{"ztest_pass": 7, "batches": 8}]}
+    assert failed_targets("exact_water", {"caustics": caustics}) == ["caustics_ztest"]
