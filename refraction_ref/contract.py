@@ -15,7 +15,7 @@ import platform
 __all__ = ["CONTRACT_VERSION", "software_versions"]
 
 #: Version of ``docs/oracle.md``; see its changelog.
-CONTRACT_VERSION = 5
+CONTRACT_VERSION = 6
 
 
 def _cpu_name():
