@@ -69,7 +69,8 @@ import fnmatch
 import numpy as np
 
 __all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
-           "FINITENESS", "SNAP_SLOPE", "neighbour_step"]
+           "FINITENESS", "SNAP_SLOPE", "neighbour_step", "flux_error", "FLUX", "VOLUME_FLUX", "RADIANCE_FLOOR",
+           "DEFAULT", "DEFAULT_INT", "fmt_share"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
         "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
@@ -79,8 +80,17 @@ _DIR = ("unit vectors: float64 arithmetic in another order moves them by ~1e-12 
         "slice ties and silhouettes (1 % of the covered pixels elsewhere: a tie moves an interface by a slice)")
 _POS = ("positions and lengths: another order of float64 arithmetic; differences follow slice ties and "
         "silhouettes (0.5 % of the informative elements elsewhere)")
+#: the allowed relative error of a map's (or volume's) total, per channel or plane: |sum c - sum g| <= FLUX
+#: sum |g|. Another summation order of float32 deposits moves a total by a few float32 ulps (about 1e-7
+#: relative per deposit, 1e-5 even for thousands of deposits per texel), and a photon that ties at the
+#: lit region's or a receiver's edge (counted by the per-texel fraction) carries 1/P of the flux (P photons,
+#: 1e-4 to 1e-3 of it on the catalogue's maps); a scale error of 1 % (a splat without its cosine, a
+#: deposit without its segment length) is five times the allowance
+FLUX = 2e-3
+_FLUX_WHY = ("; the total (per channel or plane) within 0.2 %: a 1 % scale error fails here, where the texels' "
+             "allowance is relative to the map's maximum")
 _MAP = ("maps of deterministic photons: another summation order; photons landing on the lit region's edge or "
-        "beside a depth discontinuity of the receivers (1 % of the lit texels elsewhere)")
+        "beside a depth discontinuity of the receivers (1 % of the lit texels elsewhere)" + _FLUX_WHY)
 _EXACT_F = "set-up arithmetic (frames, cameras, boxes): float64 rounding only"
 
 #: the sample shift, in pixels per axis, that a rasterizer without the oracle's 1/256 snap (or a ray caster)
@@ -93,6 +103,25 @@ _SLOPE = ("a rasterizer without the 1/256 vertex snap, or a ray caster, samples 
           "neighbours; coverage differs only at silhouettes")
 _DEPTH = "rasterized depths: another order of float64 arithmetic; " + _SLOPE + " (0.5 % elsewhere)"
 
+#: the radiance floor of the volumetric ``direction``: voxels whose golden radiance (summed over channels) is
+#: below this fraction of its maximum are not judged. Directions are normalised sums of float32 deposits: a
+#: voxel the Gaussian's tail barely reaches (radiance 1e-16 of the maximum) holds a sum of rounding residues
+#: whose direction may point anywhere, while above 1e-4 its float32 sum (relative error ~1e-7 of the largest
+#: deposit) is good to ~1e-3, the key's rtol
+RADIANCE_FLOOR = 1e-4
+#: the allowed relative error of a radiance (or deposit) volume's total per channel: photons grazing the box
+#: may change status (0.5 % of them, ``photon_status``), each carrying its own share of the flux
+VOLUME_FLUX = 5e-3
+#: the spec of a key no pattern names (a buffer added to the contract before its rule): float arrays as
+#: positions, integer and bool arrays (indices, codes) exact; the report says it is the default
+DEFAULT = {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
+           "default": True,
+           "why": "no rule names this key: the default for float arrays (float64 rounding: 1e-6 + 1e-5 |g|, 0.5 % "
+                  "of the finite elements); add its rule to refraction_ref/golden/tolerances.py"}
+DEFAULT_INT = {"kind": "exact", "fraction": 0.0, "over": "all", "locate": True, "default": True,
+               "why": "no rule names this key: the default for integer and bool arrays (indices, codes, counts): "
+                      "equal outside the ambiguity mask; add its rule to refraction_ref/golden/tolerances.py"}
+
 #: (pattern on the key, spec): the first match wins. Stage buffers are ``stage.<stage>.<buffer>``.
 TOLERANCES = [
     ("stage.voxelize.bits", {"kind": "exact", "fraction": 0.002, "over": "nonzero", "locate": True,
@@ -104,8 +133,19 @@ TOLERANCES = [
                           "why": "as stage.peel.depth_complexity"}),
     ("stage.receiver_depth.triangle", {"kind": "exact", "fraction": 0.0, "over": "all", "locate": True,
                                        "own_edges": True, "why": "triangle ids tie on shared edges"}),
-    ("stage.receiver_hit.hit_face_*", {"kind": "exact", "fraction": 0.01, "over": "all",
-                                       "why": "photons on a shared edge of two receiver triangles"}),
+    ("stage.receiver_hit.hit_face_*", {"kind": "exact", "fraction": 0.005, "over": "all", "locate": True,
+                                       "face_ties": True,
+                                       "why": "a photon whose hit lies within one camera pixel of an edge two "
+                                              "receiver triangles share may name either (inside the ambiguity "
+                                              "mask); elsewhere 0.5 % of the photons (hit or missed at a "
+                                              "receiver's outer edge, a depth discontinuity or the image's border)"}),
+    ("*hit_receiver", {"kind": "exact", "fraction": 0.005, "over": "all",
+                       "why": "the receiver a photon met is an index: equal, but for photons grazing a receiver's "
+                              "edge or the volume's box (0.5 %, as photon_status)"}),
+    ("*path_index", {"kind": "exact", "fraction": 0.0, "over": "all",
+                     "why": "photon indices of the sample (evenly spaced over P): integers, no rounding"}),
+    ("*photon_steps", {"kind": "exact", "fraction": 0.005, "over": "all",
+                       "why": "steps per photon are counts: equal, but for photons grazing the box (0.5 %)"}),
     ("*photon_status", {"kind": "exact", "fraction": 0.005, "over": "all",
                         "why": "photons grazing the volume's box or a receiver's edge"}),
     ("*status", {"kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True, "own_edges": True,
@@ -132,24 +172,48 @@ TOLERANCES = [
     ("*normal_*", {"kind": "angle", "deg": 0.05, "norm": 1e-6, "fraction": 0.01, "over": "finite", "locate": True,
                    "why": "unit normals of the receivers: faces tie on shared edges"}),
     ("*direction", {"kind": "close", "atol": 1e-4, "rtol": 1e-3, "fraction": 0.01, "over": "all",
-                    "why": "smoothed photon directions: deposition order"}),
+                    "weight_key": "radiance", "floor": RADIANCE_FLOOR,
+                    "why": "smoothed photon directions: deposition order; judged only in voxels whose golden "
+                           "radiance (summed over channels) is above 1e-4 of its maximum (an almost empty "
+                           "voxel's normalised direction is rounding noise); 1 % of those voxels"}),
     ("*caustic_frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
     ("*frame_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
     ("*camera_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
     ("*box_*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all", "why": _EXACT_F}),
     ("stage.caustics.planes_[0-9]*", {"kind": "close", "atol": 1e-7, "rtol": 1e-7, "over": "all",
                                       "why": "plane offsets from the box (eqs. 4-1..4-9): float64 rounding only"}),
-    ("*caustic_map*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+    ("*caustic_map*", {"kind": "close", "flux": FLUX, "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
                        "over": "nonzero", "locate": True, "why": _MAP}),
-    ("*caustic_rgb*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+    ("*caustic_rgb*", {"kind": "close", "flux": FLUX, "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
                        "over": "nonzero", "locate": True, "why": _MAP}),
-    ("*splat_*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01, "over": "nonzero",
+    ("*splat_*", {"kind": "close", "flux": FLUX, "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01, "over": "nonzero",
                   "locate": True, "why": _MAP}),
-    ("*plane_maps*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+    ("*plane_maps*", {"kind": "close", "flux": FLUX, "atol": 2e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
                       "over": "nonzero", "locate": True,
                       "why": _MAP + "; counted over each plane's lit texels, not diluted over the planes"}),
     ("*radiance", {"kind": "close", "atol": 1e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01, "over": "nonzero",
-                   "why": "photon radiance in the volume: deposition order (1 % of the lit voxels)"}),
+                   "flux": VOLUME_FLUX,
+                   "why": "photon radiance in the volume: deposition order (1 % of the lit voxels); the total per "
+                          "channel within 0.5 % (photons grazing the box change status, 0.5 %)"}),
+    ("stage.march.deposit*", {"kind": "close", "atol": 1e-3, "rtol": 1e-3, "scale": "max", "fraction": 0.01,
+                              "over": "nonzero", "flux": VOLUME_FLUX,
+                              "why": "deposits before smoothing: as the radiance volume (deposition order, 1 % of "
+                                     "the lit voxels; the total per channel within 0.5 %): a deposit without its "
+                                     "segment length or without the extinction fails here"}),
+    ("stage.image.water_pos", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.01, "over": "finite",
+                               "locate": True,
+                               "why": "where the eye ray meets the water mesh: float64 ray-triangle arithmetic "
+                                      "(1e-5 relative); a ray through a shared edge of two water triangles, "
+                                      "silhouettes and status changes free, 1 % of the pixels elsewhere"}),
+    ("stage.image.receiver_pos", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.01, "over": "finite",
+                                  "locate": True,
+                                  "why": "the receiver point a pixel shows: float64 arithmetic of the refracted (or "
+                                         "direct) ray; the receiver's silhouette and status changes free, 1 % "
+                                         "of the pixels elsewhere (rays through a water mesh edge)"}),
+    ("stage.image.water_length", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.01, "over": "finite",
+                                  "locate": True,
+                                  "why": "distance travelled in water: |receiver_pos - water_pos| in float64, "
+                                         "judged as those two positions"}),
     ("*image*", {"kind": "close", "atol": 2e-3, "rtol": 1e-3, "fraction": 0.01, "over": "all", "locate": True,
                  "why": "colours: 8-bit-level differences; silhouettes free, 1 % of the pixels elsewhere "
                         "(slice ties move a path)"}),
@@ -167,8 +231,7 @@ TOLERANCES = [
                                     "fraction": 0.005, "over": "finite", "locate": True, "why": _DEPTH}),
     ("stage.level_map.position_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "slope": SNAP_SLOPE,
                                     "fraction": 0.005, "over": "finite", "locate": True, "why": _DEPTH}),
-    ("*", {"kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
-           "why": _POS}),
+    ("*", DEFAULT),
 ]
 
 #: the share of the informative elements that may differ inside the ambiguity mask, unless a spec says
@@ -180,7 +243,7 @@ ZTEST = {"kind": "ztest", "alpha": 1e-3, "atol": 1e-3, "over": "all",
          "why": "jittered photons: a Z-test against the oracle's K independent batches, Bonferroni-corrected"}
 
 
-def tolerance_for(key, noisy=False):
+def tolerance_for(key, noisy=False, dtype=None):
     """The tolerance spec of an array key (a copy of the first matching :data:`TOLERANCES` entry).
 
     Parameters
@@ -190,6 +253,9 @@ def tolerance_for(key, noisy=False):
     noisy : bool
         The case is judged statistically: keys matching :data:`NOISY` get the
         :data:`ZTEST` spec.
+    dtype : numpy dtype, optional
+        The array's dtype: a key no pattern names gets :data:`DEFAULT_INT` when
+        it is an integer or bool array, else :data:`DEFAULT`.
 
     Returns
     -------
@@ -205,6 +271,8 @@ def tolerance_for(key, noisy=False):
         return dict(ZTEST)
     for pat, spec in TOLERANCES:
         if fnmatch.fnmatchcase(key, pat):
+            if spec is DEFAULT and dtype is not None and np.dtype(dtype).kind in "biu":
+                return dict(DEFAULT_INT)
             return dict(spec)
     raise KeyError(key)
 
@@ -391,7 +459,119 @@ def _fold(a, shape):
     return np.broadcast_to(a, shape)
 
 
-def judge(cand, gold, spec, batches=None, ambiguous=None):
+def fmt_share(n, total):
+    """A count and its share, never rounded to zero: ``"3 of 262144 (0.0011 %)"``.
+
+    Parameters
+    ----------
+    n, total : int
+        Elements counted and elements they are counted over.
+
+    Returns
+    -------
+    str
+    """
+    n, total = int(n), int(total)
+    pct = "0" if n == 0 else f"{100.0 * n / max(total, 1):.2g}"
+    return f"{n} of {total} ({pct} %)"
+
+
+def _flux_axes(g):
+    """The axes a total sums over: per channel for (..., 3) arrays of 3 or more axes, per plane for (k, H, W)."""
+    if g.ndim >= 3 and g.shape[-1] == 3:
+        return tuple(range(g.ndim - 1))
+    if g.ndim == 3:
+        return (1, 2)
+    return tuple(range(g.ndim))
+
+
+def flux_error(cand, gold):
+    """Relative error of the totals, per channel (``(..., 3)``) or plane (``(k, H, W)``), else of the whole array.
+
+    ``|sum c - sum g| / sum |g|`` over the finite elements; 0 where both totals are 0, inf where only the
+    golden's is.
+
+    Parameters
+    ----------
+    cand, gold : ndarray
+        Same shape.
+
+    Returns
+    -------
+    err, ratio : 1-D float ndarrays
+        Per group: the relative error and ``sum c / sum g`` (NaN where ``sum g`` is 0).
+
+    References
+    ----------
+    docs/oracle.md, "Conformance" (the ``flux`` term of ``close``).
+    """
+    g = np.asarray(gold, np.float64)
+    c = np.asarray(cand, np.float64)
+    ax = _flux_axes(g)
+    sg = np.where(np.isfinite(g), g, 0.0).sum(axis=ax)
+    ag = np.abs(np.where(np.isfinite(g), g, 0.0)).sum(axis=ax)
+    sc = np.where(np.isfinite(c), c, 0.0).sum(axis=ax)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.where(ag > 0, np.abs(sc - sg) / np.where(ag > 0, ag, 1.0), np.where(sc == 0, 0.0, np.inf))
+        ratio = np.where(sg != 0, sc / np.where(sg != 0, sg, 1.0), np.nan)
+    return np.atleast_1d(err), np.atleast_1d(ratio)
+
+
+def moments_test(cand, batches, alpha):
+    """The second test of ``ztest`` maps: the map's total and centroid against the K batches' (Student's t).
+
+    Per statistic ``s`` (the total, the flux-weighted centroid's column and row, in texels)
+    ``t = (s(c) - mean_k s(b_k)) / (sd_k s(b_k) sqrt(1 + 1/K))``: a candidate drawn independently from the
+    oracle's distribution gives a Student's t with K - 1 degrees of freedom (the statistics are sums over
+    many photons, so close to normal). Two-sided, Bonferroni over the three at ``alpha``. A map shifted by
+    one texel moves its centroid by about one texel, where the batches' centroids scatter by hundredths,
+    while the per-texel test sees each texel's change within its own noise.
+
+    Parameters
+    ----------
+    cand : (H, W) ndarray
+        The candidate map.
+    batches : (K, H, W) ndarray
+        The oracle's independent maps.
+    alpha : float
+        Significance of the three tests together.
+
+    Returns
+    -------
+    dict
+        ``ok``, ``t`` (per statistic), ``threshold``, ``shift`` (the candidate's centroid minus the
+        batches' mean, (col, row) texels) and ``sd`` (the batches' centroid spread, texels).
+    """
+    from scipy.stats import t as student
+
+    b = np.asarray(batches, np.float64)
+    c = np.asarray(cand, np.float64)
+    K = b.shape[0]
+    H, W = c.shape[-2:]
+    cols = np.arange(W) + 0.5
+    rows = np.arange(H) + 0.5
+
+    def stats(m):
+        tot = m.sum(axis=(-2, -1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cx = (m.sum(axis=-2) * cols).sum(axis=-1) / tot
+            cy = (m.sum(axis=-1) * rows).sum(axis=-1) / tot
+        return np.stack([tot, cx, cy], axis=-1)
+
+    sb, sc = stats(b), stats(c)
+    mean = sb.mean(axis=0)
+    sd = sb.std(axis=0, ddof=1) if K > 1 else np.zeros(3)
+    thr = float(student.isf(alpha / 3.0 / 2.0, max(K - 1, 1)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(sd > 0, (sc - mean) / (np.where(sd > 0, sd, 1.0) * np.sqrt(1.0 + 1.0 / K)),
+                     np.where(np.isclose(sc, mean, rtol=1e-9, atol=0.0) | (np.isnan(sc) & np.isnan(mean)),
+                              0.0, np.inf))
+    t = np.nan_to_num(t, nan=np.inf)
+    return {"ok": bool(np.all(np.abs(t) <= thr)), "t": [float(x) for x in t], "threshold": thr,
+            "shift": [float(sc[1] - mean[1]), float(sc[2] - mean[2])], "sd": [float(sd[1]), float(sd[2])]}
+
+
+def judge(cand, gold, spec, batches=None, ambiguous=None, judged=None):
     """Judge one array against the golden.
 
     Parameters
@@ -404,6 +584,9 @@ def judge(cand, gold, spec, batches=None, ambiguous=None):
         The oracle's independent batches, for ``ztest``.
     ambiguous : bool ndarray, optional
         The ambiguity mask (broadcastable to the failing mask), for ``locate`` specs.
+    judged : bool ndarray, optional
+        The elements judged at all (broadcastable to the failing mask; the ``weight_key`` floor of the
+        volumetric ``direction``): the others neither fail nor count as informative.
 
     Returns
     -------
@@ -418,6 +601,11 @@ def judge(cand, gold, spec, batches=None, ambiguous=None):
     g = np.asarray(gold)
     bad, err, detail = _elementwise(c, g, spec, batches)
     info = _fold(informative(c, g, spec.get("over", "all")), bad.shape) | bad
+    if judged is not None:
+        jm = _fold(np.asarray(judged, bool), bad.shape)
+        bad, info = bad & jm, info & jm
+        detail += f"; judged where the golden's {spec.get('weight_key', 'weight')} is above " \
+                  f"{spec.get('floor', 0):g} of its maximum: {int(np.count_nonzero(jm))} of {jm.size} elements"
     amb = np.zeros(bad.shape, bool) if ambiguous is None else _fold(np.asarray(ambiguous, bool), bad.shape)
     located = bad & ~amb
     nonfinite = nonfinite_mismatch(c, g)
@@ -443,8 +631,26 @@ def judge(cand, gold, spec, batches=None, ambiguous=None):
     else:
         v = verdict(located, info, bad, amb)
     cn = v["counts"]
-    detail += (f"; {cn['located']} failing outside the ambiguity mask of {cn['informative']} informative "
-               f"({cn['inside_ambiguity']} more inside it, {100 * inside:.3g} % allowed there)")
+    detail += (f"; {fmt_share(cn['located'], cn['informative'])} of the informative elements failing outside "
+               f"the ambiguity mask ({cn['inside_ambiguity']} more inside it, {100 * inside:.3g} % allowed there)")
+    if spec.get("flux") and spec["kind"] == "close" and c.shape == g.shape:
+        fe, ratio = flux_error(c, g)
+        ok_flux = bool(np.all(fe <= spec["flux"]))
+        err["flux_error"] = float(np.max(fe)) if fe.size else 0.0
+        v["ok"] = v["ok"] and ok_flux
+        per = ", ".join(f"{r:.5g}" for r in ratio[:8])
+        detail += (f"; total {per} x the golden's (largest error {100 * err['flux_error']:.3g} %, tolerance "
+                   f"{100 * spec['flux']:.3g} %{'' if ok_flux else ' FAIL'})")
+        v["flux_ok"] = ok_flux
+    if spec["kind"] == "ztest" and batches is not None and spec.get("moments", True) and g.ndim == 2:
+        mt = moments_test(c, batches, spec["alpha"])
+        err["moments"] = mt
+        v["ok"] = v["ok"] and mt["ok"]
+        v["moments_ok"] = mt["ok"]
+        detail += (f"; total and centroid: t = {', '.join(f'{x:.3g}' for x in mt['t'])} (threshold "
+                   f"{mt['threshold']:.3g}, Student's t over {np.shape(batches)[0]} batches; centroid shift "
+                   f"({mt['shift'][0]:.3g}, {mt['shift'][1]:.3g}) texels, batches' spread "
+                   f"({mt['sd'][0]:.2g}, {mt['sd'][1]:.2g})){'' if mt['ok'] else ' FAIL'}")
     if parts:
         detail += "; " + ", ".join(f"{n}: {p['counts']['located']} of {p['counts']['informative']}"
                                    f"{'' if p['ok'] else ' FAIL'}" for n, p in parts.items())
