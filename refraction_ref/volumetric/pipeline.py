@@ -341,8 +341,11 @@ def _st_march(ctx):
                           "photons_truncated": minfo["truncated"], "drift_max": minfo["drift_max"],
                           "drift_median": minfo["drift_median"], "drift_p99": minfo["drift_p99"],
                           "deposit_buffers": minfo["buffers"]}
+    # the deposits before smoothing, so that a deposit or extinction error is named here, not in `smooth`
+    deposit = sums[..., :3].astype(np.float32)
     return {"sums": sums, "minfo": minfo, "exit_pos": minfo["exit_pos"], "exit_dir": minfo["exit_dir"],
-            "photon_status": minfo["status"], "hit_pos": minfo["hit_pos"], "hit_receiver": minfo["hit_receiver"]}
+            "photon_status": minfo["status"], "hit_pos": minfo["hit_pos"], "hit_receiver": minfo["hit_receiver"],
+            "deposit": deposit}
 
 
 #: photons in the ``photon_paths`` sample, and the steps recorded of each
@@ -504,7 +507,7 @@ def _stages(scene):
               doc="one photon per light texel covered by the proxy geometry (§4.3)"),
     ) + recv_stage + (
         Stage("march", _st_march, reads=("outside_ior",) + tuple(_V + k for k in MARCH_KNOBS),
-              after=after_march, makes=("exit_pos", "exit_dir", "photon_status", "hit_pos", "hit_receiver"),
+              after=after_march, makes=("exit_pos", "exit_dir", "photon_status", "hit_pos", "hit_receiver", "deposit"),
               doc="adaptive marching and deposition (§4.4, eqs. 4-6)"),
         Stage("photon_paths", _st_photon_paths, reads=("outside_ior",) + tuple(_V + k for k in MARCH_KNOBS),
               after=after_march, makes=("paths", "path_index"), diagnostic=True,
