@@ -432,7 +432,8 @@ def _build_case(case, d, progress=False):
     keys = {}
     for k, a in sorted(res.arrays.items()):
         keys[k] = {"sha256": array_sha256(a), "shape": list(a.shape), "dtype": a.dtype.str,
-                   "stage": key_stage(k, stages), "tolerance": tolerance_for(k, noisy=noisy)}
+                   "stage": key_stage(k, stages),
+                   "tolerance": tolerance_for(k, noisy=noisy, dtype=a.dtype)}
     _save_npz(os.path.join(d, "golden.npz"), res.arrays)
     entry = {"method": method, "purpose": case["purpose"], "stages": stage_order(stages),
              "keys": keys, "files": ["scene.json", "golden.npz"], "numba_threads": res.meta["numba_threads"]}
