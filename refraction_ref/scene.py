@@ -21,9 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .graph import BLOCKS, load_builtin_blocks
-from .validation import SceneError, check_number, check_vector, merge_defaults
+from .validation import (SceneError, check_depth, check_dict, check_number, check_vector, merge_defaults,
+                         show)
 
-__all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides", "BLOCKS"]
+__all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides", "BLOCKS",
+           "ignored_content", "FOV_MIN"]
 
 
 DEFAULT_CAMERA = {"eye": [0.0, 0.0, 2.6], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
@@ -130,6 +132,7 @@ def _check_mesh_ref(mesh, where, base_dir):
 
 
 def _check_transform(t, where):
+    check_dict(t, where)
     check_number(t["scale"], f"{where}.scale", 0.0, lo_open=True)
     check_vector(t["rotate"], 3, f"{where}.rotate")
     check_vector(t["translate"], 3, f"{where}.translate")
@@ -159,7 +162,7 @@ def validate(data, base_dir="."):
     SceneError
         Naming the key and the fix.
     """
-    c = data["camera"]
+    c = check_dict(data["camera"], "camera")
     eye = check_vector(c["eye"], 3, "camera.eye")
     target = check_vector(c["target"], 3, "camera.target")
     up = check_vector(c["up"], 3, "camera.up")
@@ -167,11 +170,15 @@ def validate(data, base_dir="."):
         raise SceneError("scene: camera.eye and camera.target coincide; move the target")
     if np.linalg.norm(np.cross(target - eye, up)) < 1e-12 * np.linalg.norm(target - eye) * max(np.linalg.norm(up), 1e-300):
         raise SceneError("scene: camera.up is parallel to the viewing direction; choose another up vector")
-    check_number(c["fov_y"], "camera.fov_y", 0.0, 179.0, lo_open=True)
+    # below 0.1 degree a pixel's footprint falls under the float32 depth and projection precision of the
+    # image-space buffers: every pixel reads "missed" there while the exact trace hits
+    check_number(c["fov_y"], "camera.fov_y", FOV_MIN, 179.0)
     check_number(c["width"], "camera.width", 1, integer=True)
     check_number(c["height"], "camera.height", 1, integer=True)
     check_number(c["near"], "camera.near", 0.0, lo_open=True)
     check_number(c["far"], "camera.far", c["near"], lo_open=True)
+    if np.linalg.norm(target - eye) < 1e-9 * max(1.0, float(np.abs(eye).max())):
+        raise SceneError("scene: camera.eye and camera.target nearly coincide (no view direction); move the target")
     if c["width"] * c["height"] > 16384 * 16384:
         raise SceneError(f"scene: camera {c['width']}x{c['height']} is too large for memory; "
                          "use at most 16384x16384 pixels")
@@ -181,10 +188,9 @@ def validate(data, base_dir="."):
     for k, o in enumerate(data["objects"]):
         w = f"objects[{k}]"
         _check_mesh_ref(o["mesh"], f"{w}.mesh", base_dir)
-        if o["fit"] is not None:
-            check_number(o["fit"], f"{w}.fit", 0.0, lo_open=True)
+        _check_fit_size(o, w)
         _check_transform(o["transform"], f"{w}.transform")
-        m = o["material"]
+        m = check_dict(o["material"], f"{w}.material")
         check_number(m["ior"], f"{w}.material.ior", 0.0, lo_open=True)
         a = check_vector(m["absorption"], 3, f"{w}.material.absorption")
         if np.any(a < 0):
@@ -197,16 +203,30 @@ def validate(data, base_dir="."):
                 raise SceneError(f"scene: '{w}.deform.type' is {d['type']!r}; only 'sine' is known")
             check_number(d["amplitude"], f"{w}.deform.amplitude")
             check_number(d["wavelength"], f"{w}.deform.wavelength", 0.0, lo_open=True)
-            check_vector(d["direction"], 3, f"{w}.deform.direction")
+            if not np.linalg.norm(check_vector(d["direction"], 3, f"{w}.deform.direction")) > 0:
+                raise SceneError(f"scene: '{w}.deform.direction' is zero; give the direction the wave runs along")
             check_number(d["phase"], f"{w}.deform.phase")
     for k, r in enumerate(data["receivers"] or []):
         _check_mesh_ref(r["mesh"], f"receivers[{k}].mesh", base_dir)
+        _check_fit_size(r, f"receivers[{k}]")
         _check_transform(r["transform"], f"receivers[{k}].transform")
-    env = data["environment"]
+    env = check_dict(data["environment"], "environment")
     if env["type"] not in ("checker", "latlong", "constant"):
-        raise SceneError(f"scene: environment.type is {env['type']!r}; use 'checker', 'latlong' or 'constant'")
-    if env["type"] == "checker":
-        check_number(env["tiles"], "environment.tiles", 1, integer=True)
+        raise SceneError(f"scene: environment.type is {show(env['type'])}; use 'checker', 'latlong' or 'constant'")
+    check_number(env["tiles"], "environment.tiles", 1, 10**6, integer=True)
+    colors = env["colors"]
+    if not isinstance(colors, list) or not 1 <= len(colors) <= 2:
+        raise SceneError(f"scene: 'environment.colors' must be a list of two [r, g, b] colours (constant uses "
+                         f"the first), got {show(colors)}")
+    for i, col in enumerate(colors):
+        if np.any(check_vector(col, 3, f"environment.colors[{i}]") < 0):
+            raise SceneError(f"scene: 'environment.colors[{i}]' is {show(col)}; radiances must be >= 0")
+    if env["type"] == "checker" and len(colors) != 2:
+        raise SceneError("scene: 'environment.colors' has one colour; the checker needs two (or use type "
+                         "'constant')")
+    check_number(env["intensity"], "environment.intensity", 0.0)
+    if env["path"] is not None and not isinstance(env["path"], str):
+        raise SceneError(f"scene: 'environment.path' must be a file path (a string) or null, got {show(env['path'])}")
     if env["type"] == "latlong":
         if not env["path"]:
             raise SceneError("scene: environment.type 'latlong' needs environment.path (an image file)")
@@ -223,12 +243,91 @@ def validate(data, base_dir="."):
             block.merge(data)
     validate_lights(data)
     for k, r in enumerate(data["receivers"] or []):
-        alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo")
+        alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo", limit=1.0)
         if np.any(alb < 0):
             raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
     for name, block in BLOCKS.items():  # each method's own checks, beside the code that reads them
         block.validate(data, base_dir)
+    _check_volume_files(data, base_dir)
     return data
+
+
+#: The smallest ``camera.fov_y`` (degrees): below it the image-space buffers' float32 precision no longer
+#: separates a pixel's rays (every pixel read "missed" at 1e-6 degree while the exact trace hit).
+FOV_MIN = 0.1
+
+
+def _check_fit_size(o, w):
+    """An object's or receiver's ``fit`` (null or > 0) and ``size`` (null or [sx, sz] > 0)."""
+    if o["fit"] is not None:
+        check_number(o["fit"], f"{w}.fit", 0.0, lo_open=True)
+    if o["size"] is not None:
+        if np.any(check_vector(o["size"], 2, f"{w}.size") <= 0):
+            raise SceneError(f"scene: '{w}.size' is {show(o['size'])}; both extents must be > 0")
+
+
+def _check_volume_files(data, base_dir):
+    """Read every ``.npy`` the ``volume`` block names, now: a truncated file, an object array or a folder is
+    refused when the scene loads, not when the volumetric method reaches its first stage."""
+    vol = data.get("volume")
+    if not isinstance(vol, dict):
+        return
+    for k in ("ior", "extinction", "scattering"):
+        x = vol.get(k)
+        if isinstance(x, (str, os.PathLike)):
+            p = os.fspath(x)
+            p = p if os.path.isabs(p) else os.path.join(base_dir, p)
+            try:
+                a = np.load(p, allow_pickle=False, mmap_mode="r")
+                a = np.asarray(a)
+            except Exception as e:  # NumPy raises several types for a bad file
+                raise SceneError(f"scene: 'volume.{k}' names '{x}', which cannot be read as a .npy array "
+                                 f"({type(e).__name__}: {str(e)[:80]}); save the array with numpy.save") from None
+            if a.dtype.kind not in "fiu":
+                raise SceneError(f"scene: 'volume.{k}' ('{x}') holds {a.dtype} values; give real numbers")
+            if not np.all(np.isfinite(a)):
+                raise SceneError(f"scene: 'volume.{k}' ('{x}') holds NaN or infinite values; give finite numbers")
+        elif x is not None:
+            try:
+                a = np.asarray(x, dtype=np.float64)
+            except (TypeError, ValueError, OverflowError):
+                raise SceneError(f"scene: 'volume.{k}' must be a numeric array or a .npy path") from None
+            if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1e6):
+                raise SceneError(f"scene: 'volume.{k}' holds NaN, infinite or huge values; give finite numbers "
+                                 "within +-1e6")
+
+
+def ignored_content(data, method):
+    """A one-line warning when ``method`` reads none of the scene's content, else None.
+
+    ``imagespace`` and ``exact`` on mesh scenes read ``objects``; ``volumetric`` reads ``objects`` or
+    ``volume``; ``levelmap`` reads ``water``. A water-only scene rendered by ``imagespace``, or a volume
+    scene rendered by a method that cannot read volumes, would otherwise give an empty (or default) picture
+    without a word.
+
+    Parameters
+    ----------
+    data : dict
+        The resolved scene.
+    method : str
+        The method's name.
+
+    Returns
+    -------
+    str or None
+    """
+    has_obj = bool(data.get("objects"))
+    has_water = data.get("water") is not None
+    has_vol = data.get("volume") is not None
+    if has_vol and method != "volumetric":
+        return (f"the scene's 'volume' block is read only by --method volumetric; {method} ignores it"
+                + (" and renders the scene's objects" if has_obj else " and renders an empty scene"))
+    if method == "imagespace" and has_water and not has_obj:
+        return ("--method imagespace ignores the scene's 'water' block and the scene has no objects: the picture is "
+                "the environment alone; render water with --method levelmap (or exact)")
+    if method == "levelmap" and has_obj and not has_water:
+        return "--method levelmap reads only 'water'; it ignores the scene's objects"
+    return None
 
 
 def _coerce_cli_value(v):
@@ -240,9 +339,15 @@ def _coerce_cli_value(v):
     if low in ("null", "none"):
         return None
     try:
-        return json.loads(v)
-    except json.JSONDecodeError:
+        out = json.loads(v)
+    except RecursionError:
+        raise SceneError(f"--set value {show(v)} nests lists or objects too deeply; fix the brackets") from None
+    except ValueError as e:  # not JSON (a plain word), or an integer beyond Python's int-string limit
+        if "digits" in str(e) and v.lstrip("-+").isdigit():
+            raise SceneError(f"--set value is a {len(v)}-digit number; give a number within +-1e6") from None
         return v
+    check_depth(out, f"--set value {show(v)}")
+    return out
 
 
 def apply_overrides(data, overrides):
@@ -280,7 +385,9 @@ def apply_overrides(data, overrides):
                 node = node[_list_index(node, p, key, where)]
             elif isinstance(node, dict) and p in node:
                 if node[p] is None:
-                    node[p] = {}
+                    full = f"{where}.{p}" if where else p
+                    raise SceneError(f"override '{key}': the scene has no '{full}' block (it is null); add it "
+                                     f"whole first, e.g. --set '{full}={{...}}' (its keys: docs/oracle.md)")
                 node = node[p]
             elif isinstance(node, dict):
                 raise SceneError(f"override '{key}': unknown key '{p}'; known keys "
@@ -294,6 +401,9 @@ def apply_overrides(data, overrides):
             node[_list_index(node, last, key, where)] = _coerce_cli_value(value)
         elif isinstance(node, dict):
             if last not in node:
+                if not node:
+                    raise SceneError(f"override '{key}': '{where}' is empty; set it whole, e.g. --set "
+                                     f"'{where}={{\"{last}\": ...}}'")
                 raise SceneError(f"override '{key}': unknown key '{last}'; known keys here: "
                                  f"{', '.join(sorted(node))}")
             node[last] = _coerce_cli_value(value)
@@ -373,7 +483,7 @@ def _resolve(raw, base_dir, callables):
             raise SceneError(f"scene: '{key}' must be a list")
         items = []
         for k, item in enumerate(given):
-            item = dict(item)
+            item = dict(check_dict(item, f"{key}[{k}]"))
             if key == "objects" and callable(item.get("deform")):
                 callables[("deform", k)] = item.pop("deform")
             items.append(merge_defaults(default, item, f"{key}[{k}]"))
@@ -435,6 +545,9 @@ def load_scene(src=None, overrides=None):
         raw, base_dir = {}, "."
     elif isinstance(src, dict):
         raw, base_dir = src, "."
+    elif not isinstance(src, (str, os.PathLike)):
+        raise SceneError(f"load_scene: the scene must be a JSON file path, a dict, a Scene or None, got "
+                         f"{type(src).__name__} {show(src)}")
     else:
         path = os.fspath(src)
         if os.path.isdir(path):
@@ -444,7 +557,7 @@ def load_scene(src=None, overrides=None):
             raise SceneError(f"scene file '{path}' does not exist; give the path of a JSON scene "
                              "(see docs/oracle.md) or omit it to render the default scene")
         try:
-            with open(path) as f:
+            with open(path, encoding="utf-8-sig") as f:  # a byte-order mark (Windows editors) is not an error
                 raw = json.load(f, object_pairs_hook=_no_duplicate_keys)
         except _DuplicateKey as e:
             raise SceneError(f"scene file '{path}' gives the key '{e.key}' twice in one object (JSON keeps only "
@@ -453,9 +566,16 @@ def load_scene(src=None, overrides=None):
             raise SceneError(f"scene file '{path}' is not a text (JSON) file ({e.reason}); give a JSON scene") from None
         except json.JSONDecodeError as e:
             raise SceneError(f"scene file '{path}' is not valid JSON: {e}") from None
+        except RecursionError:
+            raise SceneError(f"scene file '{path}' nests lists or objects too deeply to read; fix the "
+                             "brackets") from None
+        except ValueError as e:  # an integer beyond Python's int-string limit (4,300 digits)
+            raise SceneError(f"scene file '{path}' holds a number that cannot be read ({str(e)[:70]}); give "
+                             "numbers within +-1e6") from None
         if not isinstance(raw, dict):
             raise SceneError(f"scene file '{path}' must hold a JSON object at the top level")
         base_dir = os.path.dirname(os.path.abspath(path))
+    check_depth(raw, "the scene")
     data = _resolve(raw, base_dir, callables)
     if overrides:
         # a whole block set on the command line (--set 'camera={"width":64}', --set 'objects.0={...}')

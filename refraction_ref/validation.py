@@ -14,11 +14,83 @@ import math
 
 import numpy as np
 
-__all__ = ["SceneError", "check_number", "check_vector", "merge_defaults"]
+__all__ = ["SceneError", "check_number", "check_vector", "check_dict", "merge_defaults", "show", "LIMIT",
+           "INT_LIMIT", "MAX_DEPTH", "check_depth"]
+
+#: The largest magnitude of a scene number that has no range of its own (positions, sizes, radiances,
+#: intensities, amplitudes): beyond it the float32 buffers and the products of the shading (radiance x
+#: photon density, eye distance squared) overflow or lose every digit, so it is refused, not rendered.
+LIMIT = 1e6
+#: The largest whole number without a range of its own (seeds, counts): the kernels take int32.
+INT_LIMIT = 2**31 - 1
+#: The deepest nesting of lists and objects a scene may have (a real scene nests five levels).
+MAX_DEPTH = 32
 
 
 class SceneError(ValueError):
     """A scene that cannot be rendered, with a message saying what to change."""
+
+
+def show(x, n=60):
+    """``repr(x)`` cut to ``n`` characters, so that a 5,000-digit number stays a one-line message."""
+    try:
+        r = repr(x)
+    except ValueError:  # an int beyond Python's int-string limit
+        return "a number of more than 4,300 digits"
+    return r if len(r) <= n else r[: n - 4] + " ..."
+
+
+def check_depth(x, where="scene", limit=MAX_DEPTH):
+    """Refuse lists and objects nested deeper than ``limit`` (walked without recursion).
+
+    Parameters
+    ----------
+    x : object
+        A parsed JSON value.
+    where : str
+        What it is, for the message.
+    limit : int
+        The deepest nesting allowed.
+
+    Returns
+    -------
+    object
+        ``x``, unchanged.
+    """
+    stack = [(x, 1)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, (dict, list, tuple)):
+            if d > limit:
+                raise SceneError(f"{where} nests lists or objects {limit + 1} or more levels deep; a scene needs "
+                                 "at most a few levels: fix the brackets")
+            stack.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return x
+
+
+def check_dict(x, where, nullable=False):
+    """``x`` if it is an object (a dict), else a :class:`SceneError` naming ``where``.
+
+    Parameters
+    ----------
+    x : object
+        The value given.
+    where : str
+        Its dotted key, for the message.
+    nullable : bool
+        None is allowed (and returned).
+
+    Returns
+    -------
+    dict or None
+    """
+    if x is None and nullable:
+        return x
+    if not isinstance(x, dict):
+        got = "null" if x is None else type(x).__name__
+        tail = "give one object per item" if where.endswith("]") else "give an object or leave the key out for its defaults"
+        raise SceneError(f"scene: '{where}' must be an object (a JSON dict), got {got}; {tail}")
+    return x
 
 
 def merge_defaults(default, given, path):
@@ -51,6 +123,9 @@ def merge_defaults(default, given, path):
             name = f"{path}.{k}" if path else k
             raise SceneError(f"scene: unknown key '{name}'; known keys here: {', '.join(sorted(default))}")
         sub = default[k]
+        if isinstance(sub, dict) and sub and v is None:  # null is not "the defaults": say so, not a TypeError
+            name = f"{path}.{k}" if path else k
+            raise SceneError(f"scene: '{name}' is null; give an object (or leave the key out for its defaults)")
         if isinstance(sub, dict) and sub and v is not None:
             out[k] = merge_defaults(sub, v, f"{path}.{k}" if path else k)
         else:
@@ -58,7 +133,7 @@ def merge_defaults(default, given, path):
     return out
 
 
-def check_vector(x, n, where, finite=True):
+def check_vector(x, n, where, finite=True, limit=LIMIT):
     """``x`` as a float64 vector of ``n`` numbers, or a :class:`SceneError` naming ``where``.
 
     Parameters
@@ -71,23 +146,36 @@ def check_vector(x, n, where, finite=True):
         Its dotted key, for the message.
     finite : bool
         Refuse NaN and infinite components.
+    limit : float or None
+        Refuse components of magnitude above it (:data:`LIMIT`; None for no bound).
 
     Returns
     -------
     ndarray, shape (n,), float64
     """
+    items = x if isinstance(x, (list, tuple)) else None
+    if items is None or len(items) != n or not all(_is_number(v) for v in items):
+        raise SceneError(f"scene: '{where}' must be a list of {n} numbers, got {show(x)}"
+                         + ("; true and false are not numbers" if items and any(isinstance(v, bool) for v in items)
+                            else ""))
     try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"scene: '{where}' must be a list of {n} numbers, got {x!r}") from None
-    if a.shape != (n,):
-        raise SceneError(f"scene: '{where}' must be a list of {n} numbers, got {x!r}")
+        a = np.array([float(v) for v in items], dtype=np.float64)
+    except OverflowError:
+        raise SceneError(f"scene: '{where}' holds a number too large for a float ({show(x)}); "
+                         f"give numbers within +-{LIMIT:g}") from None
     if finite and not np.all(np.isfinite(a)):
-        raise SceneError(f"scene: '{where}' holds a NaN or infinite value ({x!r}); give finite numbers")
+        raise SceneError(f"scene: '{where}' holds a NaN or infinite value ({show(x)}); give finite numbers")
+    if limit is not None and np.any(np.abs(a) > limit):
+        raise SceneError(f"scene: '{where}' is {show(x)}; give numbers within +-{limit:g} (larger ones overflow "
+                         "the float32 buffers)")
     return a
 
 
-def check_number(x, where, lo=None, hi=None, lo_open=False, integer=False):
+def _is_number(v):
+    return not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
+
+
+def check_number(x, where, lo=None, hi=None, lo_open=False, integer=False, limit=None):
     """``x`` itself if it is a finite number in range, else a :class:`SceneError` naming ``where``.
 
     Parameters
@@ -102,20 +190,35 @@ def check_number(x, where, lo=None, hi=None, lo_open=False, integer=False):
         ``x`` must be strictly greater than ``lo``.
     integer : bool
         ``x`` must be a whole number.
+    limit : float, optional
+        The largest magnitude; by default :data:`LIMIT` (:data:`INT_LIMIT` for whole numbers) where no
+        ``hi`` is given, so that no number reaches the kernels large enough to overflow.
 
     Returns
     -------
     int or float
         ``x``, unchanged.
     """
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise SceneError(f"scene: '{where}' must be a number, got {x!r}")
-    if not math.isfinite(float(x)):
-        raise SceneError(f"scene: '{where}' is {x!r}; give a finite number")
-    if integer and int(x) != x:
-        raise SceneError(f"scene: '{where}' must be a whole number, got {x!r}")
+    if not _is_number(x):
+        raise SceneError(f"scene: '{where}' must be a number, got {show(x)}")
+    try:
+        f = float(x)
+    except OverflowError:
+        f = math.inf
+    if math.isnan(f) or (math.isinf(f) and not isinstance(x, (int, np.integer))):
+        raise SceneError(f"scene: '{where}' is {show(x)}; give a finite number")
+    if integer and (math.isinf(f) or int(x) != x):
+        if math.isinf(f):
+            raise SceneError(f"scene: '{where}' is a whole number too large to use ({show(x)}); it must be "
+                             f"<= {hi if hi is not None else INT_LIMIT}")
+        raise SceneError(f"scene: '{where}' must be a whole number, got {show(x)}")
     if lo is not None and (x <= lo if lo_open else x < lo):
-        raise SceneError(f"scene: '{where}' is {x!r}; it must be {'>' if lo_open else '>='} {lo}")
+        raise SceneError(f"scene: '{where}' is {show(x)}; it must be {'>' if lo_open else '>='} {lo}")
     if hi is not None and x > hi:
-        raise SceneError(f"scene: '{where}' is {x!r}; it must be <= {hi}")
+        raise SceneError(f"scene: '{where}' is {show(x)}; it must be <= {hi}")
+    if limit is None and hi is None:
+        limit = INT_LIMIT if integer else LIMIT
+    if limit is not None and abs(f) > limit:
+        raise SceneError(f"scene: '{where}' is {show(x)}; give a number within +-{limit:g} (larger ones overflow "
+                         "the float32 buffers)")
     return x

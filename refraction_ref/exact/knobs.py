@@ -84,7 +84,7 @@ def validate_exact(data, base_dir="."):
     if p["normals"] not in NORMALS:
         raise SceneError(f"scene: 'exact.normals' is {p['normals']!r}; choose one of {', '.join(NORMALS)}")
     check_number(p["crease_deg"], "exact.crease_deg", 0.0, 180.0, lo_open=True)
-    check_number(p["max_bounces"], "exact.max_bounces", 1, 100000, integer=True)
+    check_number(p["max_bounces"], "exact.max_bounces", 1, 32767, integer=True)  # the interface counts are int16
     check_number(p["photons"], "exact.photons", 1, 16384, integer=True)
     check_number(p["photon_seed"], "exact.photon_seed", 0, integer=True)
     check_number(p["record"], "exact.record", 0, 64, integer=True)
