@@ -41,13 +41,25 @@ def _check_workers(n):
                          "cluster)")
 
 
+def _check_keep(keep):
+    """``--keep`` naming no stage (``''``, ``','``) would keep nothing without a word: refuse it."""
+    if keep is not None and not [x for x in keep.split(",") if x.strip()]:
+        raise UsageError(f"--keep {keep!r} names no stage; give 'stages' for every stage or a comma list of "
+                         "stage names, e.g. --keep peel,trace (docs/oracle.md, Stage buffers)")
+
+
 def _cmd_render(a):
     from . import load_scene, render
 
     from .result import check_writable, output_paths
+    from .scene import ignored_content
 
+    _check_keep(a.keep)
     scene = load_scene(a.scene, _parse_sets(a.set))
     check_writable(output_paths(a.out), overwrite=a.force)  # before any work, not after it
+    why = ignored_content(scene.data, a.method)
+    if why:
+        print(f"refraction-ref: warning: {why}", file=sys.stderr, flush=True)
     from .warm import compile_report
 
     with compile_report(a.method):  # kernels done of total on a terminal, one line each way in logs
@@ -120,7 +132,7 @@ def _cmd_scene(a):
             raise SceneError(f"scene --to: unknown format {fmt!r}; the one known is 'mitsuba'")
         from .interop.mitsuba import write_xml
 
-        spec = write_xml(scene, path, bsdf=a.bsdf)
+        spec = write_xml(scene, path, bsdf=a.bsdf, force=a.force)
         files = sorted(v["file"] for v in spec.values() if isinstance(v, dict) and "file" in v)
         print(f"wrote {path} and beside it {', '.join(files)} (load with mitsuba.load_file)")
         return 0
@@ -173,13 +185,20 @@ def _cmd_check(a):
 def _cmd_sweep(a):
     from .sweep import load_spec, sweep, tasks_of
 
+    from .sweep import output_files
+
     spec = load_spec(a.spec)
     _check_workers(a.workers if not a.scheduler else None)
+    there = [p for p in output_files(spec, a.out) if os.path.exists(p)]
+    if there and not a.force:  # before the cluster starts (sweep() checks again for Python callers)
+        raise FileExistsError(f"'{there[0]}' exists; choose another --out folder or spec name, or pass --force "
+                              "to replace it")
     n = len(tasks_of(spec))
     where = a.scheduler or f"a LocalCluster of {a.workers} worker process(es) x {a.threads_per_worker} thread(s)"
     print(f"sweep {spec['name']}: {n} tasks on {where}", flush=True)
     rows, paths, wall = sweep(spec, out=a.out, scheduler=a.scheduler, workers=a.workers,
-                              threads_per_worker=a.threads_per_worker, progress=not a.quiet and sys.stderr.isatty())
+                              threads_per_worker=a.threads_per_worker, progress=not a.quiet and sys.stderr.isatty(),
+                              force=a.force)
     failed = [r for r in rows if r.get("status") != "ok"]
     print(f"{len(rows) - len(failed)} tasks ok, {len(failed)} failed, {wall:.1f} s; wrote " + ", ".join(paths))
     for r in failed[:5]:
@@ -291,6 +310,7 @@ def main(argv=None):
     s.add_argument("--bsdf", default="dielectric", choices=("dielectric", "refract"),
                    help="with --to mitsuba: Mitsuba's dielectric (default) or the Fresnel-free refraction of "
                         "the exact references (plugin refraction_ref_refract, registered from Python)")
+    s.add_argument("--force", action="store_true", help="with --to: replace existing files")
     s.set_defaults(fn=_cmd_scene)
     x = sub.add_parser("crosscheck", help="the exact references against Mitsuba 3, per golden case (Markdown report)")
     x.add_argument("--out", default="out/crosscheck", help="folder for crosscheck.md, crosscheck.json, figures")
@@ -327,13 +347,14 @@ def main(argv=None):
                         "they fail the case, so a typo'd key cannot pass unjudged")
     k.set_defaults(fn=_cmd_check)
     w = sub.add_parser("sweep", help="run a grid of scenes x methods x knobs on dask.distributed (error vs time)")
-    w.add_argument("spec", help="sweep spec (JSON; see refraction_ref/sweep.py)")
+    w.add_argument("spec", help="sweep spec (JSON; see docs/sweep.md)")
     w.add_argument("--out", default="out/sweep",
                    help="folder for NAME.csv and NAME.png (and NAME.parquet where pyarrow is installed)")
     w.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing dask cluster (default: a LocalCluster)")
     w.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     w.add_argument("--threads-per-worker", type=int, default=1, help="threads per LocalCluster worker (default 1)")
     w.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on terminals)")
+    w.add_argument("--force", action="store_true", help="replace an existing NAME.csv, NAME.png, NAME.parquet")
     w.set_defaults(fn=_cmd_sweep)
     t = sub.add_parser("tables", help="reproduce every paper's tables and check their claims (Markdown report)")
     t.add_argument("--out", default="out/tables", help="folder for tables.md, claims.csv, one CSV per table, plots")

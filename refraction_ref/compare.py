@@ -118,7 +118,10 @@ def compare_arrays(a, b, mask=None):
     -------
     dict
         ``pixels`` compared; ``exit_dir_deg`` median / p90 / p99 / max over
-        pixels where both exited (``both_exited``); ``interfaces_agree``
+        pixels where both exited (``both_exited``); ``a_stopped_b_exited`` and
+        ``a_exited_b_stopped``: fractions of the compared pixels where one run
+        exits (status 1) and the other stopped (status 2-4), which the angle
+        cannot see; ``interfaces_agree``
         and ``status_agree`` (fractions); ``status_a`` / ``status_b``
         histograms; ``image_rmse`` over all pixels; ``hit_agree``;
         ``caustic_rel_l1`` per shared ``caustic_map_r`` (relative L1, both
@@ -158,6 +161,11 @@ def compare_arrays(a, b, mask=None):
         "interfaces_agree": float(np.mean(a["interfaces"][mask] == b["interfaces"][mask])) if n else float("nan"),
         "status_agree": float(np.mean(a["status"][mask] == b["status"][mask])) if n else float("nan"),
         "hit_agree": float(np.mean(np.asarray(a["hit"]) == np.asarray(b["hit"]))),
+        # where one run exits and the other stopped (status 2-4): the angle above cannot see these pixels
+        "a_stopped_b_exited": float(np.mean((a["status"][mask] >= 2) & (b["status"][mask] == 1))) if n
+        else float("nan"),
+        "a_exited_b_stopped": float(np.mean((a["status"][mask] == 1) & (b["status"][mask] >= 2))) if n
+        else float("nan"),
         "status_a": np.bincount(a["status"][mask].astype(np.int64), minlength=5).tolist(),
         "status_b": np.bincount(b["status"][mask].astype(np.int64), minlength=5).tolist(),
     }
@@ -191,11 +199,14 @@ def format_comparison(c, name_a="A", name_b="B"):
     e = c["exit_dir_deg"]
     lines = [
         f"compared {c['pixels']} pixels hit in {name_b}; both exited: {c['both_exited']}",
-        f"exit direction error (deg): median {e['median']:.3f}  p90 {e['p90']:.3f}  p99 {e['p99']:.3f}  "
-        f"max {e['max']:.3f}",
+        f"exit direction error (deg, where both exited): median {e['median']:.3f}  p90 {e['p90']:.3f}  "
+        f"p99 {e['p99']:.3f}  max {e['max']:.3f};  stopped in {name_a} but exited in {name_b}: "
+        f"{100 * c.get('a_stopped_b_exited', float('nan')):.1f}%, exited in {name_a} but stopped in {name_b}: "
+        f"{100 * c.get('a_exited_b_stopped', float('nan')):.1f}%",
         f"interfaces agree: {100 * c['interfaces_agree']:.1f}%   status agree: {100 * c['status_agree']:.1f}%   "
         f"hit agree: {100 * c['hit_agree']:.2f}%",
-        f"status histogram {min(LABELS)}..{max(LABELS)}: {name_a} {c['status_a']}  {name_b} {c['status_b']}",
+        f"status histogram {min(LABELS)}..{max(LABELS)} over the {c['pixels']} pixels hit in {name_b}: "
+        f"{name_a} {c['status_a']}  {name_b} {c['status_b']}",
     ]
     if "image_rmse" in c:
         lines.append(f"image RMSE: {c['image_rmse']:.4f}")

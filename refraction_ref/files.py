@@ -91,7 +91,42 @@ def check_out_file(path, what="the output"):
                           f"{os.path.join(path, 'render')}")
     if stem in ("", ".", ".."):
         raise OutputError(f"{what} '{path}' has no file name; give one such as {os.path.join(folder, 'render')}")
+    _check_name_length(path, what)
     _probe_folder(folder, what)
+
+
+#: Characters :func:`atomic_path` adds to a file name for its temporary file (``.NAME.tmpPID``).
+_TMP_EXTRA = len(".") + len(".tmp") + 10
+
+
+def _name_max(folder):
+    """The longest file name the file system of ``folder`` (or its nearest existing parent) takes."""
+    f = os.path.abspath(folder or ".")
+    while not os.path.exists(f) and os.path.dirname(f) != f:
+        f = os.path.dirname(f)
+    try:
+        return os.pathconf(f, "PC_NAME_MAX"), os.pathconf(f, "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):  # no pathconf (Windows) or no answer: the common limits
+        return 255, 4096
+
+
+def _check_name_length(path, what):
+    """Refuse a file name (or a folder name on the way) longer than the file system takes, counting the
+    temporary name the atomic write uses, so that the failure comes before the work and not when saving."""
+    folder, name = os.path.split(path)
+    name_max, path_max = _name_max(folder)
+    for part in [p for p in os.path.normpath(folder).split(os.sep) if p] if folder else []:
+        if len(part.encode("utf-8", "surrogateescape")) > name_max:
+            raise OutputError(f"{what} '{path[:60]}...': the folder name '{part[:40]}...' has {len(part)} "
+                              f"characters, more than the {name_max} this file system takes; shorten it")
+    n = len(name.encode("utf-8", "surrogateescape")) + _TMP_EXTRA
+    if n > name_max:
+        raise OutputError(f"{what} file name '{name[:40]}...' has {len(name)} characters; this file system takes "
+                          f"{name_max} (with the {_TMP_EXTRA} of the temporary name written first, at most "
+                          f"{name_max - _TMP_EXTRA}); give a shorter --out")
+    if len(os.path.abspath(path).encode("utf-8", "surrogateescape")) + _TMP_EXTRA > path_max:
+        raise OutputError(f"{what} path has {len(os.path.abspath(path))} characters; this file system takes at "
+                          f"most {path_max - _TMP_EXTRA}; give a shorter --out")
 
 
 def check_out_folder(path, what="the output folder"):

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .files import OutputError, atomic_path, check_out_file, load_npz
+from .files import NotNpzError, OutputError, atomic_path, check_out_file, load_npz
 
 __all__ = ["Result", "tonemap", "load_result", "output_paths", "check_writable"]
 
@@ -171,8 +171,26 @@ def load_result(path):
     FileNotFoundError
         No such file.
     """
+
     path = os.fspath(path)
     with load_npz(path) as z:  # a PNG or a text file: NotNpzError naming it, not NumPy's pickle advice
-        arrays = {k: z[k] for k in z.files if k != "meta"}
-        meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+        arrays = {}
+        for k in z.files:
+            try:
+                arrays[k] = z[k]
+            except Exception as e:  # noqa: BLE001 - object arrays (pickles), a broken zip member
+                why = ("an object array, which is read only by unpickling" if "pickle" in str(e)
+                       else f"{type(e).__name__}: {str(e)[:60]}")
+                raise NotNpzError(f"{path}: the array '{k}' cannot be read ({why}); write plain numeric arrays "
+                                  "(numpy.savez) and meta as a JSON string") from None
+    meta = {}
+    if "meta" in arrays:
+        m = arrays.pop("meta")
+        try:
+            meta = json.loads(str(m)) if m.dtype.kind in "US" and m.ndim == 0 else None
+        except ValueError:
+            meta = None
+        if not isinstance(meta, dict):
+            raise NotNpzError(f"{path}: its 'meta' is not a JSON object (a {m.dtype} array of shape {m.shape}); "
+                              "write meta as numpy.array(json.dumps(meta)), or leave it out")
     return Result(arrays, meta)

@@ -321,7 +321,8 @@ def ignored_content(data, method):
     has_vol = data.get("volume") is not None
     if has_vol and method != "volumetric":
         return (f"the scene's 'volume' block is read only by --method volumetric; {method} ignores it"
-                + (" and renders the scene's objects" if has_obj else " and renders an empty scene"))
+                + (" and renders the scene's objects (the default bunny where the scene gives no 'objects')" if has_obj
+                   else " and renders an empty scene"))
     if method == "imagespace" and has_water and not has_obj:
         return ("--method imagespace ignores the scene's 'water' block and the scene has no objects: the picture is "
                 "the environment alone; render water with --method levelmap (or exact)")
@@ -380,14 +381,16 @@ def apply_overrides(data, overrides):
         if len(parts) == 2:
             parts[0], parts[1] = _alias(parts[0], parts[1])
         node, where = data, ""
-        for p in parts[:-1]:
+        for i, p in enumerate(parts[:-1]):
             if isinstance(node, list):
                 node = node[_list_index(node, p, key, where)]
             elif isinstance(node, dict) and p in node:
                 if node[p] is None:
                     full = f"{where}.{p}" if where else p
-                    raise SceneError(f"override '{key}': the scene has no '{full}' block (it is null); add it "
-                                     f"whole first, e.g. --set '{full}={{...}}' (its keys: docs/oracle.md)")
+                    shown = str(value) if isinstance(value, str) else json.dumps(value, default=str)
+                    raise SceneError(f"override '{key}': the scene has no '{full}' block (it is null); add the "
+                                     f"block itself, e.g. --set '{full}={{\"{'.'.join(parts[i + 1:])}\": "
+                                     f"{shown[:30]}}}' (other keys take their defaults; docs/oracle.md)")
                 node = node[p]
             elif isinstance(node, dict):
                 raise SceneError(f"override '{key}': unknown key '{p}'; known keys "

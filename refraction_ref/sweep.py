@@ -53,9 +53,11 @@ linked keys
 ``error``, ``time``
     The row columns the plot shows (default: the first of
     ``exit_dir_median_deg``, ``image_rmse``, ``*_rel_l1`` the rows have,
-    against ``total_ms``).
+    against ``total_ms``). For render sweeps ``error`` is one of
+    :data:`ERROR_METRICS` or ``caustic_map_<k>_rel_l1`` and ``time`` is
+    ``total_ms`` or ``t_<stage>``; anything else is refused (docs/sweep.md).
 
-Output (``--out DIR``): ``NAME.csv`` (one row per task: scene, method, the
+Output (``--out DIR``; existing files are refused without ``--force``): ``NAME.csv`` (one row per task: scene, method, the
 grid's values, error statistics, median stage timings, total, worker, thread
 count, status), ``NAME.parquet`` where pyarrow is installed (it is not a
 dependency), and ``NAME.png`` (error against time: one line per scene and
@@ -70,11 +72,49 @@ import json
 import os
 import time
 
-__all__ = ["load_spec", "tasks_of", "run_task", "run_function", "run_reference", "sweep", "SweepError"]
+__all__ = ["load_spec", "tasks_of", "run_task", "run_function", "run_reference", "sweep", "SweepError",
+           "ERROR_METRICS", "output_files"]
+
+#: The error columns of a render sweep's rows (each against the reference of the same scene and camera):
+#: the median and 90th percentile of the exit-direction angle where both exit (degrees), the fraction of
+#: pixels hit in the reference whose status agrees, the image RMSE (linear RGB); and, per receiver,
+#: ``caustic_map_<k>_rel_l1`` (relative L1 of the caustic maps, both blurred one texel).
+ERROR_METRICS = ("exit_dir_median_deg", "exit_dir_p90_deg", "status_agree", "image_rmse")
 
 
 class SweepError(ValueError):
     """A spec that cannot be run, with the key to fix."""
+
+
+def _check_columns(spec):
+    """Refuse an ``error`` or ``time`` column a render sweep never writes (the plot would be empty)."""
+    import re
+
+    err, tim = spec.get("error"), spec.get("time")
+    if err is not None and not (isinstance(err, str) and (err in ERROR_METRICS
+                                                          or re.fullmatch(r"caustic_map_\d+_rel_l1", err))):
+        raise SweepError(f"sweep: 'error' is {str(err)[:60]!r}; choose one of {', '.join(ERROR_METRICS)} or "
+                         "caustic_map_<k>_rel_l1 (docs/sweep.md), or leave it out for the first the rows have")
+    if tim is not None and not (isinstance(tim, str) and (tim == "total_ms" or re.fullmatch(r"t_\w+", tim))):
+        raise SweepError(f"sweep: 'time' is {str(tim)[:60]!r}; choose total_ms or t_<stage> (a stage's median "
+                         "time, e.g. t_trace), or leave it out")
+
+
+def output_files(spec, out):
+    """The files a sweep writes in ``out``: ``NAME.csv``, ``NAME.png`` and ``NAME.parquet``.
+
+    Parameters
+    ----------
+    spec : dict
+        A spec from :func:`load_spec`.
+    out : str
+        The output folder.
+
+    Returns
+    -------
+    list of str
+    """
+    return [os.path.join(out, f"{spec['name']}.{ext}") for ext in ("csv", "png", "parquet")]
 
 
 def load_spec(src):
@@ -101,13 +141,20 @@ def load_spec(src):
         if not os.path.isfile(path):
             raise SweepError(f"sweep: spec file '{path}' does not exist")
         try:
-            with open(path) as f:
+            with open(path, encoding="utf-8-sig") as f:
                 spec = json.load(f)
         except json.JSONDecodeError as e:
             raise SweepError(f"sweep: spec file '{path}' is not valid JSON: {e}") from None
+        except (ValueError, RecursionError) as e:  # not UTF-8, a 5,000-digit number, deep nesting
+            raise SweepError(f"sweep: spec file '{path}' cannot be read as JSON ({type(e).__name__}: "
+                             f"{str(e)[:60]})") from None
         base_dir = os.path.dirname(os.path.abspath(path))
-    else:
+    elif isinstance(src, dict):
         spec = dict(src)
+    else:
+        raise SweepError(f"sweep: the spec must be a JSON file path or a dict, got {type(src).__name__}")
+    if not isinstance(spec, dict):
+        raise SweepError("sweep: the spec must be a JSON object {\"name\": ..., \"scenes\": ..., ...} (docs/sweep.md)")
     known = {"name", "scenes", "methods", "grid", "base", "repeats", "threads", "reference", "families",
              "reference_base", "reference_follows", "task", "error", "time"}
     bad = sorted(set(spec) - known)
@@ -125,6 +172,20 @@ def load_spec(src):
     spec.setdefault("reference", "exact")
     spec.setdefault("reference_base", {})
     spec.setdefault("reference_follows", [])
+    if not isinstance(spec["name"], str) or not spec["name"].strip() or os.sep in spec["name"] \
+            or spec["name"].startswith(".") or len(spec["name"]) > 200:
+        raise SweepError(f"sweep: 'name' is {str(spec['name'])[:60]!r}; give a short file name without a "
+                         "folder separator (the outputs are NAME.csv and NAME.png)")
+    for k, typ in (("scenes", dict), ("methods", list), ("grid", dict), ("base", dict), ("reference_base", dict),
+                   ("reference_follows", list)):
+        if not isinstance(spec[k], typ):
+            raise SweepError(f"sweep: '{k}' must be a {'JSON object' if typ is dict else 'list'}, got "
+                             f"{type(spec[k]).__name__} (docs/sweep.md)")
+    for k in ("repeats", "threads"):
+        if isinstance(spec[k], bool) or not isinstance(spec[k], int) or not 1 <= spec[k] <= 1000:
+            raise SweepError(f"sweep: '{k}' is {str(spec[k])[:30]}; give a whole number from 1 to 1000")
+    if not spec.get("task"):
+        _check_columns(spec)
     if "families" in spec:
         if spec["grid"]:
             raise SweepError("sweep: give either 'grid' or 'families', not both")
@@ -397,7 +458,8 @@ def run_task(task, base, repeats, threads, reference=None):
     return row
 
 
-def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progress=False, client=None):
+def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progress=False, client=None,
+          force=False):
     """Run a spec on dask.distributed; returns (rows, paths written).
 
     Parameters
@@ -412,6 +474,8 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
         threads each.
     client : distributed.Client, optional
         Use this client (tests).
+    force : bool
+        Replace existing ``NAME.csv``/``NAME.png``/``NAME.parquet`` (else refused before any work).
     """
     from distributed import as_completed
 
@@ -423,6 +487,10 @@ def sweep(spec, out=".", scheduler=None, workers=2, threads_per_worker=1, progre
     if client is None and not scheduler and int(workers) < 1:
         raise SweepError(f"sweep: workers is {workers}; give at least 1 worker process (or a scheduler)")
     check_out_folder(out, "the sweep's output folder (--out)")  # before any work, not after it
+    there = [p for p in output_files(spec, out) if os.path.exists(p)]
+    if there and not force:
+        raise FileExistsError(f"'{there[0]}' exists; choose another --out folder or spec name, or pass --force "
+                              "to replace it")
     t0 = time.perf_counter()
     with dask_client(scheduler, workers, threads_per_worker, client) as client:
         refs = {}

@@ -50,7 +50,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-__all__ = ["require", "export", "to_dict", "to_xml", "write_xml", "load", "object_meshes",
+__all__ = ["require", "export", "export_files", "to_dict", "to_xml", "write_xml", "load", "object_meshes",
            "envmap_bitmap", "register_refract_bsdf", "REFRACT_PLUGIN", "write_ply", "ENV_WIDTH",
            "export_water_mesh"]
 
@@ -258,7 +258,7 @@ def _medium(sigma_t):
 
 
 def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resolution=None,
-           integrator=None, max_depth=None, near_clip=1e-4):
+           integrator=None, max_depth=None, near_clip=1e-4, prefix=""):
     """Write a scene's meshes and environment into ``folder``; the scene spec (plain data).
 
     Parameters
@@ -283,6 +283,9 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
         segment to the environment), Russian roulette off (``rr_depth`` the same).
     near_clip : float
         The sensor's near clip (our primary rays start at the eye).
+    prefix : str
+        Put before every file name (:func:`write_xml` gives the XML's stem and ``_``, so that two exports
+        into one folder do not share ``object_0.ply``).
 
     Returns
     -------
@@ -309,7 +312,7 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
                  "rfilter": {"type": "box"}, "sample_border": False},
         "sampler": {"type": "independent", "sample_count": 64}}
     for k, m in enumerate(object_meshes(scene)):
-        fn = f"object_{k}.ply"
+        fn = f"{prefix}object_{k}.ply"
         write_ply(os.path.join(folder, fn), m["vertices"], m["faces"], m["normals"])
         e = {"type": "ply", "file": fn, "face_normals": m["normals"] is None,
              "bsdf": _bsdf(bsdf, m["ior"], out_ior)}
@@ -319,7 +322,7 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
         spec[f"object_{k}"] = e
     for k, rc in enumerate(d.get("receivers") or []):
         v, f = object_mesh(rc, scene.base_dir)
-        fn = f"receiver_{k}.ply"
+        fn = f"{prefix}receiver_{k}.ply"
         write_ply(os.path.join(folder, fn), v, f)
         spec[f"receiver_{k}"] = {"type": "ply", "file": fn, "face_normals": True,
                                  "bsdf": {"type": "diffuse",
@@ -327,8 +330,8 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
     w = d.get("water")
     if w is not None:
         wm, res = export_water_mesh(w, water_resolution)
-        write_ply(os.path.join(folder, "water.ply"), wm.vertices, wm.faces, wm.normals)
-        e = {"type": "ply", "file": "water.ply", "face_normals": False,
+        write_ply(os.path.join(folder, f"{prefix}water.ply"), wm.vertices, wm.faces, wm.normals)
+        e = {"type": "ply", "file": f"{prefix}water.ply", "face_normals": False,
              "bsdf": _bsdf(bsdf, float(w["ior"]), out_ior), "resolution": res}
         if float(w["absorption"]) > 0:
             absorbing = True
@@ -348,8 +351,8 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
         spec["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": [float(x) for x in c]}}
     else:
         img = envmap_bitmap(env, env_width, scene.base_dir)
-        _write_exr(os.path.join(folder, "environment.exr"), img)
-        spec["environment"] = {"type": "envmap", "file": "environment.exr", "scale": 1.0}
+        _write_exr(os.path.join(folder, f"{prefix}environment.exr"), img)
+        spec["environment"] = {"type": "envmap", "file": f"{prefix}environment.exr", "scale": 1.0}
     kind = integrator or ("volpath" if absorbing else "path")
     spec["integrator"] = {"type": kind, "max_depth": depth}
     if kind in ("path", "volpath"):
@@ -481,10 +484,38 @@ def to_xml(spec):
            '<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
 
 
-def write_xml(scene, path, **kw):
+def export_files(scene, path):
+    """The files :func:`write_xml` writes for ``scene`` at ``path``: the XML and, beside it, its side files
+    named after the XML's stem (``OUT_object_0.ply``, ``OUT_receiver_0.ply``, ``OUT_water.ply``,
+    ``OUT_environment.exr``).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to export.
+    path : str
+        The XML file.
+
+    Returns
+    -------
+    list of str
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    prefix = os.path.splitext(os.path.basename(path))[0] + "_"
+    d = scene.data
+    names = [f"{prefix}object_{k}.ply" for k in range(len(d["objects"] or []))]
+    names += [f"{prefix}receiver_{k}.ply" for k in range(len(d.get("receivers") or []))]
+    names += [f"{prefix}water.ply"] if d.get("water") is not None else []
+    names += [f"{prefix}environment.exr"] if d["environment"].get("type") != "constant" else []
+    return [os.fspath(path)] + [os.path.join(folder, n) for n in names]
+
+
+def write_xml(scene, path, force=False, **kw):
     """Export ``scene`` as ``path`` (Mitsuba XML) with its mesh and bitmap files beside it; the spec.
 
-    Keyword arguments are those of :func:`export`.
+    The side files are named after the XML's stem (:func:`export_files`), so exports of two scenes into one
+    folder keep apart; an existing file is refused (``FileExistsError``, before anything is written) unless
+    ``force``. Keyword arguments are those of :func:`export`.
 
     Parameters
     ----------
@@ -492,6 +523,8 @@ def write_xml(scene, path, **kw):
         The scene to export.
     path : str
         The XML file; the mesh and bitmap files go into its folder.
+    force : bool
+        Replace existing files.
     **kw
         Passed to :func:`export` (``bsdf``, ``env_width``, ...).
 
@@ -500,7 +533,15 @@ def write_xml(scene, path, **kw):
     dict
         The spec (:func:`export`).
     """
+    from ..files import check_out_file
+
+    check_out_file(path, "the Mitsuba scene (--to mitsuba OUT.xml)")
+    there = [p for p in export_files(scene, path) if os.path.exists(p)]
+    if there and not force:
+        raise FileExistsError(f"'{there[0]}' exists; choose another OUT.xml or pass --force to replace "
+                              f"{'it' if len(there) == 1 else f'the {len(there)} files'}")
     folder = os.path.dirname(os.path.abspath(path))
+    kw.setdefault("prefix", os.path.splitext(os.path.basename(path))[0] + "_")
     spec = export(scene, folder, **kw)
     with open(path, "w") as f:
         f.write(to_xml(spec))
