@@ -387,7 +387,7 @@ _PHOTON_SETS = (
      "light {0}", ("stage.photon_trace.exit_pos_{0}", "stage.photon_trace.exit_dir_{0}",
                    "stage.receiver_hit.hit_pos_{0}")),
     (re.compile(r"stage\.photons\.start_(?:pos|dir|radiance)|stage\.march\.(?:exit_pos|exit_dir|photon_status|"
-                r"hit_pos|hit_receiver)|photon_(?:exit_pos|exit_dir|status|steps)"),
+                r"hit_pos|hit_receiver)|photon_(?:exit_pos|exit_dir|status)"),
      "photons", ("stage.photons.start_pos", "stage.photons.start_dir", "photon_exit_pos", "stage.march.exit_pos",
                  "photon_exit_dir", "stage.march.exit_dir")),
 )
