@@ -246,9 +246,9 @@ def validate(data, base_dir="."):
         alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo", limit=1.0)
         if np.any(alb < 0):
             raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
+    _check_volume_files(data, base_dir)  # the files first: a folder or a truncated file named as such
     for name, block in BLOCKS.items():  # each method's own checks, beside the code that reads them
         block.validate(data, base_dir)
-    _check_volume_files(data, base_dir)
     return data
 
 
@@ -277,6 +277,11 @@ def _check_volume_files(data, base_dir):
         if isinstance(x, (str, os.PathLike)):
             p = os.fspath(x)
             p = p if os.path.isabs(p) else os.path.join(base_dir, p)
+            if os.path.isdir(p):
+                raise SceneError(f"scene: 'volume.{k}' names '{x}', which is a folder; give a .npy file "
+                                 "(numpy.save) or an array")
+            if not os.path.isfile(p):
+                continue  # the volume block's own check names the missing file
             try:
                 a = np.load(p, allow_pickle=False, mmap_mode="r")
                 a = np.asarray(a)
