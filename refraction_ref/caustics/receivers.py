@@ -15,11 +15,14 @@ Triangles
     per (receiver, light), where the caustic map of the other methods is one
     box per receiver aligned with the first light.
 Frames
-    Receiver ``r``'s caustic map lies on the face (nearest the light) of a
-    box around it aligned with the first light's direction at the
-    receiver, exactly as the level-map method's maps
-    (:func:`~refraction_ref.levelmap.planes.reference_box`,
-    :func:`~refraction_ref.levelmap.planes.frame_of`): ``caustic_frame_r``
+    Receiver ``r``'s caustic map lies on the face (nearest the light) of the
+    **tight** box of its vertices in axes aligned with the first light's
+    direction at the receiver: the level map's axes (eq. 4-1,
+    :func:`~refraction_ref.caustics.boxes.box_axes`), not the level map's
+    box (:func:`~refraction_ref.caustics.boxes.reference_box` with its
+    default ``placement="tight"``; ``caustics.placement`` places only the
+    level map's boxes), framed by
+    :func:`~refraction_ref.caustics.boxes.frame_of`: ``caustic_frame_r``
     is (origin, u, v, normal) and texel (a, b) holds the irradiance on the
     first surface of the receiver seen from the light through
     ``origin + (b + .5)/Wc u + (a + .5)/Hc v``. A floor lit from straight
@@ -29,11 +32,17 @@ Eye-space intersection (``receiver_hit = 'eyespace'``)
     line primitive in the camera's image, and the first fragment of the
     line that falls behind the receivers' depth image is its hit. Here the
     ray is clipped to the camera's frustum, sampled once per pixel along
-    its screen-space projection (perspective-correct), compared at each
-    sample with the depth image of the receivers (rasterized from the
-    camera with the shared rasterizer, nearest depth and triangle), and the
-    crossing is refined by linear interpolation of the depth gap between
-    the last sample in front and the first behind. A sample that lands
+    its screen-space projection (``ceil(L) + 1`` steps for ``L`` pixels
+    along the major axis, uniform on screen, perspective-correct along the
+    ray), compared at each sample with the depth image of the receivers
+    (rasterized from the camera with the shared rasterizer, nearest depth
+    and triangle) at the nearest texel, and the crossing is refined by
+    linear interpolation of the depth gap between the last sample in front
+    and the first behind (the first behind itself when the sample before
+    it saw no receiver); the hit's triangle is that of the texel where the
+    crossing was detected. The hit lies on the ray, near but not exactly
+    on the receiver (docs/oracle.md, "Porting rules: image-space",
+    ``receiver_hit``). A sample that lands
     behind by more than the ray's depth step plus 1 % of the depth is taken
     as passing behind an occluder, not a hit, and the march goes on.
     Photons that leave the frustum, or never cross, are lost (the method's
