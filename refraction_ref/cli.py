@@ -379,7 +379,9 @@ def main(argv=None):
         return a.fn(a)
     except (SceneError, CompareError, CheckError, SweepError, TablesError, FileExistsError,
             FileNotFoundError, OutputError, NotNpzError, UsageError) as e:
-        print(f"refraction-ref: error: {e}", file=sys.stderr)
+        # one line whatever the user typed: a control character in a key or path is shown escaped
+        msg = "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in str(e))
+        print(f"refraction-ref: error: {msg}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         # the reader left (`refraction-ref scene | head`): stop quietly, as a shell tool does; stdout goes to

@@ -104,6 +104,32 @@ def angular_error_deg(a, b):
     return np.degrees(np.arctan2(s, c))
 
 
+#: The per-pixel keys compared, with the trailing shape and the dtype kinds each must have (docs/oracle.md)
+_PER_PIXEL = {"status": ((), "iu"), "hit": ((), "bui"), "exit_dir": ((3,), "f"), "interfaces": ((), "iu")}
+
+
+def _check_arrays(arrays, name):
+    """Refuse (CompareError, naming the key) the arrays of a run that the comparison cannot read: a per-pixel
+    key missing beside ``status``, or of the wrong shape or dtype; an ``image`` that is not (H, W, 3) numbers."""
+    if "status" in arrays:
+        shape = np.shape(arrays["status"])
+        if len(shape) != 2:
+            raise CompareError(f"compare: run {name}'s 'status' has shape {shape}; give (H, W) status codes")
+        for k, (tail, kinds) in _PER_PIXEL.items():
+            if k not in arrays:
+                raise CompareError(f"compare: run {name} has 'status' but no '{k}'; write every per-pixel key "
+                                   "(docs/oracle.md, Per-pixel keys)")
+            x = np.asarray(arrays[k])
+            if x.shape != shape + tail or x.dtype.kind not in kinds:
+                raise CompareError(f"compare: run {name}'s '{k}' is {x.dtype} {x.shape}; docs/oracle.md has "
+                                   f"{shape + tail} of kind {kinds!r}")
+    for k, v in arrays.items():
+        if (k == "image" or k.startswith("caustic_map_")) and np.asarray(v).dtype.kind not in "fiub":
+            raise CompareError(f"compare: run {name}'s '{k}' holds {np.asarray(v).dtype} values; give numbers")
+    if "image" in arrays and (np.ndim(arrays["image"]) != 3 or np.shape(arrays["image"])[-1] != 3):
+        raise CompareError(f"compare: run {name}'s 'image' has shape {np.shape(arrays['image'])}; give (H, W, 3)")
+
+
 def compare_arrays(a, b, mask=None):
     """Statistics of run ``a`` against run ``b`` (the reference).
 
@@ -128,9 +154,11 @@ def compare_arrays(a, b, mask=None):
         blurred by one texel). Runs without per-pixel keys (water caustics)
         get only the caustic and image statistics.
     """
+    _check_arrays(a, "A")
+    _check_arrays(b, "B")
     caustics = {}
     for k in sorted(a):
-        if k.startswith("caustic_map_") and k in b:
+        if k.startswith("caustic_map_") and k in b and np.shape(a[k]) == np.shape(b[k]):
             from .metrics import relative_l1
 
             caustics[k] = relative_l1(a[k], b[k], blur=1.0)

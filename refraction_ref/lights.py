@@ -59,11 +59,16 @@ def validate_lights(data):
 
     w = data.get("water")
     top = None
-    if w is not None:
-        top = float(w["height"]) + sum(abs(float(x["amplitude"])) for x in w["waves"])
+    if w is not None:  # the water block's own checks run later: its numbers are checked here before use
+        waves = w["waves"] if isinstance(w.get("waves"), list) else []
+        top = float(check_number(w["height"], "water.height")) + sum(
+            abs(float(check_number(x["amplitude"], f"water.waves[{k}].amplitude")))
+            for k, x in enumerate(waves) if isinstance(x, dict) and "amplitude" in x)
+    if not isinstance(data["lights"], list):
+        raise SceneError("scene: 'lights' must be a list of lights")
     for k, lt in enumerate(data["lights"] or []):
-        if lt["type"] not in LIGHT_TYPES:
-            raise SceneError(f"scene: 'lights[{k}].type' is {lt['type']!r}; use 'directional' or 'point'")
+        if not isinstance(lt["type"], str) or lt["type"] not in LIGHT_TYPES:
+            raise SceneError(f"scene: 'lights[{k}].type' is {str(lt['type'])[:40]!r}; use 'directional' or 'point'")
         if lt["type"] == "directional":
             d = check_vector(lt["direction"], 3, f"lights[{k}].direction")
             if not np.linalg.norm(d) > 0:

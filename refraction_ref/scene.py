@@ -22,7 +22,7 @@ import numpy as np
 
 from .graph import BLOCKS, load_builtin_blocks
 from .validation import (SceneError, check_depth, check_dict, check_number, check_vector, merge_defaults,
-                         show)
+                         printable, show)
 
 __all__ = ["Scene", "SceneError", "load_scene", "default_scene", "DEFAULTS", "apply_overrides", "BLOCKS",
            "ignored_content", "FOV_MIN"]
@@ -382,7 +382,10 @@ def apply_overrides(data, overrides):
     """
     data = copy.deepcopy(data)
     for key, value in (overrides or {}).items():
+        if not isinstance(key, str):
+            raise SceneError(f"override {show(key)}: keys are dotted strings, e.g. 'camera.width'")
         parts = key.split(".")
+        key = printable(key)
         if len(parts) == 2:
             parts[0], parts[1] = _alias(parts[0], parts[1])
         node, where = data, ""

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 __all__ = ["SceneError", "check_number", "check_vector", "check_dict", "merge_defaults", "show", "LIMIT",
-           "INT_LIMIT", "MAX_DEPTH", "check_depth"]
+           "INT_LIMIT", "MAX_DEPTH", "check_depth", "printable"]
 
 #: The largest magnitude of a scene number that has no range of its own (positions, sizes, radiances,
 #: intensities, amplitudes): beyond it the float32 buffers and the products of the shading (radiance x
@@ -38,6 +38,11 @@ def show(x, n=60):
     except ValueError:  # an int beyond Python's int-string limit
         return "a number of more than 4,300 digits"
     return r if len(r) <= n else r[: n - 4] + " ..."
+
+
+def printable(text):
+    """``text`` with every non-printable character (a newline, a carriage return) escaped: one line."""
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in str(text))
 
 
 def check_depth(x, where="scene", limit=MAX_DEPTH):
