@@ -316,11 +316,13 @@ _EXPLAINED_BY = {"stage.peel.ldi": ("stage.voxelize.bits",),
 
 
 # --------------------------------------------------------------------- shared receiver edges (hit_face ties)
-#: a photon whose golden hit lies within this many camera pixels (the pixel's footprint at the hit's depth)
-#: of an edge two receiver triangles share may name either triangle: the eye-space march names the triangle
-#: of the depth image's texel where it detects the crossing, up to about one pixel from the hit point, and an
-#: exact hit on the edge itself is a float tie
-FACE_TIE_PIXELS = 1.5
+#: a photon whose golden hit lies within this many camera pixels (the pixel's footprint at the hit's depth,
+#: measured in the triangles' plane) of an edge two receiver triangles share may name either triangle: the
+#: eye-space march names the triangle of the depth image's texel where it detects the crossing, not the one
+#: holding the hit (on ``is_caustics_sphere`` 277 of 11608 golden hits lie in the other triangle, all within
+#: 2 pixels of the diagonal: a port with an exact ray-triangle hit names those), and an exact hit on the edge
+#: itself is a float tie
+FACE_TIE_PIXELS = 2.0
 
 
 def _point_segment_distance(p, a, b):
@@ -370,7 +372,10 @@ def face_ties(golden, name, gold, key, cand_face):
     a = np.take_along_axis(A, ia[:, :1, None], axis=1)[:, 0]
     b = np.take_along_axis(A, ia[:, 1:2, None], axis=1)[:, 0]
     p = hp[sel]
-    dist = _point_segment_distance(p, a, b)
+    n = np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+    # measured in the triangles' plane: the eye-space march's hits lie up to a few 1e-3 off it
+    dist = _point_segment_distance(p - np.sum((p - A[:, 0]) * n, axis=-1)[:, None] * n, a, b)
     z = np.maximum(-cam.world_to_view(p)[:, 2], 0.0)
     pix = 2.0 * cam.sy * (1.0 if cam.ortho else z) / cam.height
     out[sel] = two & (dist <= FACE_TIE_PIXELS * pix)
