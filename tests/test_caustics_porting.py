@@ -54,8 +54,11 @@ def _doc_namespace(scene):
     return ns
 
 
-def _scene(case, point_light=False):
+def _scene(case, point_light=False, edge=False):
     data = json.loads((GOLDEN / f"{case}.json").read_text())["scene"]
+    if edge:  # a narrow floor whose edge cuts the caustic: photons cross from no receiver to behind one
+        data["receivers"][0]["size"] = [1.2, 3]
+        data["receivers"][0]["transform"]["translate"] = [-0.75, -0.5, 0]
     for old, new in (("caustic_map", "map_size"), ("gather", "gather")):  # the old names, moved to their block
         if old in data.get("imagespace", {}):
             data.setdefault("caustics", {})[new] = data["imagespace"].pop(old)
@@ -151,9 +154,9 @@ class _Port:
                                    int(self.scene.data["imagespace"]["delta"]), cam["near"], cam["far"])
 
 
-@pytest.fixture(scope="module", params=[("is_caustics_sphere", False), ("is_caustics_slanted", False),
-                                        ("is_caustics_slanted", True)],
-                ids=["sphere", "slanted", "slanted_point_light"])
+@pytest.fixture(scope="module", params=[("is_caustics_sphere", False, False), ("is_caustics_slanted", False, False),
+                                        ("is_caustics_slanted", True, False), ("is_caustics_slanted", False, True)],
+                ids=["sphere", "slanted", "slanted_point_light", "slanted_floor_edge"])
 def port(request):
     return _Port(_scene(*request.param))
 
@@ -205,3 +208,20 @@ def test_the_slanted_case_exposes_the_cosine_and_the_shadow():
     full, _ = p.final(rgb, texel_shift=1)
     moved = np.any(full != p.buf("caustic_final.image_caustics"), axis=2)
     assert moved.sum() >= 10  # a shadow map read one light texel off moves the shadow's edge
+
+
+def test_a_crossing_after_a_hole_is_the_sample_itself():
+    # the march's hole rule (no secant when the previous sample's texel had no receiver) is
+    # exercised by the floor-edge scene and reproduced there bit for bit
+    p = _Port(_scene("is_caustics_slanted", edge=True))
+    ns = dict(p.ns)
+    src = [b for b in _blocks("### Caustic stages (§4.1)\n") if "def march" in b][0]
+    rule = "f = -gap_prev / (gap - gap_prev) if np.isfinite(gap_prev) else 1.0"
+    assert rule in src
+    ns["AFTER_HOLE"] = []
+    exec(src.replace(rule, rule + "\n            AFTER_HOLE.append(not np.isfinite(gap_prev))"), ns)  # noqa: S102
+    cam = p.scene.data["camera"]
+    P, face = ns["receiver_hits"](p.buf("photon_trace.exit_pos_0"), p.buf("photon_trace.exit_dir_0"), p.depth,
+                                  p.triangle, cam["near"], cam["far"])
+    assert sum(ns["AFTER_HOLE"]) >= 5
+    assert _same(P, p.buf("receiver_hit.hit_pos_0")) and _same(face, p.buf("receiver_hit.hit_face_0"))
