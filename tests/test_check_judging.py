@@ -369,3 +369,29 @@ def test_a_one_texel_shift_of_the_exact_water_map_fails_and_a_fresh_seed_passes(
     for k in shifted:
         mt = res["keys"][k]["error"]["moments"]
         assert max(abs(t) for t in mt["t"]) < mt["threshold"]
+
+
+def test_the_moments_test_leaves_out_the_centroid_of_empty_maps():
+    rng = np.random.default_rng(5)
+    batches = np.stack([_poisson_map(rng, 2000) if k % 2 else np.zeros((64, 64)) for k in range(8)])
+    assert moments_test(_poisson_map(rng, 2000) * 0.5, batches, 1e-3)["ok"]  # half the batches are empty
+    empty = moments_test(np.zeros((64, 64)), np.zeros((8, 64, 64)), 1e-3)
+    assert empty["ok"] and empty["t"] == [0.0, 0.0, 0.0]
+    assert not moments_test(_poisson_map(rng, 2000), np.zeros((8, 64, 64)), 1e-3)["ok"]  # light where none is
+
+
+def test_volumetric_photons_are_matched_by_their_start(suite, tmp_path):
+    case = "vol_luneburg"
+    g = _gold(suite, case)
+    P = g["stage.photons.start_pos"].shape[0]
+    keys = [k for k in g if k.startswith(("stage.photons.", "stage.march.", "photon_exit_", "photon_status"))
+            and g[k].ndim >= 1 and g[k].shape[0] == P]
+    drop = np.arange(3, P, 40)  # 2.5 % of the photons never started
+    res = _check(suite, tmp_path, case, {k: np.delete(g[k], drop, axis=0) for k in keys}).cases[case]
+    j = res["keys"]["stage.photons.start_pos"]
+    assert not res.ok and res.earliest_failing_stage == "photons" and j["photons"]["missing"] == drop.tolist()
+    judged = [k for k in keys if "same_as" not in res["keys"][k]]  # photon_exit_pos: a copy of the march's
+    assert len(judged) >= 8 and all(res["keys"][k]["photons"]["anchor"] == "stage.photons.start_pos" for k in judged)
+    for k in judged:  # downstream of the matching the march's rows agree photon by photon
+        if not k.startswith("stage.photons."):
+            assert res["keys"][k]["counts"]["located"] == len(drop), (k, res["keys"][k]["detail"])

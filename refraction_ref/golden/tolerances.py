@@ -596,13 +596,17 @@ def moments_test(cand, batches, alpha):
         return np.stack([tot, cx, cy], axis=-1)
 
     sb, sc = stats(b), stats(c)
-    mean = sb.mean(axis=0)
-    sd = sb.std(axis=0, ddof=1) if K > 1 else np.zeros(3)
+    # an empty batch or candidate has no centroid: the total judges emptiness, the centroid is left out
+    n = np.count_nonzero(np.isfinite(sb), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(n > 0, np.nansum(sb, axis=0) / np.maximum(n, 1), np.nan)
+        sd = np.sqrt(np.nansum((sb - mean) ** 2, axis=0) / np.maximum(n - 1, 1))
+    sd = np.where(n > 1, sd, 0.0)
     thr = float(student.isf(alpha / 3.0 / 2.0, max(K - 1, 1)))
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(sd > 0, (sc - mean) / (np.where(sd > 0, sd, 1.0) * np.sqrt(1.0 + 1.0 / K)),
-                     np.where(np.isclose(sc, mean, rtol=1e-9, atol=0.0) | (np.isnan(sc) & np.isnan(mean)),
-                              0.0, np.inf))
+                     np.where(np.isclose(sc, mean, rtol=1e-9, atol=0.0), 0.0, np.inf))
+    t[1:] = np.where(np.isnan(sc[1:]) | np.isnan(mean[1:]), 0.0, t[1:])
     t = np.nan_to_num(t, nan=np.inf)
     return {"ok": bool(np.all(np.abs(t) <= thr)), "t": [float(x) for x in t], "threshold": thr,
             "shift": [float(sc[1] - mean[1]), float(sc[2] - mean[2])], "sd": [float(sd[1]), float(sd[2])]}
