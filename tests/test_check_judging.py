@@ -331,16 +331,20 @@ def test_a_manifest_key_without_a_tolerance_is_judged_by_the_table_or_its_defaul
     m = json.load(open(other / "manifest.json"))
     keys = m["cases"][case]["keys"]
     del keys["stage.photon_paths.path_index"]["tolerance"]
+    keys["stage.gradient.field"]["tolerance"] = dict(DEFAULT)  # as a build records a key no rule names
     raw = json.dumps(m).encode()
     (other / "manifest.json").write_bytes(raw)
     done = json.load(open(other / COMPLETE))
     done["manifest_sha256"] = hashlib.sha256(raw).hexdigest()
     json.dump(done, open(other / COMPLETE, "w"))
     g = _gold(suite, case)
-    out = rr.check(_cand_dir(tmp_path, case, {"stage.photon_paths.path_index": g["stage.photon_paths.path_index"]}),
+    out = rr.check(_cand_dir(tmp_path, case, {k: g[k] for k in ("stage.photon_paths.path_index",
+                                                                "stage.gradient.field")}),
                    str(other), cases=[case], panels=False)
     j = out.cases[case]["keys"]["stage.photon_paths.path_index"]
     assert out.ok and j["kind"] == "exact"
+    f = out.cases[case]["keys"]["stage.gradient.field"]
+    assert f["detail"].startswith("default tolerance (no rule names this key)") and "no rule names" in f["why"]
 
 
 def _cand_dir(tmp_path, case, arrays):
