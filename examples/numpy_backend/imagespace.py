@@ -31,8 +31,21 @@ from __future__ import annotations
 import json
 import os
 from collections import namedtuple
+from types import SimpleNamespace
 
 import numpy as np
+
+def _load_caustics():
+    """The caustic passes (``imagespace_caustics.py`` beside this file), loaded by path."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "imagespace_caustics", os.path.join(os.path.dirname(os.path.abspath(__file__)), "imagespace_caustics.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+caustics_passes = _load_caustics()
 
 MISSED, EXITED, LIMIT, TIR, LOST = 0, 1, 2, 3, 4
 
@@ -50,9 +63,11 @@ BUGS = {
     "path_length_ior": "trace: optical length (times ior) stored in path_length instead of the geometric one",
     "no_snap": "minmax/voxelize: the rasterizer samples the unsnapped triangle (no 1/256 pixel grid), as an "
                "analytic rasterizer or a ray caster does; not a bug: check admits it (the depth keys' slope term)",
+    **caustics_passes.BUGS,
 }
 
-Camera = namedtuple("Camera", "W H sx sy eye B near")
+#: ``far`` is read only by the caustic march; ``ortho`` marks a directional light's view (orthographic)
+Camera = namedtuple("Camera", "W H sx sy eye B near far ortho", defaults=(np.inf, False))
 Knobs = namedtuple(
     "Knobs",
     "iterations layers slices bounds mip_size bound_margin blend filter peel_all slicing "
@@ -77,7 +92,7 @@ def camera(cam):
     r = np.cross(f, np.asarray(cam["up"], np.float64))
     r = r / np.linalg.norm(r)
     u = np.cross(r, f)
-    return Camera(W, H, sx, sy, eye, np.stack([r, u, -f]), float(cam["near"]))
+    return Camera(W, H, sx, sy, eye, np.stack([r, u, -f]), float(cam["near"]), float(cam["far"]))
 
 
 def to_view(c, P):
@@ -95,14 +110,16 @@ def to_world(c, p, point=True):
 
 
 def unproject(c, col, row, d):
-    """View point at depth d seen at continuous screen position (col, row)."""
+    """View point at depth d seen at continuous screen position (col, row); orthographic: no factor d."""
+    if c.ortho:
+        return (col * (2.0 / c.W) - 1.0) * c.sx, (1.0 - row * (2.0 / c.H)) * c.sy, -d
     return (col * (2.0 / c.W) - 1.0) * c.sx * d, (1.0 - row * (2.0 / c.H)) * c.sy * d, -d
 
 
 def screen(c, P):
     """The trace's projection of view points (N, 3) -> (row, col); (-1, -1) behind the eye or off the image."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / -P[:, 2]
+        inv = 1.0 if c.ortho else 1.0 / -P[:, 2]
         row = 0.5 * c.H - P[:, 1] * inv * (0.5 * c.H / c.sy)
         col = P[:, 0] * inv * (0.5 * c.W / c.sx) + 0.5 * c.W
     ok = (-P[:, 2] > 0) & (row >= 0) & (row < c.H) & (col >= 0) & (col < c.W)
@@ -187,16 +204,21 @@ def _clip_near(c, V, F):
         pt[:, 2] = -near
         out[rows, cnt[rows]] = pt
         cnt[rows] += 1
-    tris = []
+    tris, origin = [], []
     for k in (1, 2):                                  # fan from the first vertex
         rows = np.nonzero(cnt >= k + 2)[0]
         tris.append(np.stack([out[rows, 0], out[rows, k], out[rows, k + 1]], 1))
+        origin.append(rows)
     T2 = np.concatenate(tris, 0)
-    return T2.reshape(-1, 3), np.arange(len(T2) * 3).reshape(-1, 3)
+    return T2.reshape(-1, 3), np.arange(len(T2) * 3).reshape(-1, 3), np.concatenate(origin)
 
 
-def fragments(c, Vw, F, bugs=()):
+def fragments(c, Vw, F, bugs=(), with_triangle=False):
     """Every fragment (pixel index, depth) of the GPU-style rasterizer: 1/256 snap, top-left rule, no culling.
+
+    ``with_triangle=True`` also returns each fragment's triangle (its row in ``F``; a clipped
+    triangle's pieces keep it). An orthographic view (``c.ortho``) snaps with d replaced by 1 and
+    interpolates the depth linearly.
 
     ``bugs=("no_snap",)`` samples the unsnapped triangle (float64 vertices and edge functions, the same
     top-left rule): the depths of an analytic rasterizer, which ``check`` admits.
@@ -207,20 +229,23 @@ def fragments(c, Vw, F, bugs=()):
     """
     W, H, sx, sy = c.W, c.H, c.sx, c.sy
     V = to_view(c, Vw)
+    origin = np.arange(len(F))
     if np.any(-V[:, 2] < c.near):
-        V, F = _clip_near(c, V, F)
+        V, F, origin = _clip_near(c, V, F)
     d = -V[:, 2]
+    dp = np.ones_like(d) if c.ortho else d
     with np.errstate(divide="ignore", invalid="ignore"):
-        col = (V[:, 0] / (d * sx) * 0.5 + 0.5) * W
-        row = (0.5 - V[:, 1] / (d * sy) * 0.5) * H
+        col = (V[:, 0] / (dp * sx) * 0.5 + 0.5) * W
+        row = (0.5 - V[:, 1] / (dp * sy) * 0.5) * H
         bad = (d <= 0) | ~(np.abs(col) < 2.0 ** 22) | ~(np.abs(row) < 2.0 ** 22)
         X = np.where(bad, 0.0, col * 256.0)
         Y = np.where(bad, 0.0, row * 256.0)
     if "no_snap" not in bugs:                         # the 1/256 sub-pixel grid; unsnapped: float64 vertices
         X, Y = np.rint(X).astype(np.int64), np.rint(Y).astype(np.int64)
     with np.errstate(divide="ignore"):
-        D = 1.0 / d
-    F = F[~bad[F].any(1)]
+        D = d if c.ortho else 1.0 / d
+    keep = ~bad[F].any(1)
+    F, origin = F[keep], origin[keep]
     x0, x1, x2 = X[F].T
     y0, y1, y2 = Y[F].T
     d0, d1, d2 = D[F].T
@@ -264,7 +289,10 @@ def fragments(c, Vw, F, bugs=()):
            & ((w1 > 0) | ((w1 == 0) & own(a2, b2, a0, b0)))
            & ((w2 > 0) | ((w2 == 0) & own(a0, b0, a1, b1))))
     w0, w1, w2, t = w0[cov], w1[cov], w2[cov], t[cov]
-    depth = 1.0 / ((w0 * d0[t] + w1 * d1[t] + w2 * d2[t]) * (1.0 / A[t]))
+    lin = (w0 * d0[t] + w1 * d1[t] + w2 * d2[t]) * (1.0 / A[t])
+    depth = lin if c.ortho else 1.0 / lin
+    if with_triangle:
+        return i[cov] * W + j[cov], depth, origin[t]
     return i[cov] * W + j[cov], depth
 
 
@@ -540,7 +568,10 @@ def pass_trace(c, k, v_view, ray_dir, ldi, total, zmax, zlo, zhi, bounds_hi, bou
     # live state, compressed to the pixels still tracing
     pix = np.nonzero(~missed)[0]
     v = v_view.reshape(N, 3)[pix].copy()
-    q = v * (d0[pix] / -v[:, 2])[:, None]              # first hit: the primary ray at layer 0's depth
+    if c.ortho:                                        # a light's parallel photons start on layer 0
+        q = np.stack(unproject(c, pix % W + 0.5, pix // W + 0.5, d0[pix]), -1)
+    else:
+        q = v * (d0[pix] / -v[:, 2])[:, None]          # first hit: the primary ray at layer 0's depth
     p = q.copy()
     t = np.zeros(len(pix), np.int64)
     ti, tj = pix // W, pix % W
@@ -733,9 +764,16 @@ def render_case(scene_path, bugs=()):
     out["hit"] = tr["status"] != MISSED
     out["depth_complexity"] = total
     caustics = bool(data.get("lights")) and bool(data.get("receivers"))
-    # with caustics `image` is the full scene (caustic_final, not ported here): the
-    # refraction-only view is `image_refraction`
+    # with caustics `image` is the full scene (caustic_final's): the refraction-only view is
+    # `image_refraction`
     out["image_refraction" if caustics else "image"] = st["shade"]["image"]
+    if caustics:
+        before = set(st)
+        final = caustics_passes.run_caustics(
+            SimpleNamespace(**globals()), c, k, data, Vw, F, ior, outside_ior, st["geometry"]["absorption"], st,
+            v_view, bugs)
+        out.update({f"stage.{s}.{b}": a for s in st if s not in before for b, a in st[s].items()})
+        out.update(final)
     return out
 
 
