@@ -282,6 +282,13 @@ def _check_volume_files(data, base_dir):
                                  "(numpy.save) or an array")
             if not os.path.isfile(p):
                 continue  # the volume block's own check names the missing file
+            with open(p, "rb") as f:
+                npy = f.read(6) == b"\x93NUMPY"
+            if not npy:  # NumPy would read it as a pickle, and advise loading it unsafely
+                from .files import file_kind
+
+                raise SceneError(f"scene: 'volume.{k}' names '{x}', which is not a .npy array ({file_kind(p)}); "
+                                 "save the array with numpy.save")
             try:
                 a = np.load(p, allow_pickle=False, mmap_mode="r")
                 a = np.asarray(a)
