@@ -16,7 +16,7 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.golden import build
-from refraction_ref.golden.check import FACE_TIE_PIXELS, align_photons, format_report
+from refraction_ref.golden.check import align_photons
 from refraction_ref.golden.tolerances import (DEFAULT, DEFAULT_INT, FLUX, RADIANCE_FLOOR, VOLUME_FLUX, flux_error,
                                               fmt_share, judge, moments_test, tolerance_for)
 
