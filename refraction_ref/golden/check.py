@@ -768,7 +768,7 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
         first = judged_as.get(sig) if spec.get("sha256") else None
         if first is not None and _same_bytes(cand[first], c):
             f = res["keys"][first]
-            j.update(ok=f["ok"], same_as=first, kind=f["kind"],
+            j.update(ok=f["ok"], same_as=first, kind=f["kind"], why=f"as `{first}`",
                      detail=f"same as `{first}` (byte-identical to it here and in the golden): judged once there")
             passed[k] = bool(j["ok"])
             if not j["ok"]:
