@@ -784,7 +784,10 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
                 except ValueError:
                     r = None
             if r is None:
-                j.update(ok=False, detail=f"shape {tuple(c.shape)} where the golden has {tuple(spec['shape'])}")
+                ps = _photon_set(k)
+                hint = (f" (supply one of {', '.join(f'`{a}`' for a in ps[1])} with the same photon count to have "
+                        "the photons matched one by one)" if ps else "")
+                j.update(ok=False, detail=f"shape {tuple(c.shape)} where the golden has {tuple(spec['shape'])}" + hint)
             else:
                 r.pop("bad")  # over the golden's photons, not the candidate's: no mask file
                 j.update(r)
