@@ -399,8 +399,9 @@ def _normals_central(c, layer, delta, forward=False):
     with np.errstate(invalid="ignore", divide="ignore"):
         gx = np.where((oR != oL) & (xr != xl), (dr - dl) / (xr - xl), 0.0)
         gy = np.where((oU != oD) & (yu != yd), (du - dd) / (yu - yd), 0.0)
-    s = 1.0 / np.sqrt(gx * gx + gy * gy + 1.0)
-    n = np.stack([gx * s, gy * s, s], -1)
+    with np.errstate(invalid="ignore"):               # absent texels (inf - inf) become NaN below anyway
+        s = 1.0 / np.sqrt(gx * gx + gy * gy + 1.0)
+        n = np.stack([gx * s, gy * s, s], -1)
     n[~np.isfinite(layer)] = np.nan
     return n
 

@@ -37,6 +37,10 @@ BUGS = {
     "plane_other_diagonal": "receivers: the plane split along the other diagonal (faces [0, 1, 3], [1, 2, 3])",
     "light_mean_centre": "photon_trace: the light camera's bounding sphere centred on the vertices' mean",
     "map_transposed": "receivers/splat: map rows along u and columns along v",
+    "hit_face_at_hit": "receiver_hit: hit_face the triangle of the texel under hit_pos instead of the texel "
+                       "where the crossing was detected",
+    "final_nearest_lookup": "caustic_final: the caustic map read at the nearest texel (point sampling) "
+                            "instead of bilinearly",
 }
 
 LightCam = namedtuple("LightCam", "cam far N")
@@ -335,7 +339,13 @@ def receiver_hits(c, exit_pos, exit_dir, depth, triangle, bugs=()):
         act &= m <= n
     face = np.where(hi >= 0, triangle[np.maximum(hi, 0), np.maximum(hj, 0)], -1)
     face = np.where(np.isfinite(t_hit), face, -1)
-    return exit_pos + t_hit[:, None] * exit_dir, face
+    hit_pos = exit_pos + t_hit[:, None] * exit_dir
+    if "hit_face_at_hit" in bugs:                      # the texel under the resolved point instead
+        ok = face >= 0
+        row, col = _project(c, *base_to_view(c, hit_pos[ok]).T)
+        face[ok] = triangle[np.clip(np.floor(row), 0, c.H - 1).astype(np.int64),
+                            np.clip(np.floor(col), 0, c.W - 1).astype(np.int64)]
+    return hit_pos, face
 
 
 def base_to_view(c, P):
@@ -497,6 +507,8 @@ def shade_receiver(P, face, dirs, soup, lights, vis, rgb, Hc, Wc, bugs=()):
         i0 = np.minimum(np.floor(y).astype(np.int64), Hc - 1)
         j1, i1 = np.minimum(j0 + 1, Wc - 1), np.minimum(i0 + 1, Hc - 1)
         fx, fy = (x - j0)[:, None], (y - i0)[:, None]
+        if "final_nearest_lookup" in bugs:             # point sampling: the texel under the point
+            fx, fy = np.round(fx), np.round(fy)
         E = rgb[r]
         acc[sel] += (1 - fy) * ((1 - fx) * E[i0, j0] + fx * E[i0, j1]) + fy * ((1 - fx) * E[i1, j0] + fx * E[i1, j1])
     return soup["albedo"][own] * acc
