@@ -75,8 +75,9 @@ def half_contrast(field, outside_ior):
 
 # ----------------------------------------------------------------------------- photons
 def slab(o, d, lo, hi):
-    """(t_in, t_out) of one ray and a box; t_in = inf for a miss. 1/0 = +-inf; a NaN t (0 * inf: the
-    ray lies in a face plane) makes that axis (-inf, inf): the bounds are inclusive."""
+    """(t_in, t_out) of one ray and a box; t_in = inf for a miss. 1/0 = +-inf; a NaN t0 (0 * inf: the
+    ray lies in the lower face's plane) makes that axis (-inf, inf), a NaN t1 (the upper face's) a miss:
+    the box is half-open, [lo, hi)."""
     tin, tout = -math.inf, math.inf
     for a in range(3):
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -85,6 +86,8 @@ def slab(o, d, lo, hi):
             t1 = float((hi[a] - o[a]) * inv)
         if t0 != t0:
             l, h = -math.inf, math.inf
+        elif t1 != t1:                                # NaN propagates (np.minimum): no entry
+            return math.inf, math.nan
         else:
             l, h = min(t0, t1), max(t0, t1)
         tin, tout = max(tin, l), min(tout, h)
