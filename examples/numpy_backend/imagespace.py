@@ -4,7 +4,8 @@ Written from ``docs/oracle.md`` ("Porting rules: image-space", "Per-pixel
 keys", "Stage buffers", "Conformance") and ``docs/backends.md`` alone, the
 way a GPU port is structured: one function per pass (``rays``, ``geometry``,
 ``minmax``, ``voxelize``, ``peel``, ``reduce``, ``normals``, ``trace``,
-``shade``), every pass vectorised over all pixels; the trace loops over
+``shade``; on scenes with lights and receivers the caustic stages of
+``imagespace_caustics.py``), every pass vectorised over all pixels; the trace loops over
 interface events and search iterations with all live pixels at once (one
 "draw" per event, as a multi-pass shader would).
 
@@ -135,6 +136,9 @@ def knobs(scene_data):
             raise NotImplementedError(
                 f"imagespace.{key} = {k[key]!r} is not implemented by this example backend "
                 f"(only {want!r}); set imagespace.{key} to {want!r}")
+    if k.get("grid") is not None:
+        raise NotImplementedError("imagespace.grid is not implemented by this example backend "
+                                  "(the textures at the image's size); remove imagespace.grid")
     if k["normals"] not in ("central", "forward"):
         raise NotImplementedError(
             f"imagespace.normals = {k['normals']!r} is not implemented (use 'central' or 'forward')")

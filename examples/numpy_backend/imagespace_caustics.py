@@ -558,7 +558,10 @@ def pass_caustic_final(base, c, k, data, zfront, rdepth, rtri, ray_dir, v_view, 
     full[si] = environment(base, env, tr["last_dir"].reshape(-1, 3)[si])
     full[oi] *= np.exp(-absorption * (tr["path_length"].ravel()[oi] * ior)[:, None])
     # the thesis's final pass: one refraction at the front surface, normal from zfront
-    n = base._normals_central(c, zfront, k.delta).reshape(-1, 3)[oi]
+    if k.normals == "forward":
+        n = base._normals_forward(c, zfront).reshape(-1, 3)[oi]
+    else:
+        n = base._normals_central(c, zfront, k.delta).reshape(-1, 3)[oi]
     v = v_view.reshape(-1, 3)[oi]
     i, j = np.divmod(oi, W)
     x = ((j + 0.5) / W * 2.0 - 1.0) * c.sx
