@@ -72,7 +72,8 @@ EXPOSED = {
     "shadow_texel_off": ("caustic_final", set(CASES)),          # within image's 1 % pixel allowance
 }
 CAUSTIC_BUGS = {b for b in EXPOSED if b in backend.caustics_passes.BUGS}
-#: the caustic bugs the default run plants (on is_caustics_slanted): issue 29's four, and the march
+#: the caustic bugs the default run plants (on is_caustics_slanted): three of issue 29's four (the fourth,
+#: shadow_texel_off, passes check: see EXPOSED) and the exact hit in place of the march
 QUICK_CAUSTIC_BUGS = ["exact_hit", "flux_no_texel_area", "gather_sigma", "splat_no_cosine"]
 QUICK_CASES = ["is_sphere_1_5", "is_bunny_1_2"]
 
