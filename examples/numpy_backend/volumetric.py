@@ -26,6 +26,15 @@ import os
 
 import numpy as np
 
+try:                                   # the sibling helper module, loaded by path or as a script
+    import volumetric_view as vv
+except ImportError:
+    import importlib.util as _ilu
+    _spec = _ilu.spec_from_file_location(
+        "volumetric_view", os.path.join(os.path.dirname(os.path.abspath(__file__)), "volumetric_view.py"))
+    vv = _ilu.module_from_spec(_spec)
+    _spec.loader.exec_module(vv)
+
 #: Planted porter's bugs, by flag: what it does and the pass it should name.
 BUGS = {
     "forward_gradient": ("gradient: forward differences (n[i+1] - n[i]) / h instead of central", "gradient"),
@@ -36,6 +45,19 @@ BUGS = {
                     "march"),
     "window_flip": ("photons: texture row 0 at -e2 (the window flipped vertically)", "photons"),
     "no_nudge": ("march: no 1e-4-voxel nudge past the node boundary", "march"),
+    "deposit_no_length": ("march: a deposit not scaled by its segment length (in voxels)", "march"),
+    "no_extinction": ("march: no extinction along the photon's steps (eq. 6 left out)", "march"),
+    "exit_dir_full_step": ("march: the photon's exit direction from the full step's v1, not the "
+                           "step redone over the part inside the box", "march"),
+    "no_receivers": ("march: receivers inside the volume ignored (photons pass through them)", "march"),
+    "caustics_unmet": ("caustics: photons splatted whether or not they met refractive material",
+                       "caustics"),
+    "splat_no_cosine": ("caustics: the splat without |n . V|", "caustics"),
+    "phase_sign": ("view: Henyey-Greenstein with the sign of g flipped", "view"),
+    "view_along_ray_dir": ("view: status-0 pixels shaded along the written ray_dir/exit_dir, not the "
+                           "bent direction at the box exit", "view"),
+    "view_exit_full_step": ("view: the viewing ray's exit direction from the full step's v1", "view"),
+    "view_drop_colour": ("view: the radiance gathered before a stop (status 2, 4) dropped", "view"),
 }
 
 #: The `volumetric` knob block's defaults (docs/oracle.md, knob table).
@@ -65,8 +87,9 @@ def read_scene(path):
         raw = json.load(f)
     vol = dict(VOL_DEFAULTS)
     vol.update(raw.get("volumetric") or {})
-    if raw.get("receivers"):
-        raise ValueError(f"{path}: this port covers scenes without receivers only")
+    for r in raw.get("receivers") or []:
+        if r.get("mesh", "plane") != "plane" or r.get("fit") is not None:
+            raise ValueError(f"{path}: this port covers built-in `plane` receivers without `fit` only")
     if vol["integrator"] != "euler" or vol["stepping"] != "paper":
         raise ValueError(f"{path}: this port covers integrator=euler, stepping=paper only "
                          f"(got {vol['integrator']!r}, {vol['stepping']!r})")
@@ -356,11 +379,17 @@ def octree(ior, vol, bugs=()):
 # ----------------------------------------------------------------------------------------------
 
 def _slab(org, d, blo, bhi):
+    """Slab test, half-open per axis: IEEE division; a NaN t0 (the ray in a lower face's plane)
+    spans (-inf, inf), a NaN t1 propagates (the ray misses). Returns (t_in, t_out); the ray meets
+    the box when t_out > t_in."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        t0 = (blo - org) / d
-        t1 = (bhi - org) / d
-    t_in = np.maximum(np.max(np.minimum(t0, t1), axis=1), 0.0)
-    t_out = np.min(np.maximum(t0, t1), axis=1)
+        inv = 1.0 / d
+        t0 = (blo - org) * inv
+        t1 = (bhi - org) * inv
+    lo_t = np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1))
+    hi_t = np.where(np.isnan(t0), np.inf, np.maximum(t0, t1))
+    t_in = np.maximum(lo_t.max(axis=1), 0.0)
+    t_out = hi_t.min(axis=1)
     return t_in, t_out
 
 
@@ -494,8 +523,8 @@ def photons(sc, ior, lo, hi, objs, bugs=()):
     N = np.array(ior.shape)
     h = (hi - lo) / N
     hmin = float(h.min())
-    pos, dirs, rads = [], [], []
-    for light in sc["lights"]:
+    pos, dirs, rads, lids = [], [], [], []
+    for li, light in enumerate(sc["lights"]):
         org, d, L, grid = light_texels(light, lo, hi, N, M, bugs)
         t_box, t_out_box = _slab(org, d, lo, hi)
         hit_box = t_out_box > t_box
@@ -524,27 +553,34 @@ def photons(sc, ior, lo, hi, objs, bugs=()):
         pos.append(p[keep])
         dirs.append(d[keep])
         rads.append(L[keep])
-    return np.concatenate(pos), np.concatenate(dirs), np.concatenate(rads)
+        lids.append(np.full(int(keep.sum()), li, np.int64))
+    return np.concatenate(pos), np.concatenate(dirs), np.concatenate(rads), np.concatenate(lids)
 
 
 # ----------------------------------------------------------------------------------------------
 # march (§4.4, eqs. 4-6)
 # ----------------------------------------------------------------------------------------------
 
-def _voxel_of(x, lo, h, N):
+def _vcoord(x, lo, ih):
+    """Voxel coordinates U = (x - lo) * ih (a product with the reciprocal, as the oracle)."""
+    return (x - lo) * ih
+
+
+def _voxel_of(x, lo, ih, N):
     with np.errstate(invalid="ignore"):
-        c = np.floor((x - lo) / h)
+        U = _vcoord(x, lo, ih)
+        c = np.floor(np.where(U > 0, U, 0.0))
     c = np.where(np.isnan(c), 0, c)
     return np.clip(c, 0, N - 1).astype(np.int64)
 
 
-def sample_field(field, x, lo, h, N, bugs=()):
+def sample_field(field, x, lo, ih, N, bugs=()):
     """Trilinear lookup of ``field`` at world points x (P, 3) -> (P, 4) float64.
 
     Values clamp at the outer voxel centres; weights wx wy wz; float32 values, float64 sums.
     """
     with np.errstate(invalid="ignore"):
-        u = (x - lo) / h - (0.0 if "half_voxel" in bugs else 0.5)
+        u = _vcoord(x, lo, ih) - (0.0 if "half_voxel" in bugs else 0.5)
         low = (u < 0) | np.isnan(u)
         high = u >= N - 1
         cell = np.where(low, 0, np.where(high, N - 2, np.floor(np.where(low | high, 0, u))))
@@ -562,8 +598,8 @@ def sample_field(field, x, lo, h, N, bugs=()):
     return out
 
 
-def _axis_distance(x, u, lo, h, N, L):
-    U = (x - lo) / h
+def _axis_distance(x, u, lo, h, ih, N, L):
+    U = _vcoord(x, lo, ih)
     c = np.where(U > 0, np.floor(np.where(U > 0, U, 0)), 0).astype(np.int64)
     b0 = (c >> L[:, None]) << L[:, None]
     size = np.left_shift(1, L)[:, None]
@@ -574,8 +610,9 @@ def _axis_distance(x, u, lo, h, N, L):
 
 
 def extinction(sc, ior, absorb):
-    """kappa (nx, ny, nz, 3) float32: the medium's scattering + absorption (+ objects' absorption
-    weighted by coverage), or ``volume.extinction``."""
+    """kappa (nx, ny, nz, 3) float32: ``volume.extinction`` rounded to float32, or the medium's
+    ``float32(float64(float32(scattering)) + absorption)`` (+ float32 object absorption x
+    coverage)."""
     v = sc["raw"].get("volume") or {}
     if v.get("extinction") is not None:
         e = v["extinction"]
@@ -584,79 +621,111 @@ def extinction(sc, ior, absorb):
             e = np.broadcast_to(_rgb(e), ior.shape + (3,))
         elif e.ndim == 3:
             e = np.repeat(e[..., None], 3, -1)
-        return np.asarray(e, np.float32)
+        return np.ascontiguousarray(e, np.float32)
     vol = sc["vol"]
-    k = _rgb(vol["scattering"]) + _rgb(vol["absorption"]) + absorb
-    return np.broadcast_to(k, ior.shape + (3,)).astype(np.float32)
+    k = (_rgb(vol["scattering"]).astype(np.float32).astype(np.float64)
+         + _rgb(vol["absorption"])).astype(np.float32)
+    k = np.broadcast_to(k, ior.shape + (3,)).astype(np.float32)
+    if np.any(absorb):
+        k = (k + absorb.astype(np.float32)).astype(np.float32)
+    return k
 
 
-def segment_voxels(p0, p1, N):
-    """The voxels each segment p0 -> p1 (voxel coordinates, (S, 3)) crosses, as a 3D DDA visits
-    them, all segments at once: the crossings of the integer planes on each axis, sorted per
-    segment, give the intervals; each interval's voxel is the floor of its midpoint.
+def scattering(sc, shape):
+    """sigma (nx, ny, nz, 3) float32 for the viewing pass: ``volume.scattering`` or the knob."""
+    v = sc["raw"].get("volume") or {}
+    s = v.get("scattering")
+    if s is None:
+        s = sc["vol"]["scattering"]
+    s = np.load(os.path.join(sc["dir"], s)) if isinstance(s, str) else np.asarray(s, np.float64)
+    if s.ndim <= 1:
+        s = np.broadcast_to(_rgb(s), shape + (3,))
+    elif s.ndim == 3:
+        s = np.repeat(s[..., None], 3, -1)
+    return np.ascontiguousarray(s, np.float32)
+
+
+def dda_walk(x, e, lo, ih, N):
+    """The voxels each segment x -> e (world, (S, 3)) crosses, by a 3D DDA (Amanatides-Woo) in
+    voxel coordinates from the voxel of x, every segment at once (one loop over the walk).
 
     Returns
     -------
-    seg (K,) segment index, vox (K, 3) int64, t0, t1 (K,) segment parameters where it enters and
-    leaves that voxel; voxels outside the grid are dropped (the walk stops at the grid's edge).
+    seg (K,), vox (K, 3) int64, t0, t1 (K,) the segment parameters where it enters and leaves the
+    voxel, lv (S,) the segment's length in voxels. The walk stops at the segment's end or the
+    grid's edge; intervals of zero length are left out.
     """
-    S = len(p0)
-    d = p1 - p0
-    f0, f1 = np.floor(p0), np.floor(p1)
-    segs, ts = [np.arange(S)], [np.zeros(S)]
-    for a in range(3):
-        lo_a = np.minimum(f0[:, a], f1[:, a])
-        n = np.abs(f1[:, a] - f0[:, a]).astype(np.int64)
-        sid = np.repeat(np.arange(S), n)
-        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-        plane = lo_a[sid] + 1 + k
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (plane - p0[sid, a]) / d[sid, a]
-        segs.append(sid)
-        ts.append(np.clip(t, 0.0, 1.0))
-    segs.append(np.arange(S))
-    ts.append(np.ones(S))
-    sid = np.concatenate(segs)
-    t = np.concatenate(ts)
-    o = np.lexsort((t, sid))
-    sid, t = sid[o], t[o]
-    same = sid[1:] == sid[:-1]
-    a0, a1, sg = t[:-1][same], t[1:][same], sid[:-1][same]
-    keep = a1 > a0
-    a0, a1, sg = a0[keep], a1[keep], sg[keep]
-    mid = p0[sg] + ((a0 + a1) / 2.0)[:, None] * d[sg]
-    vox = np.floor(mid).astype(np.int64)
-    ok = np.all((vox >= 0) & (vox < N), axis=1)
-    return sg[ok], vox[ok], a0[ok], a1[ok]
-
-
-def deposit(rad_acc, dir_acc, x, e, L, L1, lo, h, N):
-    """Add segments x -> e of radiance L -> L1 to the accumulators (Sun 2008 §4.4): each crossed
-    voxel gets ``(L + (L1 - L) (t0 + t1) / 2) (t1 - t0) lv`` (lv the length in voxels) and its
-    direction sums ``dir * sum(that)``."""
-    p0, p1 = (x - lo) / h, (e - lo) / h
-    lv = np.sqrt(np.sum((p1 - p0) ** 2, axis=1))
-    seg = np.sqrt(np.sum((e - x) ** 2, axis=1))
+    S = len(x)
+    u0 = _vcoord(x, lo, ih)
+    du = _vcoord(e, lo, ih) - u0
+    lv = np.sqrt(np.sum(du * du, axis=1))
+    with np.errstate(invalid="ignore"):
+        v = np.clip(np.floor(np.where(u0 > 0, u0, 0.0)), 0, N - 1).astype(np.int64)
+    step = np.where(du > 0, 1, -1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        dr = (e - x) / seg[:, None]
-    sg, vox, t0, t1 = segment_voxels(p0, p1, N)
-    w = (L[sg] + (L1[sg] - L[sg]) * ((t0 + t1) / 2.0)[:, None]) * ((t1 - t0) * lv[sg])[:, None]
-    flat = (vox[:, 0] * N[1] + vox[:, 1]) * N[2] + vox[:, 2]
-    for c in range(3):
-        rad_acc[:, c] += np.bincount(flat, w[:, c], minlength=len(rad_acc))
-        dir_acc[:, c] += np.bincount(flat, dr[sg, c] * w.sum(axis=1), minlength=len(dir_acc))
+        tmax = np.where(du != 0, (v + (du > 0) - u0) / du, np.inf)
+        tdel = np.where(du != 0, np.abs(1.0 / du), np.inf)
+    t = np.zeros(S)
+    act = np.arange(S)
+    segs, voxs, t0s, t1s = [], [], [], []
+    while len(act):
+        tm = tmax[act]
+        tn = np.minimum(tm.min(axis=1), 1.0)
+        pos = tn - t[act] > 0
+        segs.append(act[pos]); voxs.append(v[act[pos]].copy())
+        t0s.append(t[act[pos]]); t1s.append(tn[pos])
+        go = tn < 1.0
+        a = np.argmin(tm, axis=1)                     # ties: x before y before z
+        ai, aa = act[go], a[go]
+        v[ai, aa] += step[ai, aa]
+        tmax[ai, aa] += tdel[ai, aa]
+        inside = (v[ai, aa] >= 0) & (v[ai, aa] < N[aa])
+        t[ai] = tn[go]
+        act = ai[inside]
+    if not segs:
+        return (np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0), lv)
+    return np.concatenate(segs), np.concatenate(voxs), np.concatenate(t0s), np.concatenate(t1s), lv
+
+
+class Deposits:
+    """The photons' deposits as 64-bit fixed point (RGB in multiples of q, direction sums in
+    multiples of 3 q, each share truncated towards zero), so sums are exact and order-free."""
+
+    def __init__(self, nvox, L_start):
+        self.q = 16.0 * float(np.sum(L_start.max(axis=1))) / 2.0 ** 58
+        self.rgb = np.zeros((nvox, 3), np.int64)
+        self.dirs = np.zeros((nvox, 3), np.int64)
+
+    def add(self, x, e, L, L1, lo, ih, N, bugs=()):
+        """Deposit the segments x -> e of radiance L -> L1 (Sun 2008 §4.4, eq. 6)."""
+        if len(x) == 0 or self.q <= 0:
+            return
+        seg = np.sqrt(np.sum((e - x) ** 2, axis=1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dr = (e - x) / seg[:, None]
+        sg, vox, t0, t1, lv = dda_walk(x, e, lo, ih, N)
+        length = np.ones_like(lv) if "deposit_no_length" in bugs else lv
+        rgb = (L[sg] + (L1[sg] - L[sg]) * ((t0 + t1) / 2.0)[:, None]) * ((t1 - t0) * length[sg])[:, None]
+        ds = dr[sg] * rgb.sum(axis=1)[:, None]
+        flat = (vox[:, 0] * N[1] + vox[:, 1]) * N[2] + vox[:, 2]
+        np.add.at(self.rgb, flat, np.trunc(rgb / self.q).astype(np.int64))
+        np.add.at(self.dirs, flat, np.trunc(ds / (3.0 * self.q)).astype(np.int64))
+
+    def sums(self):
+        """(rgb, direction sums) float64 (nvox, 3)."""
+        return self.rgb.astype(np.float64) * self.q, self.dirs.astype(np.float64) * (3.0 * self.q)
 
 
 def skipped_attenuation(start_pos, start_dir, kappa, lo, hi):
     """exp(-sum kappa_voxel length_in_voxel) over the part of each texel ray inside the box that a
-    proxy start skipped (entry -> start), (P, 3)."""
+    proxy start skipped (entry -> start), the walk clamped to the grid, (P, 3)."""
     N = np.array(kappa.shape[:3])
-    h = (hi - lo) / N
+    ih = 1.0 / ((hi - lo) / N)
     t_in, t_out = _slab(start_pos, -start_dir, lo, hi)
     t = np.where(np.isfinite(t_out), np.maximum(t_out, 0.0), 0.0)
     entry = start_pos - t[:, None] * start_dir
-    p0, p1 = (entry - lo) / h, (start_pos - lo) / h
-    sg, vox, t0, t1 = segment_voxels(p0, p1, N)
+    sg, vox, t0, t1, _ = dda_walk(entry, start_pos, lo, ih, N)
+    vox = np.clip(vox, 0, N - 1)
     length = np.sqrt(np.sum((start_pos - entry) ** 2, axis=1))
     tau = np.zeros((len(start_pos), 3))
     k = kappa[vox[:, 0], vox[:, 1], vox[:, 2]].astype(np.float64)
@@ -665,41 +734,93 @@ def skipped_attenuation(start_pos, start_dir, kappa, lo, hi):
     return np.exp(-tau)
 
 
-def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi, vol,
-          bugs=(), record=None, deposit_steps=None):
+def material_level(field, outside):
+    """(n_half, side): the half-contrast level of the index and the side material lies on."""
+    n = field[..., 0]
+    hi_, lo_ = float(n.max()), float(n.min())
+    far = hi_ if abs(hi_ - outside) >= abs(lo_ - outside) else lo_
+    return outside + (far - outside) / 2.0, float(np.sign(far - outside))
+
+
+def clip_box(x, x1, lo, hi):
+    """The part s in [0, 1] of each step x -> x1 inside the box (axes moving out of it)."""
+    s = np.ones(len(x))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for a in range(3):
+            up = (x1[:, a] > hi[a]) & (x1[:, a] > x[:, a])
+            dn = (x1[:, a] < lo[a]) & (x1[:, a] < x[:, a])
+            s = np.where(up, np.minimum(s, (hi[a] - x[:, a]) / (x1[:, a] - x[:, a])), s)
+            s = np.where(dn, np.minimum(s, (lo[a] - x[:, a]) / (x1[:, a] - x[:, a])), s)
+    return np.maximum(s, 0.0)
+
+
+def _ray_tris(o, D, tris, tmax):
+    """Nearest hit of rays o + t D, t in (0, tmax], on triangles (T, 3, 3): two-sided
+    Moller-Trumbore, triangles in order, a later one only when strictly nearer.
+    Returns (t, tri): inf / -1 where none."""
+    best = np.full(len(o), np.inf)
+    tri = np.full(len(o), -1, np.int64)
+    for k in range(len(tris)):
+        v0, v1, v2 = tris[k]
+        e1, e2 = v1 - v0, v2 - v0
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            pv = np.cross(D, e2)
+            det = pv @ e1
+            inv = 1.0 / det
+            tv = o - v0
+            u = np.einsum("ij,ij->i", tv, pv) * inv
+            qv = np.cross(tv, e1)
+            w = np.einsum("ij,ij->i", D, qv) * inv
+            t = (qv @ e2) * inv
+            ok = ((det != 0) & np.isfinite(det) & (u >= 0) & (u <= 1) & (w >= 0) & (u + w <= 1)
+                  & (t > 0) & (t <= tmax) & (t < best))
+        best = np.where(ok, t, best)
+        tri = np.where(ok, k, tri)
+    return best, tri
+
+
+def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi, vol, outside,
+          bugs=(), record=None, deposit_cap=None, tris=None):
     """Pass ``march``: adaptive photon marching, all photons vectorised, one loop over steps.
 
     Returns
     -------
     dict of ``exit_pos``, ``exit_dir`` (P, 3) float64 (NaN unless status 1), ``photon_status``
-    (P,) int8, ``steps`` (P,) int64 (before the stopping rule), ``paths`` (len(record), 257, 3)
-    when ``record`` (photon indices) is given; with ``deposit_steps`` (the stopping rule's cut, or
-    a step count no photon reaches) also ``rad_acc``, ``dir_acc`` (nx*ny*nz, 3) float64: the
-    deposits of every photon's first ``deposit_steps`` steps.
+    (P,) int8, ``steps`` (P,) int64 (before the stopping rule), ``hit_pos`` (P, 3), ``hit_tri``
+    (P,) (the receiver triangle met inside the volume, -1 where none), ``T`` (P, 3) the
+    transmittance at the end (``T_skip`` included), ``met`` (P,) bool (met refractive material),
+    ``paths`` (len(record), 257, 3) when ``record`` is given; with ``deposit_cap`` (a step count)
+    the march stops there and returns ``deposits`` (``Deposits``) of every step taken.
 
     References
     ----------
     Sun 2008 §4.4, eqs. 4-5 (x += ds/n v, v += ds grad n), eq. 6 (attenuation), §5.3 (the
-    octree's step bound).
+    octree's step bound); Fig. 9 (receivers inside the volume).
     """
     N = np.array(field.shape[:3])
     h = (hi - lo) / N
+    ih = 1.0 / h
     hmin = float(h.min())
     ds_min = float(vol["ds_min"])
     max_steps = int(vol["max_steps"]) or int(math.ceil(8 * N.max() / ds_min)) + 16
+    if deposit_cap is not None:
+        max_steps = min(max_steps, int(deposit_cap))
     P = len(start_pos)
+    n_half, side = material_level(field, outside)
     x = start_pos.copy()
-    n0 = sample_field(field, x, lo, h, N, bugs)[:, 0]
+    n0 = sample_field(field, x, lo, ih, N, bugs)[:, 0]
     v = n0[:, None] * start_dir
-    L = start_rad * skipped_attenuation(start_pos, start_dir, kappa, lo, hi)
+    T = skipped_attenuation(start_pos, start_dir, kappa, lo, hi)
+    L = start_rad * T
     L_start_max = L.max(axis=1)
-    if deposit_steps is not None:
-        rad_acc = np.zeros((int(np.prod(N)), 3))
-        dir_acc = np.zeros((int(np.prod(N)), 3))
+    dep = Deposits(int(np.prod(N)), L) if deposit_cap is not None else None
     status = np.zeros(P, np.int8)
     steps = np.zeros(P, np.int64)
+    met = np.zeros(P, bool)
     exit_pos = np.full((P, 3), np.nan)
     exit_dir = np.full((P, 3), np.nan)
+    hit_pos = np.full((P, 3), np.nan)
+    hit_tri = np.full(P, -1, np.int64)
     active = np.arange(P)
     paths = None
     if record is not None:
@@ -707,20 +828,22 @@ def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi
         paths[:, 0] = start_pos[record]
         slot = np.full(P, -1)
         slot[record] = np.arange(len(record))
+    kap = kappa.astype(np.float64)
     for it in range(max_steps):
         if len(active) == 0:
             break
         xa, va = x[active], v[active]
-        c = _voxel_of(xa, lo, h, N)
+        c = _voxel_of(xa, lo, ih, N)
         cap = step_max[c[:, 0], c[:, 1], c[:, 2]].astype(np.float64)
         Lv = level[c[:, 0], c[:, 1], c[:, 2]].astype(np.int64)
-        f = sample_field(field, xa, lo, h, N, bugs)
+        f = sample_field(field, xa, lo, ih, N, bugs)
         n, g = f[:, 0], f[:, 1:]
+        met[active] |= side * (n - n_half) > 0
         speed = np.sqrt(np.sum(va * va, axis=1))
         ok = (speed > 1e-12 * n) & (n > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = va / speed[:, None]
-            dist = _axis_distance(xa, u, lo, h, N, Lv)
+            u = va * (1.0 / speed)[:, None]
+            dist = _axis_distance(xa, u, lo, h, ih, N, Lv)
         ds = np.maximum(np.min(dist, axis=1), 0.0)
         if "no_nudge" not in bugs:
             ds = ds + 1e-4 * hmin
@@ -730,47 +853,71 @@ def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi
             x1 = xa + (ds / n)[:, None] * va
             v1 = va + ds[:, None] * g
         ok &= np.all(np.isfinite(x1), axis=1) & np.all(np.isfinite(v1), axis=1)
-        # clip to the box
-        s = np.ones(len(active))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for a in range(3):
-                up = (x1[:, a] > hi[a]) & (x1[:, a] > xa[:, a])
-                dn = (x1[:, a] < lo[a]) & (x1[:, a] < xa[:, a])
-                s = np.where(up, np.minimum(s, (hi[a] - xa[:, a]) / (x1[:, a] - xa[:, a])), s)
-                s = np.where(dn, np.minimum(s, (lo[a] - xa[:, a]) / (x1[:, a] - xa[:, a])), s)
-        s = np.maximum(s, 0.0)
+        s = clip_box(xa, x1, lo, hi)
+        rt = np.full(len(active), -1, np.int64)
+        if tris is not None and len(tris) and "no_receivers" not in bugs:
+            th, rt = _ray_tris(xa, x1 - xa, tris, s)
+            rt = np.where(ok, rt, -1)
+            s = np.where(rt >= 0, th, s)
         e = xa + s[:, None] * (x1 - xa)
         seg = np.sqrt(np.sum((e - xa) ** 2, axis=1))
-        L1 = L[active] * np.exp(-kappa[c[:, 0], c[:, 1], c[:, 2]].astype(np.float64) * seg[:, None])
-        lost = active[~ok]
-        status[lost] = 4
+        kv = kap[c[:, 0], c[:, 1], c[:, 2]]
+        att = np.ones_like(kv) if "no_extinction" in bugs else np.exp(-kv * seg[:, None])
+        L1 = L[active] * att
+        T1 = T[active] * att
+        status[active[~ok]] = 4
         go = ok
         idx = active[go]
         steps[idx] += 1
-        if deposit_steps is not None and it < deposit_steps:
-            deposit(rad_acc, dir_acc, xa[go], e[go], L[idx], L1[go], lo, h, N)
+        if dep is not None:
+            dep.add(xa[go], e[go], L[idx], L1[go], lo, ih, N, bugs)
         if paths is not None and it < 256:
             sl = slot[idx]
             m = sl >= 0
             paths[sl[m], it + 1] = e[go][m]
-        out = go & (s < 1.0)
+        hitm = go & (rt >= 0)
+        ih_ = active[hitm]
+        status[ih_] = 5
+        hit_pos[ih_] = e[hitm]
+        hit_tri[ih_] = rt[hitm]
+        T[ih_] = T1[hitm]
+        out = go & (rt < 0) & (s < 1.0)
         io = active[out]
         status[io] = 1
         exit_pos[io] = e[out]
-        vd = np.where((s[out] == 0.0)[:, None], v1[out], va[out] + (s[out] * ds[out])[:, None] * g[out])
-        exit_dir[io] = vd / np.linalg.norm(vd, axis=1)[:, None]
-        cont = go & ~(s < 1.0)
+        T[io] = T1[out]
+        if "exit_dir_full_step" in bugs:
+            vd = v1[out]
+        else:
+            vd = np.where((s[out] == 0.0)[:, None], v1[out],
+                          va[out] + (s[out] * ds[out])[:, None] * g[out])
+        exit_dir[io] = vd / np.sqrt(np.sum(vd * vd, axis=1))[:, None]
+        cont = go & (rt < 0) & ~(s < 1.0)
         ic = active[cont]
-        x[ic], v[ic], L[ic] = x1[cont], v1[cont], L1[cont]
+        x[ic], v[ic], L[ic], T[ic] = x1[cont], v1[cont], L1[cont], T1[cont]
         absorbed = L1[cont].max(axis=1) < float(vol["min_radiance"]) * L_start_max[ic]
         status[ic[absorbed]] = 3
         active = ic[~absorbed]
     status[active] = 2
-    out = {"exit_pos": exit_pos, "exit_dir": exit_dir, "photon_status": status, "steps": steps,
-           "paths": paths}
-    if deposit_steps is not None:
-        out["rad_acc"], out["dir_acc"] = rad_acc, dir_acc
-    return out
+    return {"exit_pos": exit_pos, "exit_dir": exit_dir, "photon_status": status, "steps": steps,
+            "hit_pos": hit_pos, "hit_tri": hit_tri, "T": T, "met": met, "paths": paths,
+            "deposits": dep}
+
+
+def outside_hits(m, tris, lo, hi):
+    """Status-1 photons go on straight from their exit to the first receiver outside the box:
+    fills ``hit_pos`` and ``hit_tri`` of those that meet one (status stays 1)."""
+    if tris is None or not len(tris):
+        return
+    io = np.flatnonzero(m["photon_status"] == 1)
+    if not len(io):
+        return
+    tmax = 1e6 * (1.0 + float(np.max(np.abs(lo))) + float(np.max(np.abs(hi))))
+    o, D = m["exit_pos"][io], m["exit_dir"][io]
+    t, k = _ray_tris(o, D, tris, tmax)
+    hm = k >= 0
+    m["hit_pos"][io[hm]] = o[hm] + t[hm, None] * D[hm]
+    m["hit_tri"][io[hm]] = k[hm]
 
 
 def stop_cut(steps, vol):
@@ -796,22 +943,25 @@ def stopping_rule(m, vol):
         m["photon_status"][over] = 2
         m["exit_pos"][over] = np.nan
         m["exit_dir"][over] = np.nan
+        m["hit_pos"][over] = np.nan
+        m["hit_tri"][over] = -1
         steps[over] = cut
     m["steps"] = steps
     return np.int64(steps.sum())
 
 
 def smooth(rad_acc, dir_acc, shape):
-    """Pass ``smooth``: the deposits filtered by [1/4, 1/2, 1/4] along x, y, z (edges clamped);
-    ``radiance`` float32 and ``direction`` float32 (unit, zero where no photon passed)."""
-    from scipy.ndimage import correlate1d
-    w = np.array([0.25, 0.5, 0.25])
-    r = rad_acc.reshape(shape + (3,))
-    d = dir_acc.reshape(shape + (3,))
+    """Pass ``smooth``: the deposits filtered by [1/4, 1/2, 1/4] along x, then y, then z (edges
+    clamped) in float64 on the six sums, rounded once; ``radiance`` float32 and ``direction``
+    float32 (unit, zero where no photon passed)."""
+    a = np.concatenate([rad_acc, dir_acc], axis=1).reshape(shape + (6,))
     for ax in range(3):
-        r = correlate1d(r, w, axis=ax, mode="nearest")
-        d = correlate1d(d, w, axis=ax, mode="nearest")
-    n = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+        m = np.moveaxis(a, ax, 0)
+        prev = np.concatenate([m[:1], m[:-1]])
+        nxt = np.concatenate([m[1:], m[-1:]])
+        a = np.moveaxis(m * 0.5 + (prev + nxt) * 0.25, 0, ax)
+    r, d = a[..., :3], a[..., 3:]
+    n = np.sqrt(d[..., 0:1] ** 2 + d[..., 1:2] ** 2 + d[..., 2:3] ** 2)
     with np.errstate(invalid="ignore", divide="ignore"):
         d = np.where(n > 0, d / n, 0.0)
     return r.astype(np.float32), d.astype(np.float32)
@@ -829,27 +979,36 @@ def path_index(P):
 # ----------------------------------------------------------------------------------------------
 
 def render_case(scene_path, bugs=()):
-    """Every pass from ``voxelize`` to ``march`` on one scene -> dict of golden-named arrays."""
+    """Every pass from ``voxelize`` to ``view`` on one scene -> dict of golden-named arrays."""
     unknown = set(bugs) - set(BUGS)
     if unknown:
         raise ValueError(f"unknown bug flag(s) {sorted(unknown)}; known: {sorted(BUGS)}")
     sc = read_scene(scene_path)
-    vol = sc["vol"]
+    vol, raw = sc["vol"], sc["raw"]
     ior, lo, hi, absorb, objs = voxelize(sc, bugs)
     field = gradient(ior, lo, hi, bugs)
     level, smax, vsmax = octree(ior, vol, bugs)
-    sp, sd, srad = photons(sc, ior, lo, hi, objs, bugs)
+    sp, sd, srad, light_of = photons(sc, ior, lo, hi, objs, bugs)
     kappa = extinction(sc, ior, absorb)
+    N = np.array(ior.shape)
+    h = (hi - lo) / N
+    has_caustics = bool(raw.get("receivers")) and bool(sc["lights"])
+    tris, owner, boxes, frames = (vv.receivers(raw, sc["lights"], bugs) if has_caustics
+                                  else (None, None, [], []))
     rec = path_index(len(sp))
-    m = march(field, level, smax, kappa, sp, sd, srad, lo, hi, vol, bugs, record=rec)
+    args = (field, level, smax, kappa, sp, sd, srad, lo, hi, vol, sc["outside_ior"])
+    m = march(*args, bugs, record=rec, tris=tris)
+    cut = stop_cut(m["steps"], vol)
     total = stopping_rule(m, vol)
-    # the deposits of the steps the stopping rule keeps: the march again, depositing the first
-    # `cut` steps (photons are independent, so the second march retraces the first)
-    cut = stop_cut(march(field, level, smax, kappa, sp, sd, srad, lo, hi, vol, bugs)["steps"], vol)
-    dm = march(field, level, smax, kappa, sp, sd, srad, lo, hi, vol, bugs,
-               deposit_steps=cut if cut is not None else 1 << 62)
-    radiance, direction = smooth(dm["rad_acc"], dm["dir_acc"], ior.shape)
-    return {
+    outside_hits(m, tris, lo, hi)
+    # the deposits of the steps the stopping rule keeps: the march again, stopped at the cut
+    # (photons are independent, so the second march retraces the first)
+    dm = march(*args, bugs, tris=tris, deposit_cap=cut if cut is not None else 1 << 62)
+    rad_sum, dir_sum = dm["deposits"].sums()
+    radiance, direction = smooth(rad_sum, dir_sum, ior.shape)
+    hit_receiver = np.where(m["hit_tri"] >= 0, owner[np.maximum(m["hit_tri"], 0)] if has_caustics
+                            else -1, -1).astype(np.int32)
+    out = {
         "ior": ior, "volume_bounds": np.stack([lo, hi]),
         "stage.voxelize.ior_volume": ior,
         "stage.gradient.field": field,
@@ -857,15 +1016,37 @@ def render_case(scene_path, bugs=()):
         "stage.photons.start_pos": sp, "stage.photons.start_dir": sd, "stage.photons.start_radiance": srad,
         "stage.march.exit_pos": m["exit_pos"], "stage.march.exit_dir": m["exit_dir"],
         "stage.march.photon_status": m["photon_status"],
-        # no receivers in this port: no photon meets one
-        "stage.march.hit_pos": np.full((len(sp), 3), np.nan),
-        "stage.march.hit_receiver": np.full(len(sp), -1, np.int32),
+        "stage.march.hit_pos": m["hit_pos"], "stage.march.hit_receiver": hit_receiver,
+        "stage.march.deposit": rad_sum.reshape(ior.shape + (3,)).astype(np.float32),
         "photon_exit_pos": m["exit_pos"], "photon_exit_dir": m["exit_dir"],
         "photon_status": m["photon_status"], "photon_steps": total,
         "stage.photon_paths.paths": m["paths"], "stage.photon_paths.path_index": rec,
         "stage.smooth.radiance": radiance, "stage.smooth.direction": direction,
         "radiance": radiance, "direction": direction,
     }
+    if has_caustics:
+        Hc = Wc = int((raw.get("caustics") or {}).get("map_size", 512))
+        h2 = float((h[0] * h[1] * h[2]) ** (2.0 / 3.0))
+        maps, rgbs = vv.caustics(m, light_of, srad, sc["lights"], tris, owner, boxes, h2, Hc, Wc,
+                                 bugs)
+        for r, fr in enumerate(frames):
+            out[f"stage.receivers.frame_{r}"] = fr
+            for pre in ("", "stage.caustics."):
+                out[f"{pre}caustic_frame_{r}"] = fr
+                out[f"{pre}caustic_map_{r}"] = maps[r]
+                out[f"{pre}caustic_rgb_{r}"] = rgbs[r]
+    # view (§4.5)
+    ro, rd = vv.camera_rays(raw.get("camera") or {})
+    n_half, side = material_level(field, sc["outside_ior"])
+    sigma = scattering(sc, ior.shape)
+    vw = vv.view(ro, rd, field, vsmax, kappa, sigma, radiance, direction, lo, hi, n_half, side, vol,
+                 raw.get("environment"), sample_field, _voxel_of, clip_box, _slab, bugs)
+    out.update({"ray_origin": ro, "ray_dir": rd})
+    for k in ("hit", "exit_pos", "exit_dir", "status", "image"):
+        out[k] = vw[k]
+        out[f"stage.view.{k}"] = vw[k]
+    out["interfaces"], out["path_length"] = vw["interfaces"], vw["path_length"]
+    return out
 
 
 def volumetric_cases(golden_dir):
