@@ -76,7 +76,38 @@ weird = st.one_of(
     st.lists(st.floats(-3, 3), min_size=2, max_size=3),
     st.text(max_size=8),
 )
-mutations = st.lists(st.tuples(st.sampled_from(SCENE_KEYS + LOAD_ONLY_KEYS), weird), min_size=1, max_size=3)
+def _vec(lo, hi, n=3):
+    return st.lists(st.floats(lo, hi), min_size=n, max_size=n)
+
+
+#: Values inside (or at the edges of) the documented ranges, so that a good share of inputs is accepted and
+#: rendered: the extremes the issue found (radiance, intensity, eye distance, fov_y, fit) at their limits
+PLAUSIBLE = {
+    "camera.eye": st.one_of(_vec(-5, 5), st.sampled_from([[0, 0, 1e6], [0, 0, 9e5], [0, 0, 3]])),
+    "camera.target": _vec(-1, 1), "camera.up": _vec(-1, 1),
+    "camera.fov_y": st.one_of(st.floats(0.1, 179), st.sampled_from([0.1, 1, 179])),
+    "camera.width": st.integers(8, 48), "camera.height": st.integers(8, 48),
+    "camera.near": st.floats(1e-3, 1), "camera.far": st.floats(2, 1e6),
+    "outside_ior": st.floats(0.5, 3), "environment.type": st.sampled_from(["checker", "constant"]),
+    "environment.colors": st.lists(_vec(0, 1e6), min_size=2, max_size=2),
+    "environment.intensity": st.one_of(st.floats(0, 1e6), st.just(1e6)), "environment.tiles": st.integers(1, 10**6),
+    "objects.0.mesh": st.sampled_from(["sphere", "plane", "teapot"]),
+    "objects.0.fit": st.one_of(st.floats(1e-3, 3), st.just(1e6)), "objects.0.size": _vec(0.1, 10, 2),
+    "objects.0.transform.scale": st.floats(1e-3, 3), "objects.0.transform.rotate": _vec(-1e6, 1e6),
+    "objects.0.transform.translate": _vec(-3, 3), "objects.0.material.ior": st.floats(0.5, 1e6),
+    "objects.0.material.absorption": _vec(0, 1e6), "objects.0.deform": st.fixed_dictionaries(
+        {"amplitude": st.floats(-0.1, 0.1), "wavelength": st.floats(0.01, 2), "direction": _vec(-1, 1)}),
+    "receivers.0.fit": st.floats(1e-3, 1e6), "receivers.0.size": _vec(1e-3, 1e6, 2),
+    "receivers.0.albedo": _vec(0, 1), "receivers.0.transform.translate": _vec(-3, 3),
+    "lights.0.type": st.sampled_from(["directional", "point"]), "lights.0.direction": _vec(-1, 1),
+    "lights.0.position": _vec(-1e6, 1e6), "lights.0.radiance": st.one_of(_vec(0, 1e6), st.just([1e6] * 3)),
+}
+mutations = st.lists(st.one_of(st.tuples(st.sampled_from(SCENE_KEYS + LOAD_ONLY_KEYS), weird),
+                               st.sampled_from(sorted(PLAUSIBLE)).flatmap(lambda k: st.tuples(st.just(k),
+                                                                                             PLAUSIBLE[k])),
+                               st.sampled_from(sorted(PLAUSIBLE)).flatmap(lambda k: st.tuples(st.just(k),
+                                                                                             PLAUSIBLE[k]))),
+                     min_size=1, max_size=3)
 
 
 def _set(d, key, value):
@@ -421,7 +452,7 @@ STRATEGIES = {
 CHECK_STRATEGIES = (st.integers(0, 100), st.sampled_from(["object", "text", "zeros", "nan", "drop", "none"]),
                     st.sampled_from(["json", "text", "object"]), st.sampled_from([0, 0, 0, 2, 6]))
 
-FAST = {"scene_api": 150, "scene_file": 40, "set": 60, "flags": 12, "compare": 40, "check": 8}
+FAST = {"scene_api": 80, "scene_file": 40, "set": 60, "flags": 12, "compare": 40, "check": 8}
 LONG = {"scene_api": 2600, "scene_file": 900, "set": 700, "flags": 150, "compare": 500, "check": 150}
 
 
