@@ -313,7 +313,8 @@ def ignored_content(data, method):
     """A one-line warning when ``method`` reads none of the scene's content, else None.
 
     ``imagespace`` and ``exact`` on mesh scenes read ``objects``; ``volumetric`` reads ``objects`` or
-    ``volume``; ``levelmap`` reads ``water``. A water-only scene rendered by ``imagespace``, or a volume
+    ``volume``; ``levelmap`` reads ``water`` (and refuses a scene without it). A water-only scene rendered by
+    ``imagespace``, or a volume
     scene rendered by a method that cannot read volumes, would otherwise give an empty (or default) picture
     without a word.
 
@@ -338,8 +339,6 @@ def ignored_content(data, method):
     if method == "imagespace" and has_water and not has_obj:
         return ("--method imagespace ignores the scene's 'water' block and the scene has no objects: the picture is "
                 "the environment alone; render water with --method levelmap (or exact)")
-    if method == "levelmap" and has_obj and not has_water:
-        return "--method levelmap reads only 'water'; it ignores the scene's objects"
     return None
 
 
