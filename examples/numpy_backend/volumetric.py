@@ -53,6 +53,14 @@ BUGS = {
     "caustics_unmet": ("caustics: photons splatted whether or not they met refractive material",
                        "caustics"),
     "splat_no_cosine": ("caustics: the splat without |n . V|", "caustics"),
+    "no_skip_attenuation": ("march: a proxy start without the extinction of the skipped segment",
+                            "march"),
+    "no_outside_hits": ("march: photons leaving the volume not continued to the receivers below it",
+                        "march"),
+    "kappa_float64": ("march/view: kappa kept in float64 (0.2, not float32's 0.20000000298)",
+                      "none: inside every tolerance"),
+    "view_entry_voxel_n": ("view: the inside flag at the box entry from the entry voxel's own n, "
+                           "not the sampled n", "view"),
     "phase_sign": ("view: Henyey-Greenstein with the sign of g flipped", "view"),
     "view_along_ray_dir": ("view: status-0 pixels shaded along the written ray_dir/exit_dir, not the "
                            "bent direction at the box exit", "view"),
@@ -609,7 +617,7 @@ def _axis_distance(x, u, lo, h, ih, N, L):
     return np.where(u == 0, np.inf, np.where(u > 0, up, dn))
 
 
-def extinction(sc, ior, absorb):
+def extinction(sc, ior, absorb, bugs=()):
     """kappa (nx, ny, nz, 3) float32: ``volume.extinction`` rounded to float32, or the medium's
     ``float32(float64(float32(scattering)) + absorption)`` (+ float32 object absorption x
     coverage)."""
@@ -625,6 +633,9 @@ def extinction(sc, ior, absorb):
     vol = sc["vol"]
     k = (_rgb(vol["scattering"]).astype(np.float32).astype(np.float64)
          + _rgb(vol["absorption"])).astype(np.float32)
+    if "kappa_float64" in bugs:
+        return np.broadcast_to(_rgb(vol["scattering"]) + _rgb(vol["absorption"]) + absorb,
+                               ior.shape + (3,)).astype(np.float64)
     k = np.broadcast_to(k, ior.shape + (3,)).astype(np.float32)
     if np.any(absorb):
         k = (k + absorb.astype(np.float32)).astype(np.float32)
@@ -645,7 +656,7 @@ def scattering(sc, shape):
     return np.ascontiguousarray(s, np.float32)
 
 
-def dda_walk(x, e, lo, ih, N):
+def dda_walk(x, e, lo, ih, N, clamp=False):
     """The voxels each segment x -> e (world, (S, 3)) crosses, by a 3D DDA (Amanatides-Woo) in
     voxel coordinates from the voxel of x, every segment at once (one loop over the walk).
 
@@ -653,7 +664,8 @@ def dda_walk(x, e, lo, ih, N):
     -------
     seg (K,), vox (K, 3) int64, t0, t1 (K,) the segment parameters where it enters and leaves the
     voxel, lv (S,) the segment's length in voxels. The walk stops at the segment's end or the
-    grid's edge; intervals of zero length are left out.
+    grid's edge (``clamp``: walks on past it, its voxels clamped to the grid); intervals of zero
+    length are left out.
     """
     S = len(x)
     u0 = _vcoord(x, lo, ih)
@@ -672,14 +684,15 @@ def dda_walk(x, e, lo, ih, N):
         tm = tmax[act]
         tn = np.minimum(tm.min(axis=1), 1.0)
         pos = tn - t[act] > 0
-        segs.append(act[pos]); voxs.append(v[act[pos]].copy())
+        segs.append(act[pos])
+        voxs.append(np.clip(v[act[pos]], 0, N - 1))
         t0s.append(t[act[pos]]); t1s.append(tn[pos])
         go = tn < 1.0
         a = np.argmin(tm, axis=1)                     # ties: x before y before z
         ai, aa = act[go], a[go]
         v[ai, aa] += step[ai, aa]
         tmax[ai, aa] += tdel[ai, aa]
-        inside = (v[ai, aa] >= 0) & (v[ai, aa] < N[aa])
+        inside = (v[ai, aa] >= 0) & (v[ai, aa] < N[aa]) if not clamp else np.ones(len(ai), bool)
         t[ai] = tn[go]
         act = ai[inside]
     if not segs:
@@ -724,8 +737,7 @@ def skipped_attenuation(start_pos, start_dir, kappa, lo, hi):
     t_in, t_out = _slab(start_pos, -start_dir, lo, hi)
     t = np.where(np.isfinite(t_out), np.maximum(t_out, 0.0), 0.0)
     entry = start_pos - t[:, None] * start_dir
-    sg, vox, t0, t1, _ = dda_walk(entry, start_pos, lo, ih, N)
-    vox = np.clip(vox, 0, N - 1)
+    sg, vox, t0, t1, _ = dda_walk(entry, start_pos, lo, ih, N, clamp=True)
     length = np.sqrt(np.sum((start_pos - entry) ** 2, axis=1))
     tau = np.zeros((len(start_pos), 3))
     k = kappa[vox[:, 0], vox[:, 1], vox[:, 2]].astype(np.float64)
@@ -810,7 +822,8 @@ def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi
     x = start_pos.copy()
     n0 = sample_field(field, x, lo, ih, N, bugs)[:, 0]
     v = n0[:, None] * start_dir
-    T = skipped_attenuation(start_pos, start_dir, kappa, lo, hi)
+    T = (np.ones_like(start_rad) if "no_skip_attenuation" in bugs
+         else skipped_attenuation(start_pos, start_dir, kappa, lo, hi))
     L = start_rad * T
     L_start_max = L.max(axis=1)
     dep = Deposits(int(np.prod(N)), L) if deposit_cap is not None else None
@@ -904,10 +917,10 @@ def march(field, level, step_max, kappa, start_pos, start_dir, start_rad, lo, hi
             "deposits": dep}
 
 
-def outside_hits(m, tris, lo, hi):
+def outside_hits(m, tris, lo, hi, bugs=()):
     """Status-1 photons go on straight from their exit to the first receiver outside the box:
     fills ``hit_pos`` and ``hit_tri`` of those that meet one (status stays 1)."""
-    if tris is None or not len(tris):
+    if tris is None or not len(tris) or "no_outside_hits" in bugs:
         return
     io = np.flatnonzero(m["photon_status"] == 1)
     if not len(io):
@@ -989,7 +1002,7 @@ def render_case(scene_path, bugs=()):
     field = gradient(ior, lo, hi, bugs)
     level, smax, vsmax = octree(ior, vol, bugs)
     sp, sd, srad, light_of = photons(sc, ior, lo, hi, objs, bugs)
-    kappa = extinction(sc, ior, absorb)
+    kappa = extinction(sc, ior, absorb, bugs)
     N = np.array(ior.shape)
     h = (hi - lo) / N
     has_caustics = bool(raw.get("receivers")) and bool(sc["lights"])
@@ -1000,7 +1013,7 @@ def render_case(scene_path, bugs=()):
     m = march(*args, bugs, record=rec, tris=tris)
     cut = stop_cut(m["steps"], vol)
     total = stopping_rule(m, vol)
-    outside_hits(m, tris, lo, hi)
+    outside_hits(m, tris, lo, hi, bugs)
     # the deposits of the steps the stopping rule keeps: the march again, stopped at the cut
     # (photons are independent, so the second march retraces the first)
     dm = march(*args, bugs, tris=tris, deposit_cap=cut if cut is not None else 1 << 62)

@@ -268,7 +268,12 @@ def view(ray_origin, ray_dir, field, vsmax, kappa, sigma, radiance, direction, l
     x[act] = o[act] + t_in[act, None] * d[act]
     n0 = sample_field(field, x[act], lo, ih, N)[:, 0]
     v[act] = n0[:, None] * d[act]
-    inside[act] = side * (n0 - n_half) > 0
+    if "view_entry_voxel_n" in bugs:
+        ce = voxel_of(x[act], lo, ih, N)
+        n0v = field[ce[:, 0], ce[:, 1], ce[:, 2], 0].astype(np.float64)
+        inside[act] = side * (n0v - n_half) > 0
+    else:
+        inside[act] = side * (n0 - n_half) > 0
     hit[act] = inside[act]
     ds = hmin
     max_steps = 4 * int(N.sum())
