@@ -321,3 +321,25 @@ def test_accepted_extremes_render_finite(tmp_path):
         assert np.all(np.isfinite(res[k])), k
     far = rr.render(rr.load_scene(_with({"camera.eye": [0, 0, 9e5], "camera.far": 1e6})), method="imagespace")
     assert np.all(np.isfinite(far["image"])) and np.all(np.isfinite(far["ray_dir"]))
+
+
+@pytest.mark.parametrize("arrays", [
+    {"meta": np.array("{not json"), "image": np.zeros((2, 2, 3), np.float32)},
+    {"meta": np.array([{"a": 1}], dtype=object)},
+    {"image": np.array([None, 1], dtype=object)},
+], ids=["meta_not_json", "meta_object_array", "object_array"])
+def test_check_reads_a_corrupt_candidate_npz_as_a_problem_of_the_case(tmp_path, arrays):
+    """check judges a candidate's result.npz per case: a corrupt one is that case's one-line problem, no traceback
+    (the whole command's exit statuses on such files: tests/test_fuzz.py, prop_check)."""
+    from refraction_ref.golden.check import _read_result
+
+    p = _npz(tmp_path / "result.npz", **arrays)
+    got, problem = _read_result(str(p))
+    if problem is None:  # meta is not read by check: the arrays it judges are
+        assert "meta" not in got and sorted(got) == sorted(k for k in arrays if k != "meta")
+    else:
+        assert got is None and "result.npz" in _one_line(problem)
+    trunc = tmp_path / "t.npz"
+    trunc.write_bytes(p.read_bytes()[:40])
+    got, problem = _read_result(str(trunc))
+    assert got is None and _one_line(problem)
