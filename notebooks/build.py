@@ -14,6 +14,11 @@ raises is not rewritten; the error names the cell (index and first line).
 The first PNG output of the cell tagged ``learn`` is also written to
 ``docs/learn/<notebook>.png``: the picture the README's "Learn" section shows.
 
+The cell tagged ``contract`` (right after ``parameters``) prints the package's
+``contract_version``; :func:`stored_contract_version` reads it back from the
+stored outputs, so a test can tell a notebook built under another version of
+``docs/oracle.md`` without running it.
+
 The tests (``tests/test_notebooks.py``) use :func:`execute` with a small
 resolution injected after each notebook's ``parameters`` cell.
 """
@@ -37,6 +42,9 @@ NOTEBOOKS = ["imagespace_walkthrough", "caustics_walkthrough", "volumetric_walkt
 #: what the final injected cell prints before its JSON (see :func:`execute`)
 KEY_MARK = "@@KEY_NUMBERS@@"
 
+#: the tag of the cell that prints ``contract_version <n>``
+CONTRACT_TAG = "contract"
+
 
 class NotebookError(RuntimeError):
     """A cell raised; the message names the notebook, the cell index and its first source line."""
@@ -48,6 +56,25 @@ def parameters_index(nb):
         if c.cell_type == "code" and "parameters" in c.get("metadata", {}).get("tags", []):
             return i
     raise NotebookError("no code cell is tagged 'parameters'")
+
+
+def stored_contract_version(nb):
+    """The ``contract_version`` the stored outputs were made under, from the cell tagged ``contract``.
+
+    Returns
+    -------
+    int or None
+        The number its stored output prints as ``contract_version <n>``; None when the notebook has no
+        such cell or it was stored without that output.
+    """
+    for c in nb.cells:
+        if c.cell_type == "code" and CONTRACT_TAG in c.get("metadata", {}).get("tags", []):
+            text = "".join(o.get("text", "") for o in c.get("outputs", []) if o.get("output_type") == "stream")
+            for ln in text.splitlines():
+                parts = ln.split()
+                if len(parts) == 2 and parts[0] == "contract_version" and parts[1].isdigit():
+                    return int(parts[1])
+    return None
 
 
 def _is_injected(cell, injected):

@@ -166,6 +166,28 @@ def test_every_notebook_is_listed_with_a_parameters_cell_and_exercises():
     assert total < 8e6, f"notebooks/ holds {total / 1e6:.1f} MB (limit 8 MB)"
 
 
+def test_stored_outputs_come_from_the_packages_contract_version():
+    """Each notebook's stored outputs were made under this package's contract_version (read from the .ipynb,
+    not executed): the cell tagged `contract` printed it when `python notebooks/build.py` last ran the notebook."""
+    import nbformat
+    from refraction_ref.contract import CONTRACT_VERSION
+
+    stored = {name: build.stored_contract_version(nbformat.read(os.path.join(NB, name + ".ipynb"), as_version=4))
+              for name in build.NOTEBOOKS}
+    stale = sorted(n for n, v in stored.items() if v != CONTRACT_VERSION)
+    assert not stale, (f"stored outputs of another contract_version than the package's {CONTRACT_VERSION}: "
+                       f"{ {n: stored[n] for n in stale} }; rebuild them: python notebooks/build.py {' '.join(stale)}")
+    # the reader tells an old build and a notebook without the cell (or without its output) apart from a fresh one
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("print('contract_version', 5)", metadata={"tags": [build.CONTRACT_TAG]})
+    nb.cells = [cell]
+    assert build.stored_contract_version(nb) is None
+    cell.outputs = [nbformat.v4.new_output("stream", name="stdout", text="contract_version 5\n")]
+    assert build.stored_contract_version(nb) == 5
+    cell.metadata["tags"] = []
+    assert build.stored_contract_version(nb) is None
+
+
 def test_a_failing_cell_is_named(tmp_path):
     import nbformat
 
