@@ -766,6 +766,11 @@ def clip_box(x, x1, lo, hi):
     return np.maximum(s, 0.0)
 
 
+def _dot(a, b):
+    """Row-wise a . b as x x' + y y' + z z' (no BLAS, no fused multiply-add)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def _ray_tris(o, D, tris, tmax):
     """Nearest hit of rays o + t D, t in (0, tmax], on triangles (T, 3, 3): two-sided
     Moller-Trumbore, triangles in order, a later one only when strictly nearer.
@@ -777,13 +782,13 @@ def _ray_tris(o, D, tris, tmax):
         e1, e2 = v1 - v0, v2 - v0
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             pv = np.cross(D, e2)
-            det = pv @ e1
+            det = _dot(pv, e1)
             inv = 1.0 / det
             tv = o - v0
-            u = np.einsum("ij,ij->i", tv, pv) * inv
+            u = _dot(tv, pv) * inv
             qv = np.cross(tv, e1)
-            w = np.einsum("ij,ij->i", D, qv) * inv
-            t = (qv @ e2) * inv
+            w = _dot(D, qv) * inv
+            t = _dot(qv, e2) * inv
             ok = ((det != 0) & np.isfinite(det) & (u >= 0) & (u <= 1) & (w >= 0) & (u + w <= 1)
                   & (t > 0) & (t <= tmax) & (t < best))
         best = np.where(ok, t, best)
