@@ -34,6 +34,16 @@ import os
 
 import numpy as np
 
+try:                                    # as a package module, or loaded by path (tests, the CLI)
+    from .levelmap_image import BUGS as IMAGE_BUGS, image_pass
+except ImportError:
+    import importlib.util as _ilu
+    _spec = _ilu.spec_from_file_location(
+        "levelmap_image", os.path.join(os.path.dirname(os.path.abspath(__file__)), "levelmap_image.py"))
+    _mod = _ilu.module_from_spec(_spec)
+    _spec.loader.exec_module(_mod)
+    IMAGE_BUGS, image_pass = _mod.BUGS, _mod.image_pass
+
 #: Planted bugs, each a mistake a porter really makes (``run(..., bugs=...)``).
 BUGS = {
     "half_slice": "plane offsets off by half a slice (tight placement's "
@@ -48,6 +58,8 @@ BUGS = {
                        "zeta_i -+ s/2 instead of one floor",
     "receiver_cos_axis": "the receiver's cosine of eq. 4-18 taken against the "
                          "box axis V instead of the receiver's normal",
+    "radiance_twice": "casting: each light's map weighted by its radiance mean again (w^2 in all)",
+    **IMAGE_BUGS,
 }
 
 SNAP = 256          # sub-texel grid of the rasterizer (1/256 texel)
@@ -134,7 +146,9 @@ def resolve(scene):
           "shadows": True}
     lm.update(scene.get("levelmap") or {})
     # the caustic maps' knobs moved to the "caustics" block (levelmap.map_size etc. are its aliases)
-    lm.update({k: v for k, v in (scene.get("caustics") or {}).items() if k in ("map_size", "placement", "shadows")})
+    lm.update({k: v for k, v in (scene.get("caustics") or {}).items()
+               if k in ("map_size", "placement", "shadows", "ambient")})
+    lm.setdefault("ambient", 0.1)
     if (lm["placement"] not in ("component", "thesis") or lm["smart_spacing"] not in ("respace", "lattice")
             or lm["variant"] != "levelmap"):
         raise ValueError("numpy_backend.levelmap ports only caustics.placement='component' or 'thesis', "
@@ -580,8 +594,15 @@ def frame(box):
     return np.stack([centre - u / 2 - v / 2 + (h / 2) * V, u, v, V])
 
 
-def casting_pass(maps, boxes, lms, Hc, Wc):
-    """Pass `casting`: every light's map cast into light 0's (eq. 4-20)."""
+def casting_pass(maps, boxes, lms, Hc, Wc, weights=None):
+    """Pass `casting`: every light's map cast into light 0's (eq. 4-20).
+
+    The maps are added as they are: each light's radiance entered once, in
+    `water`'s flux. ``weights`` (the planted ``radiance_twice``) multiplies
+    each light's map by its radiance mean again.
+    """
+    if weights is not None:
+        maps = [m * w for m, w in zip(maps, weights)]
     out = maps[0].copy()
     if len(maps) > 1:
         c0, U0, V0, W0, (w0, h0, d0) = boxes[0]
@@ -609,8 +630,11 @@ def casting_pass(maps, boxes, lms, Hc, Wc):
 # ----------------------------------------------------------------------------
 
 
-def render(scene, bugs=()):
-    """Every pass of the level map for one scene; returns the candidate's arrays."""
+def render(scene, bugs=(), passes=("image",)):
+    """Every pass of the level map for one scene; returns the candidate's arrays.
+
+    ``passes=()`` stops after `casting` (no `image`: the view is the costly pass).
+    """
     unknown = set(bugs) - set(BUGS)
     if unknown:
         raise ValueError(f"unknown bugs {sorted(unknown)}; known: {sorted(BUGS)}")
@@ -628,6 +652,7 @@ def render(scene, bugs=()):
     out["stage.water.water_vertices"] = waters[0]["vertices"]
     out["stage.water.water_normals"] = waters[0]["normals"]
     K = float(water["absorption"])
+    casts, boxes0 = [], []
     for r, (rv, _, p0, albedo) in enumerate(recs):
         maps, boxes, lms = [], [], []
         for l, light in enumerate(lights):
@@ -659,16 +684,27 @@ def render(scene, bugs=()):
             maps.append(cmap)
             boxes.append(pl["box"])
             lms.append(lm)
-        cast = casting_pass(maps, boxes, lms, Hc, Wc)
+        weights = ([float(np.mean(li["radiance"])) for li in lights]
+                   if "radiance_twice" in bugs else None)   # planted: w^2 instead of w
+        cast = casting_pass(maps, boxes, lms, Hc, Wc, weights)
+        casts.append(cast)
+        boxes0.append(boxes[0])
         fr = frame(boxes[0])
         for key in (f"stage.casting.caustic_map_{r}", f"caustic_map_{r}"):
             out[key] = cast
         for key in (f"stage.casting.caustic_frame_{r}", f"caustic_frame_{r}"):
             out[key] = fr
+    if "image" in passes:
+        view = image_pass(dict(scene, water=water), waters[0], recs, boxes0, casts, eta, K,
+                          float(lmk["ambient"]), bugs)
+        for key, a in view.items():
+            out[f"stage.image.{key}"] = a
+            if key in ("image", "object_mask", "image_direct", "object_mask_direct"):
+                out[key] = a
     return out
 
 
-def run(golden_dir, out_dir, cases=None, bugs=()):
+def run(golden_dir, out_dir, cases=None, bugs=(), passes=("image",)):
     """Write ``out_dir/<case>/result.npz`` for the level-map cases of a golden suite.
 
     Parameters
@@ -681,6 +717,8 @@ def run(golden_dir, out_dir, cases=None, bugs=()):
         Cases to run (default: every case whose method is ``levelmap``).
     bugs : sequence of str
         Planted bugs (keys of ``BUGS``).
+    passes : sequence of str
+        ``("image",)`` (the default) also runs the view; ``()`` stops after `casting`.
 
     Returns
     -------
@@ -694,7 +732,7 @@ def run(golden_dir, out_dir, cases=None, bugs=()):
     for case in cases:
         with open(os.path.join(golden_dir, case, "scene.json")) as fh:
             scene = json.load(fh)
-        arrays = render(scene, bugs)
+        arrays = render(scene, bugs, passes)
         os.makedirs(os.path.join(out_dir, case), exist_ok=True)
         np.savez(os.path.join(out_dir, case, "result.npz"), **arrays)
     return list(cases)
