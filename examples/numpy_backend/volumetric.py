@@ -715,7 +715,7 @@ class Deposits:
             return
         seg = np.sqrt(np.sum((e - x) ** 2, axis=1))
         with np.errstate(divide="ignore", invalid="ignore"):
-            dr = (e - x) / seg[:, None]
+            dr = np.where((seg > 0)[:, None], (e - x) / seg[:, None], 0.0)   # a zero step adds nothing
         sg, vox, t0, t1, lv = dda_walk(x, e, lo, ih, N)
         length = np.ones_like(lv) if "deposit_no_length" in bugs else lv
         rgb = (L[sg] + (L1[sg] - L[sg]) * ((t0 + t1) / 2.0)[:, None]) * ((t1 - t0) * length[sg])[:, None]
