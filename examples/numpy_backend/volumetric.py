@@ -406,6 +406,37 @@ def _corners(lo, hi):
                      for a in (0, 1) for b in (0, 1) for c in (0, 1)])
 
 
+def _point_texels(light, rad, h2, C, lo, hi, M):
+    """A point light's texel rays: a square perspective camera at the light looking at the box
+    centre (up +y, +x when |f_y| >= 0.9) whose window just covers the box's corners; the start
+    radiance ``radiance domega / h2``, ``domega = (2 sx / M)(2 sy / M) cos^3``."""
+    eye = np.asarray(light["position"], np.float64)
+    f = (lo + hi) / 2.0 - eye
+    f = f / np.linalg.norm(f)
+    up = np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    r = np.cross(f, up)
+    r = r / np.linalg.norm(r)
+    u = np.cross(r, f)
+    B = np.stack([r, u, -f])
+    t = -eye @ B.T
+    pv = C[:, 0:1] * B[:, 0] + C[:, 1:2] * B[:, 1] + C[:, 2:3] * B[:, 2] + t
+    depth = -pv[:, 2]
+    tt = (1.0 + 1e-9) * float(np.max(np.maximum(np.abs(pv[:, 0]), np.abs(pv[:, 1])) / depth))
+    fov = np.degrees(2.0 * np.arctan(tt))
+    sy = np.tan(np.radians(fov) / 2.0)
+    sx = sy * M / M
+    j = np.arange(M)[None, :]
+    i = np.arange(M)[:, None]
+    x = ((j + 0.5) / M * 2.0 - 1.0) * sx + 0.0 * i
+    y = (1.0 - (i + 0.5) / M * 2.0) * sy + 0.0 * j
+    sc_ = 1.0 / np.sqrt(x * x + y * y + 1.0)
+    v = np.stack([x * sc_, y * sc_, -sc_], -1).reshape(-1, 3)
+    d = v[:, 0:1] * B[0] + v[:, 1:2] * B[1] + v[:, 2:3] * B[2]
+    domega = (2.0 * sx / M) * (2.0 * sy / M) * sc_.reshape(-1) ** 3
+    L = rad[None, :] * (domega / h2)[:, None]
+    return np.broadcast_to(eye, d.shape).copy(), d, L, None
+
+
 def light_texels(light, lo, hi, N, M, bugs=()):
     """Texel ray origins, directions and start radiance of one light's photon texture, and its
     grid (e1, e2, u0, du, v0, dv, M) for ``_first_hits``."""
@@ -414,7 +445,7 @@ def light_texels(light, lo, hi, N, M, bugs=()):
     h2 = (h[0] * h[1] * h[2]) ** (2.0 / 3.0)
     C = _corners(lo, hi)
     if light["type"] != "directional":
-        raise NotImplementedError("point lights: not ported (no volumetric golden case uses one)")
+        return _point_texels(light, rad, h2, C, lo, hi, M)
     d = np.asarray(light["direction"], np.float64)
     d = d / np.linalg.norm(d)
     a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -552,6 +583,9 @@ def photons(sc, ior, lo, hi, objs, bugs=()):
                 t, t_out = _slab(org, d, blo, bhi)
                 keep = t_out > t
         else:
+            if grid is None:
+                raise NotImplementedError("point lights on meshes (proxy = inflated): not ported; "
+                                          "set volumetric.proxy = box or use volume input")
             Vp, Fp = _inflated_proxy(objs, hmin, float(vol["proxy_inflate"]))
             th, front = _first_hits(org, d[0], Vp, Fp, grid)
             keep = np.isfinite(th) & hit_box & (th <= t_out_box)
