@@ -39,6 +39,7 @@ BUGS = {
     "map_transposed": "receivers/splat: map rows along u and columns along v",
     "hit_face_at_hit": "receiver_hit: hit_face the triangle of the texel under hit_pos instead of the texel "
                        "where the crossing was detected",
+    "light_cull_back": "photon_trace: the light's view rasterized with back faces culled (a GPU's default state)",
     "final_nearest_lookup": "caustic_final: the caustic map read at the nearest texel (point sampling) "
                             "instead of bilinearly",
 }
@@ -198,7 +199,7 @@ def pass_photon_trace(base, lc, k, Vw, F, ior, outside_ior, absorption, bugs=())
     """
     c = lc.cam
     N = lc.N
-    pix, depth = base.fragments(c, Vw, F)
+    pix, depth = base.fragments(c, Vw, F, ("cull_back",) if "light_cull_back" in bugs else ())
     mm = base.pass_minmax(c, pix, depth)
     vx = base.pass_voxelize(c, k, pix, depth, mm["zmin"], mm["zmax"])
     pe = base.pass_peel(c, k, vx["bits"], vx["zlo"], vx["zhi"])
