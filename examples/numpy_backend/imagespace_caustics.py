@@ -247,8 +247,8 @@ def _project(c, x, y, z):
     return 0.5 * c.H - y * inv * (0.5 * c.H / c.sy), x * inv * (0.5 * c.W / c.sx) + 0.5 * c.W
 
 
-def _exact_hits(c, exit_pos, exit_dir, tris, depth, triangle):
-    """The planted ``exact_hit``: the nearest ray-triangle hit (Möller-Trumbore), visible from the eye."""
+def _exact_hits(exit_pos, exit_dir, tris):
+    """The planted ``exact_hit``: the nearest ray-triangle hit (Möller-Trumbore), seen by the eye or not."""
     P = len(exit_pos)
     best = np.full(P, np.inf)
     face = np.full(P, -1, np.int64)
@@ -358,7 +358,7 @@ def base_to_view(c, P):
 def pass_receiver_hit(c, exit_pos, exit_dir, depth, triangle, tris, bugs=()):
     """``receiver_hit``: where the eye-space march meets each exiting photon with the receivers."""
     if "exact_hit" in bugs:
-        return _exact_hits(c, exit_pos, exit_dir, tris, depth, triangle)
+        return _exact_hits(exit_pos, exit_dir, tris)
     return receiver_hits(c, exit_pos, exit_dir, depth, triangle, bugs)
 
 
