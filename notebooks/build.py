@@ -19,6 +19,11 @@ The cell tagged ``contract`` (right after ``parameters``) prints the package's
 stored outputs, so a test can tell a notebook built under another version of
 ``docs/oracle.md`` without running it.
 
+A rebuild also stores the notebook's final ``key`` dict (its key numbers at the
+size it was built at) in the notebook's metadata, ``metadata.refraction_ref.key``
+(:func:`stored_key`), so that a test can re-run it at that size and compare
+(:func:`key_differences`) without trusting the printed outputs.
+
 The tests (``tests/test_notebooks.py``) use :func:`execute` with a small
 resolution injected after each notebook's ``parameters`` cell.
 """
@@ -44,6 +49,16 @@ KEY_MARK = "@@KEY_NUMBERS@@"
 
 #: the tag of the cell that prints ``contract_version <n>``
 CONTRACT_TAG = "contract"
+
+#: the notebook metadata entry a rebuild writes: ``{"key": ..., "contract_version": ...}``
+META = "refraction_ref"
+
+#: key-number names holding wall-clock times (machine- and load-dependent): never compared
+TIMING_WORDS = ("_ms", "seconds", "time", "wall")
+
+#: relative tolerance of a re-run's key numbers against the stored ones; the package is deterministic
+#: (fixed-point deposits, no RNG without a seed), so this only absorbs float formatting and BLAS order
+KEY_RTOL = 1e-6
 
 
 class NotebookError(RuntimeError):
@@ -75,6 +90,46 @@ def stored_contract_version(nb):
                 if len(parts) == 2 and parts[0] == "contract_version" and parts[1].isdigit():
                     return int(parts[1])
     return None
+
+
+def stored_key(nb):
+    """The ``key`` dict stored by the last rebuild (``metadata.refraction_ref.key``), or None."""
+    return nb.metadata.get(META, {}).get("key")
+
+
+def _is_timing(name):
+    return any(w in str(name).lower() for w in TIMING_WORDS)
+
+
+def key_differences(stored, fresh, rtol=KEY_RTOL, atol=1e-12, path="key"):
+    """Where two key dicts differ: a list of ``"path: stored != fresh"`` lines (empty when they agree).
+
+    Numbers agree within ``rtol`` (relative) or ``atol``; booleans, strings and lengths exactly; entries
+    whose name holds a timing word (:data:`TIMING_WORDS`) are skipped, as is ``_executable``.
+    """
+    if isinstance(stored, dict) and isinstance(fresh, dict):
+        out = []
+        for k in sorted(set(stored) | set(fresh), key=str):
+            if k == "_executable" or _is_timing(k):
+                continue
+            if k not in stored or k not in fresh:
+                out.append(f"{path}.{k}: only in the {'stored' if k in stored else 'fresh'} key")
+                continue
+            out += key_differences(stored[k], fresh[k], rtol, atol, f"{path}.{k}")
+        return out
+    if isinstance(stored, (list, tuple)) and isinstance(fresh, (list, tuple)):
+        if len(stored) != len(fresh):
+            return [f"{path}: {len(stored)} items stored, {len(fresh)} fresh"]
+        return [d for i, (a, b) in enumerate(zip(stored, fresh)) for d in key_differences(a, b, rtol, atol,
+                                                                                         f"{path}[{i}]")]
+    num = (int, float)
+    if (isinstance(stored, num) and isinstance(fresh, num) and not isinstance(stored, bool)
+            and not isinstance(fresh, bool)):
+        a, b = float(stored), float(fresh)
+        if a == b or (a != a and b != b) or abs(a - b) <= atol + rtol * max(abs(a), abs(b)):
+            return []
+        return [f"{path}: {a!r} stored != {b!r} fresh"]
+    return [] if stored == fresh else [f"{path}: {stored!r} stored != {fresh!r} fresh"]
 
 
 def _is_injected(cell, injected):
@@ -228,12 +283,19 @@ def main(argv=None):
     for n in names:
         path = os.path.join(HERE, n + ".ipynb")
         try:
-            nb, s, _ = execute(path, a.overrides, a.timeout)
+            nb, s, key = execute(path, a.overrides, a.timeout, key_numbers=True)
         except NotebookError as e:
             print(f"FAIL {e}", file=sys.stderr)
             failed += 1
             continue
         if a.overrides is None and not a.dry_run:
+            from refraction_ref.contract import CONTRACT_VERSION
+
+            if isinstance(key, dict):
+                key.pop("_executable", None)
+            # JSON-safe (numpy scalars, tuples) the same way the key cell printed it
+            nb.metadata[META] = {"key": json.loads(json.dumps(key, default=float)),
+                                 "contract_version": CONTRACT_VERSION}
             write_atomic(nb, path)
             png = learn_picture(nb)
             if png:

@@ -188,6 +188,54 @@ def test_stored_outputs_come_from_the_packages_contract_version():
     assert build.stored_contract_version(nb) is None
 
 
+def test_every_notebook_stores_its_key_numbers_under_this_contract_version():
+    """`python notebooks/build.py` stores each notebook's full-size `key` dict in its metadata, made under the
+    package's contract_version, and the stored outputs print the same version (read, not executed)."""
+    import nbformat
+    from refraction_ref.contract import CONTRACT_VERSION
+
+    missing, stale = [], {}
+    for name in build.NOTEBOOKS:
+        nb = nbformat.read(os.path.join(NB, name + ".ipynb"), as_version=4)
+        key = build.stored_key(nb)
+        if not isinstance(key, dict) or not key:
+            missing.append(name)
+            continue
+        meta_v = nb.metadata[build.META].get("contract_version")
+        if not (meta_v == CONTRACT_VERSION == build.stored_contract_version(nb)):
+            stale[name] = (meta_v, build.stored_contract_version(nb))
+    assert not missing, f"no stored key numbers (rebuild them): python notebooks/build.py {' '.join(missing)}"
+    assert not stale, (f"(metadata, printed) contract_version differ from the package's {CONTRACT_VERSION}: {stale}; "
+                       f"rebuild: python notebooks/build.py {' '.join(stale)}")
+
+
+def test_key_differences_names_what_changed_and_skips_timings():
+    stored = {"a": 1.0, "b": {"x": [1, 2.5], "ok": True}, "stage_ms": 10.0, "name": "lens"}
+    assert build.key_differences(stored, json.loads(json.dumps(stored))) == []
+    # a timing changes freely; a relative change below KEY_RTOL passes, above it fails and is named
+    assert build.key_differences(stored, dict(stored, stage_ms=99.0, a=1.0 + build.KEY_RTOL / 2)) == []
+    d = build.key_differences(stored, dict(stored, a=1.01, b={"x": [1, 2.5], "ok": False}))
+    assert d == ["key.a: 1.0 stored != 1.01 fresh", "key.b.ok: True stored != False fresh"]
+    assert build.key_differences(stored, dict(stored, b={"x": [1], "ok": True})) == ["key.b.x: 2 items stored, 1 fresh"]
+    assert build.key_differences({"a": 1}, {"a": 1, "c": 2}) == ["key.c: only in the fresh key"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", build.NOTEBOOKS)
+def test_stored_key_numbers_equal_a_fresh_run(name):
+    """Re-executes the notebook at the size it was stored at (its `parameters` cell as written) and compares its
+    key numbers with the stored ones, within build.KEY_RTOL (relative); timings are skipped (build.TIMING_WORDS).
+    Minutes per notebook: run with -m slow."""
+    import nbformat
+
+    stored = build.stored_key(nbformat.read(os.path.join(NB, name + ".ipynb"), as_version=4))
+    assert isinstance(stored, dict), f"{name}: no stored key numbers; python notebooks/build.py {name}"
+    fresh = run(name, None)
+    diff = build.key_differences(stored, fresh)
+    assert not diff, (f"{name}: the stored outputs are not a fresh run's ({len(diff)} differences): {diff[:8]}; "
+                      f"rebuild: python notebooks/build.py {name}")
+
+
 def test_a_failing_cell_is_named(tmp_path):
     import nbformat
 
