@@ -1,10 +1,11 @@
-"""Clean-room NumPy port of the volumetric method (Sun et al. 2008), ``voxelize`` to ``march``.
+"""Clean-room NumPy port of the volumetric method (Sun et al. 2008), ``voxelize`` to ``view``.
 
 Written from ``docs/oracle.md`` ("Porting rules: volumetric", "Volumetric",
 "Stage buffers") and ``docs/backends.md`` alone, without the package's
 source, the way a GPU port is structured: one function per pass, every pass
 vectorised over voxels, texels or photons (the march loops over steps with
-all active photons at once, as a compute shader dispatch per step would).
+all active photons at once, as a compute shader dispatch per step would). The
+receivers, caustic maps and viewing pass are in ``volumetric_view.py``.
 
 ``run(golden_dir, out_dir)`` reads each volumetric case's ``scene.json``
 from a golden suite and writes ``out_dir/<case>/result.npz`` with the
@@ -16,7 +17,8 @@ References
 ----------
 X. Sun, K. Zhou, E. Stollnitz, J. Shi, B. Guo, *Interactive Relighting of
 Dynamic Refractive Objects*, ACM TOG 27(3), 2008: §4.1 (voxelize), §3 eq. 3
-(gradient), §4.2 and §5.3 (octree), §4.3 (photons), §4.4 eqs. 4-6 (march).
+(gradient), §4.2 and §5.3 (octree), §4.3 (photons), §4.4 eqs. 4-6 (march), Fig. 9
+(receivers), §4.5 (view).
 """
 from __future__ import annotations
 
