@@ -965,7 +965,7 @@ def rasterize(tri_view, camera, op, *, zlo=None, zhi=None, slices=256, capacity=
         hi = np.ascontiguousarray(zhi, dtype=np.float64)
     elif code == 6:
         layers = np.empty((2, H, W))  # initialised band by band in the kernel
-    else:
+    elif code != 7:  # 'collect' ('nearest' needs no A-buffer: a (capacity, H, W) one cost it 64 MB at 512^2)
         ibuf = np.zeros((H, W), np.int32)
         layers = np.full((int(capacity), H, W), np.inf)
     ids = np.zeros((1, 1), np.int64)

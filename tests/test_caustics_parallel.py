@@ -396,3 +396,113 @@ def test_map_position_kernel_equals_to_map(on_one_and_two_threads):
         assert np.array_equal(x, q[:, 0], equal_nan=True)
     for x in (r, r2):
         assert np.array_equal(x, q[:, 1], equal_nan=True)
+
+
+def _march_plain(O, D, depth, cam, rel_thick=0.01, max_samples=1 << 16):
+    """march_eyespace as it was: every sample tested, one ray after another (the reference of the
+    tiled march, which steps over runs of samples that cannot hit)."""
+    import math
+
+    import numba as nb
+
+    from refraction_ref.camera import project_point
+    from refraction_ref.caustics.receivers import _clip_plane
+
+    @nb.njit
+    def run(O, D, depth, W, H, sx, sy, ortho, near, far, t_hit, pix):
+        for k in range(O.shape[0]):
+            t_hit[k] = np.nan
+            pix[k, 0] = -1
+            pix[k, 1] = -1
+            ox, oy, oz = O[k, 0], O[k, 1], O[k, 2]
+            dx, dy, dz = D[k, 0], D[k, 1], D[k, 2]
+            if not (math.isfinite(ox) and math.isfinite(dx)):
+                continue
+            t0, t1 = 0.0, 1e30
+            t0, t1 = _clip_plane(near + oz, dz, t0, t1)
+            t0, t1 = _clip_plane(-oz - far, -dz, t0, t1)
+            if ortho:
+                t0, t1 = _clip_plane(ox - sx, dx, t0, t1)
+                t0, t1 = _clip_plane(-ox - sx, -dx, t0, t1)
+                t0, t1 = _clip_plane(oy - sy, dy, t0, t1)
+                t0, t1 = _clip_plane(-oy - sy, -dy, t0, t1)
+            else:
+                t0, t1 = _clip_plane(ox + sx * oz, dx + sx * dz, t0, t1)
+                t0, t1 = _clip_plane(-ox + sx * oz, -dx + sx * dz, t0, t1)
+                t0, t1 = _clip_plane(oy + sy * oz, dy + sy * dz, t0, t1)
+                t0, t1 = _clip_plane(-oy + sy * oz, -dy + sy * dz, t0, t1)
+            if not (t1 > t0) or t1 >= 1e29:
+                continue
+            c0, r0, dA = project_point(ox + t0 * dx, oy + t0 * dy, oz + t0 * dz, W, H, sx, sy, ortho)
+            c1, r1, dB = project_point(ox + t1 * dx, oy + t1 * dy, oz + t1 * dz, W, H, sx, sy, ortho)
+            n = np.int64(math.ceil(max(abs(c1 - c0), abs(r1 - r0)))) + 1
+            n = min(max(n, 2), max_samples)
+            prev_gap, prev_t, prev_rd = -np.inf, t0, dA
+            for m in range(n + 1):
+                u = m / n
+                if ortho or not (dA > 0.0 and dB > 0.0):
+                    s = u
+                else:
+                    s = (u / dB) / ((1.0 - u) / dA + u / dB)
+                t = t0 + s * (t1 - t0)
+                col, row, rd = project_point(ox + t * dx, oy + t * dy, oz + t * dz, W, H, sx, sy, ortho)
+                i = min(max(np.int64(math.floor(row)), 0), H - 1)
+                j = min(max(np.int64(math.floor(col)), 0), W - 1)
+                sd = depth[i, j]
+                gap = rd - sd if math.isfinite(sd) else -np.inf
+                if gap >= 0.0 and prev_gap < 0.0:
+                    if gap <= abs(rd - prev_rd) + rel_thick * sd:
+                        f = 1.0
+                        if math.isfinite(prev_gap):
+                            f = -prev_gap / (gap - prev_gap)
+                        t_hit[k] = prev_t + f * (t - prev_t)
+                        pix[k, 0] = i
+                        pix[k, 1] = j
+                        break
+                prev_gap, prev_t, prev_rd = gap, t, rd
+
+    t = np.empty(len(O))
+    pix = np.empty((len(O), 2), np.int64)
+    W, H, sx, sy = cam.kernel_args()
+    run(np.ascontiguousarray(O, dtype=np.float64), np.ascontiguousarray(D, dtype=np.float64),
+        np.ascontiguousarray(depth, dtype=np.float64), W, H, sx, sy, bool(cam.ortho), float(cam.near),
+        float(cam.far), t, pix)
+    return t, pix
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_tiled_eyespace_march_equals_testing_every_sample(on_one_and_two_threads, ortho):
+    """The march steps over runs of samples nearer than a tile's nearest receiver; the hits (t and
+    pixel, NaN and -1 included) are those of the per-sample march, on the receivers' depth image of
+    the caustics scene and on a noisy one with holes, NaN and depth steps at tile corners."""
+    from refraction_ref.camera import Camera
+    from refraction_ref.caustics.receivers import eye_buffers, march_eyespace, receiver_set
+
+    sc = rr.load_scene(SCENE, {"camera.width": 150, "camera.height": 130})
+    raw = dict(sc.data["camera"], width=150, height=130)
+    if ortho:
+        raw.update(ortho=True, ortho_height=3.0)
+    cam = Camera.from_dict(raw)
+    rs = receiver_set(sc, sc.data["lights"][0], 64)
+    floor, _ = eye_buffers(rs, cam)
+    rng = np.random.default_rng(29)
+    noisy = floor * rng.uniform(0.97, 1.03, floor.shape)
+    noisy[rng.random(floor.shape) < 0.05] = np.inf
+    noisy[rng.random(floor.shape) < 0.01] = np.nan
+    noisy[40:72, 32:64] = 1.5  # a near block on tile edges (the coarse tiles are 32 pixels)
+    noisy[100:, :7] = np.inf
+    N = 6000
+    o = rng.uniform(-1.0, 1.0, (N, 3)) * [1.0, 0.6, 1.0]
+    d = rng.normal(size=(N, 3)) + [0.0, -0.8, 0.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[:300] = [0.0, -1.0, 0.0]  # straight down: screen-vertical lines
+    d[300:400] = -cam.basis[2]  # along the view axis: one pixel on screen
+    o[400] = np.nan
+    o[401:500] = cam.eye + 0.001 * rng.normal(size=(99, 3))  # from the camera: through the near plane
+    ov, dv = cam.world_to_view(o), cam.dir_world_to_view(d)
+    for depth in (floor, noisy):
+        want = _march_plain(ov, dv, depth, cam)
+        assert (want[1][:, 0] >= 0).sum() > N // 4 and np.isnan(want[0]).sum() > 100
+        a, b = on_one_and_two_threads(lambda: march_eyespace(ov, dv, depth, cam))
+        for got in (a, b):
+            assert np.array_equal(got[0], want[0], equal_nan=True) and np.array_equal(got[1], want[1])

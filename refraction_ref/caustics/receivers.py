@@ -360,14 +360,134 @@ class _Hits(NamedTuple):
     pix: np.ndarray  # (N, 2) int64 pixel (row, column), -1 where none
 
 
+#: sides (pixels) of the two levels of tiles whose nearest receiver depth lets the march
+#: step over samples that cannot hit (see :func:`_march_kernel`); the coarse a multiple of the fine
+TILE_COARSE = 32
+TILE_FINE = 8
+
+
 @nb.njit(cache=True, parallel=True)
-def _march_kernel(rays, depth, view, knobs, hits):
+def _tile_min_kernel(depth, T, out):
+    # out[a, b]: the nearest finite depth of tile (a, b) of T x T pixels, +inf where none
+    # (min is exact: the same whatever the order)
+    H, W = depth.shape
+    for a0 in nb.prange(out.shape[0]):
+        a = np.int64(a0)
+        for b in range(out.shape[1]):
+            out[a, b] = np.inf
+        for i in range(a * T, min(a * T + T, H)):
+            for j in range(W):
+                v = depth[i, j]
+                if math.isfinite(v) and v < out[a, j // T]:
+                    out[a, j // T] = v
+
+
+def tile_min(depth, T):
+    """The nearest finite depth of each ``T`` x ``T`` tile of a depth image (``+inf`` where none).
+
+    Parameters
+    ----------
+    depth : (H, W) float64
+    T : int
+        Tile side in pixels (the last row and column of tiles may be partial).
+
+    Returns
+    -------
+    (ceil(H / T), ceil(W / T)) float64
+
+    References
+    ----------
+    .. [1] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
+       Accurate Photon Tracing on GPUs", EGSR 2006.
+    """
+    d = np.ascontiguousarray(depth, dtype=np.float64)
+    out = np.empty((-(-d.shape[0] // T), -(-d.shape[1] // T)))
+    _tile_min_kernel(d, np.int64(T), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _coarsen_min(fine, r, out):
+    # out[a, b] = min of fine[r a : r a + r, r b : r b + r] (exact in any order)
+    for a0 in nb.prange(out.shape[0]):
+        a = np.int64(a0)
+        for b in range(out.shape[1]):
+            v = np.inf
+            for i in range(a * r, min(a * r + r, fine.shape[0])):
+                for j in range(b * r, min(b * r + r, fine.shape[1])):
+                    v = min(v, fine[i, j])
+            out[a, b] = v
+
+
+@nb.njit(cache=True, inline="always")
+def _march_sample(m, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz, W, H, sx, sy, ortho):
+    """Sample ``m`` of ``n`` of a clipped ray: its parameter ``t`` and (col, row, depth) on screen."""
+    u = m / n
+    if persp:  # perspective-correct: 1/depth is linear in screen space
+        s = (u / dB) / ((1.0 - u) / dA + u / dB)
+    else:
+        s = u
+    t = t0 + s * (t1 - t0)
+    col, row, rd = project_point(ox + t * dx, oy + t * dy, oz + t * dz, W, H, sx, sy, ortho)
+    return t, col, row, rd
+
+
+#: how far inside a tile (pixels) the samples of a run stepped over must lie on the line
+#: through the end points: far above the rounding of their screen positions (~1e-10 px),
+#: far below a pixel
+_TILE_MARGIN = 1e-6
+
+
+@nb.njit(cache=True, inline="always")
+def _run_in_tile(T, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H):
+    """The tile (a, b) of ``T`` pixels (a literal: the divisions are shifts) holding sample
+    ``m`` (on screen ``(c0, r0) + m (stepc, stepr)``, ``_TILE_MARGIN`` inside) and the last
+    sample ``mb <= n`` of the run from ``m`` still in it (``inv_c``, ``inv_r``: 1 / steps,
+    0 for none); ``mb = -1`` when sample ``m`` is not inside a tile."""
+    col = c0 + m * stepc
+    row = r0 + m * stepr
+    if not (col >= 0.0 and col < W and row >= 0.0 and row < H):
+        return 0, 0, np.int64(-1)
+    a = np.int64(math.floor(row)) // T
+    b = np.int64(math.floor(col)) // T
+    x0 = b * T + _TILE_MARGIN
+    x1 = min(b * T + T, W) - _TILE_MARGIN
+    y0 = a * T + _TILE_MARGIN
+    y1 = min(a * T + T, H) - _TILE_MARGIN
+    if not (col >= x0 and col <= x1 and row >= y0 and row <= y1):
+        return a, b, np.int64(-1)
+    k = 1e18
+    if stepc > 0.0:
+        k = min(k, (x1 - col) * inv_c)
+    elif stepc < 0.0:
+        k = min(k, (x0 - col) * inv_c)
+    if stepr > 0.0:
+        k = min(k, (y1 - row) * inv_r)
+    elif stepr < 0.0:
+        k = min(k, (y0 - row) * inv_r)
+    return a, b, min(m + np.int64(k), n)
+
+
+@nb.njit(cache=True, inline="always")
+def _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, lim):
+    """Whether the ray's depth at samples ``m .. me`` is below ``lim`` (less ``slack``): from its
+    end depths, 1/depth linear in the sample for perspective-correct samples (``ia``, ``ib``
+    the end points' 1/depth), the depth itself for orthographic ones; the extremes at the ends."""
+    if persp:
+        w = min(ia + (m * inv_n) * (ib - ia), ia + (me * inv_n) * (ib - ia))
+        return w > 0.0 and w * (lim - slack) > 1.0
+    return max(dA + (m * inv_n) * (dB - dA), dA + (me * inv_n) * (dB - dA)) + slack < lim
+
+
+@nb.njit(cache=True, parallel=True)
+def _march_kernel(rays, depth, view, knobs, tiles, hits):
     # the named tuples unpacked by name, outside the prange loop (inside it, Numba
     # drops stores into arrays taken from a tuple: numba#7135)
     O, D = rays.O, rays.D
     W, H, sx, sy, ortho, near, far = view.W, view.H, view.sx, view.sy, view.ortho, view.near, view.far
     rel_thick, max_samples = knobs.rel_thick, knobs.max_samples
     t_hit, pix = hits.t, hits.pix
+    tc, tf = tiles.coarse, tiles.fine
     for k0 in nb.prange(O.shape[0]):
         k = np.int64(k0)
         t_hit[k] = np.nan
@@ -399,34 +519,84 @@ def _march_kernel(rays, depth, view, knobs, hits):
         c1, r1, dB = project_point(ox + t1 * dx, oy + t1 * dy, oz + t1 * dz, W, H, sx, sy, ortho)
         n = np.int64(math.ceil(max(abs(c1 - c0), abs(r1 - r0)))) + 1
         n = min(max(n, 2), max_samples)
+        persp = not (ortho or not (dA > 0.0 and dB > 0.0))
+        # Tiles: whether sample m hits depends on it and on sample m - 1 alone, and it can hit
+        # only where the ray is at or behind the receiver under it. With samples uniform on
+        # screen (orthographic, or perspective-correct: then on screen sample m lies at
+        # (c0, r0) + m (c1 - c0, r1 - r0) / n and 1/depth is linear in m), a run of samples
+        # inside one tile whose ray depth at both ends is nearer than the tile's nearest
+        # receiver holds no hit: it is stepped over, and the sample before the next one tested
+        # is evaluated as the state that one compares with. The hits are those of testing
+        # every sample.
+        tiled = ortho or persp
+        stepc = (c1 - c0) / n
+        stepr = (r1 - r0) / n
+        inv_c = 1.0 / stepc if stepc != 0.0 else 0.0
+        inv_r = 1.0 / stepr if stepr != 0.0 else 0.0
+        inv_n = 1.0 / n
+        ia = 1.0 / dA if dA != 0.0 else 0.0
+        ib = 1.0 / dB if dB != 0.0 else 0.0
+        # the bounds' own rounding, and that of a sample's depth -(oz + t dz), are ~1e-15 of these
+        slack = 1e-9 * (abs(oz) + abs(t0 * dz) + abs(t1 * dz) + abs(dA) + abs(dB))
         prev_gap = -np.inf
         prev_t = t0
         prev_rd = dA
-        for m in range(n + 1):
-            u = m / n
-            if ortho or not (dA > 0.0 and dB > 0.0):
-                s = u
-            else:  # perspective-correct: 1/depth is linear in screen space
-                s = (u / dB) / ((1.0 - u) / dA + u / dB)
-            t = t0 + s * (t1 - t0)
-            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
-            col, row, rd = project_point(px, py, pz, W, H, sx, sy, ortho)
-            i = min(max(np.int64(math.floor(row)), 0), H - 1)
-            j = min(max(np.int64(math.floor(col)), 0), W - 1)
-            sd = depth[i, j]
-            gap = rd - sd if math.isfinite(sd) else -np.inf
-            if gap >= 0.0 and prev_gap < 0.0:
-                if gap <= abs(rd - prev_rd) + rel_thick * sd:
-                    f = 1.0
-                    if math.isfinite(prev_gap):
-                        f = -prev_gap / (gap - prev_gap)
-                    t_hit[k] = prev_t + f * (t - prev_t)
-                    pix[k, 0] = i
-                    pix[k, 1] = j
-                    break
-            prev_gap = gap
-            prev_t = t
-            prev_rd = rd
+        m = np.int64(0)
+        stale = False  # prev_* are not sample m - 1's (a run was stepped over)
+        hit = False
+        while m <= n and not hit:
+            mb = m  # test samples m .. mb one by one
+            if tiled:
+                a, b, me = _run_in_tile(TILE_COARSE, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H)
+                if me >= m and _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, tc[a, b]):
+                    m = me + 1
+                    stale = True
+                    continue
+                a, b, me = _run_in_tile(TILE_FINE, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H)
+                if me >= m:
+                    if _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, tf[a, b]):
+                        m = me + 1
+                        stale = True
+                        continue
+                    mb = me  # the rest of this fine tile, tested sample by sample
+            if stale:
+                t, col, row, rd = _march_sample(m - 1, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz,
+                                                W, H, sx, sy, ortho)
+                i = min(max(np.int64(math.floor(row)), 0), H - 1)
+                j = min(max(np.int64(math.floor(col)), 0), W - 1)
+                sd = depth[i, j]
+                prev_gap = rd - sd if math.isfinite(sd) else -np.inf
+                prev_t = t
+                prev_rd = rd
+                stale = False
+            for q in range(m, mb + 1):
+                t, col, row, rd = _march_sample(q, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz,
+                                                W, H, sx, sy, ortho)
+                i = min(max(np.int64(math.floor(row)), 0), H - 1)
+                j = min(max(np.int64(math.floor(col)), 0), W - 1)
+                sd = depth[i, j]
+                gap = rd - sd if math.isfinite(sd) else -np.inf
+                if gap >= 0.0 and prev_gap < 0.0:
+                    if gap <= abs(rd - prev_rd) + rel_thick * sd:
+                        f = 1.0
+                        if math.isfinite(prev_gap):
+                            f = -prev_gap / (gap - prev_gap)
+                        t_hit[k] = prev_t + f * (t - prev_t)
+                        pix[k, 0] = i
+                        pix[k, 1] = j
+                        hit = True
+                        break
+                prev_gap = gap
+                prev_t = t
+                prev_rd = rd
+            m = mb + 1
+
+
+class _Tiles(NamedTuple):
+    """The depth image's nearest depth per tile, two levels (:func:`tile_min`)."""
+
+    coarse: np.ndarray  # TILE_COARSE pixels a side
+    fine: np.ndarray  # TILE_FINE pixels a side
 
 
 def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samples=1 << 16):
@@ -467,10 +637,13 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
         W, H, sx, sy = cam.kernel_args()
         # marches differ in length by orders of magnitude (a ray crossing the image against one
         # that leaves at once): rays go to the threads in small chunks as they free up
+        dep = np.ascontiguousarray(depth, dtype=np.float64)
+        fine = tile_min(dep, TILE_FINE)
+        coarse = np.empty((-(-dep.shape[0] // TILE_COARSE), -(-dep.shape[1] // TILE_COARSE)))
+        _coarsen_min(fine, TILE_COARSE // TILE_FINE, coarse)
         with nb.parallel_chunksize(64):
-            _march_kernel(_Rays(O, D), np.ascontiguousarray(depth, dtype=np.float64),
-                          _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
-                          _Knobs(float(rel_thick), int(max_samples)), _Hits(t, pix))
+            _march_kernel(_Rays(O, D), dep, _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
+                          _Knobs(float(rel_thick), int(max_samples)), _Tiles(coarse, fine), _Hits(t, pix))
     return t, pix
 
 
