@@ -452,7 +452,7 @@ STRATEGIES = {
 CHECK_STRATEGIES = (st.integers(0, 100), st.sampled_from(["object", "text", "zeros", "nan", "drop", "none"]),
                     st.sampled_from(["json", "text", "object"]), st.sampled_from([0, 0, 0, 2, 6]))
 
-FAST = {"scene_api": 80, "scene_file": 40, "set": 60, "flags": 12, "compare": 40, "check": 8}
+FAST = {"scene_api": 40, "scene_file": 40, "set": 60, "flags": 12, "compare": 40, "check": 8}
 LONG = {"scene_api": 2600, "scene_file": 900, "set": 700, "flags": 150, "compare": 500, "check": 150}
 
 
