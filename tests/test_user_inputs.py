@@ -93,6 +93,9 @@ REFUSED = [
     ("material_null", _with({"objects.0.material": None}), "material"),
     ("deform_zero_direction", _with({"objects.0.deform": {"direction": [0, 0, 0]}}), "deform.direction"),
     ("albedo_1e300", _with({"receivers.0.albedo": [1e300, 0, 0]}), "'receivers[0].albedo'"),
+    ("vol_scattering_bool", _with({"volumetric.scattering": True}), "'volumetric.scattering'"),
+    ("vol_absorption_bool_in_rgb", _with({"volumetric.absorption": [0, True, 0]}), "'volumetric.absorption'"),
+    ("vol_scattering_dict", _with({"volumetric.scattering": {}}), "'volumetric.scattering'"),
     ("deep_nesting", {**TINY, "objects": [{"name": [[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]}]},
      "nests"),
 ]

@@ -104,7 +104,12 @@ VOLUME_KEYS = ("ior", "extinction", "scattering", "bounds")
 def _rgb(x, where):
     from ..validation import SceneError
 
-    a = np.asarray(x, dtype=np.float64) if not isinstance(x, str) else None
+    def number(v):
+        # bool is an int to Python; a colour of `true` is a typo, not 1.0
+        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+
+    ok = number(x) or (isinstance(x, (list, tuple)) and len(x) == 3 and all(number(v) for v in x))
+    a = np.asarray(x, dtype=np.float64) if ok else None
     if a is None or a.shape not in ((), (3,)) or not np.all(np.isfinite(a)):
         raise SceneError(f"scene: '{where}' must be a finite number or a list [r, g, b], got {x!r}")
     if np.any(a < 0):
