@@ -170,6 +170,10 @@ def execute(path, overrides=None, timeout=600, key_numbers=False, cwd=HERE):
 
     nb = nbformat.read(path, as_version=4)
     name = os.path.basename(path)
+    # the kernel inherits these: slider cells draw their static figure (notebooks/teach.py), and importing
+    # notebooks/*.py leaves no __pycache__ beside the notebooks
+    os.environ.setdefault("REFRACTION_REF_NOTEBOOK_STATIC", "1")
+    os.environ.setdefault("PYTHONDONTWRITEBYTECODE", "1")
     injected = []
     if overrides:
         i = parameters_index(nb)
