@@ -306,6 +306,23 @@ def test_stored_key_numbers_equal_a_fresh_run(name):
                       f"rebuild: python notebooks/build.py {name}")
 
 
+def test_sliders_fall_back_to_one_call_at_the_defaults(monkeypatch, capsys):
+    """notebooks/teach.py: while build.py stores outputs (or without ipywidgets) a slider cell calls its function
+    once, at each control's first value, and says so; with ipywidgets and a reader it builds the controls."""
+    spec = importlib.util.spec_from_file_location("notebooks_teach", os.path.join(NB, "teach.py"))
+    teach = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(teach)
+    calls = []
+    monkeypatch.setenv(teach.STATIC_ENV, "1")
+    assert teach.sliders(lambda **kw: calls.append(kw), ds_min=(1.0, 0.25, 4.0, 0.25), integrator=["rk4", "euler"]) is False
+    assert calls == [{"ds_min": 1.0, "integrator": "rk4"}] and "static" in capsys.readouterr().out
+    if importlib.util.find_spec("ipywidgets") is not None:
+        monkeypatch.delenv(teach.STATIC_ENV)
+        calls.clear()
+        assert teach.sliders(lambda **kw: calls.append(kw), planes=(50, 2, 200, 1), smart=[True, False]) is True
+        assert calls == [{"planes": 50, "smart": True}]     # drawn once at the defaults when the controls appear
+
+
 def test_a_failing_cell_is_named(tmp_path):
     import nbformat
 
