@@ -73,7 +73,7 @@ def amdahl(threads, times):
     return float(min(1.0, max(0.0, 1.0 - par)))
 
 
-def measure(name, scene, method, threads, repeats, warmup):
+def measure(name, scene, method, threads, repeats, warmup, samples=None):
     before = numba.get_num_threads()
     per = {p: {} for p in threads}
     try:
@@ -90,6 +90,8 @@ def measure(name, scene, method, threads, repeats, warmup):
                 per[p].setdefault("total", []).append(res.meta["total_ms"])
     finally:
         numba.set_num_threads(before)
+    if samples is not None:
+        samples[name] = {str(p): d for p, d in per.items()}
     return {p: {k: statistics.median(v) for k, v in d.items()} for p, d in per.items()}
 
 
@@ -101,14 +103,19 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", help="comma list of: imagespace, caustics, levelmap, volumetric, exact, caustics_exact")
+    ap.add_argument("--tag", default="", help="suffix of the output names (results/scaling<tag>.*), so that a "
+                    "partial or before/after run leaves the committed table alone")
+    ap.add_argument("--samples", help="also write every render's stage times here (JSON), for "
+                    "benchmarks/scaling_compare.py")
     a = ap.parse_args(argv)
     threads = sorted({int(x) for x in a.threads.split(",") if int(x) <= ncpu} | {1})
     rows, fits = [], []
+    samples = {} if a.samples else None
     for name, scene, method in scenes(a.quick):
         if a.only and name not in a.only.split(","):
             continue
         print(f"{name}: threads {threads}", flush=True)
-        m = measure(name, scene, method, threads, a.repeats, warmup=2 if a.quick else C.WARMUP)
+        m = measure(name, scene, method, threads, a.repeats, warmup=2 if a.quick else C.WARMUP, samples=samples)
         for stage in m[1]:
             times = [m[p].get(stage, 0.0) for p in threads]
             for p, t in zip(threads, times):
@@ -123,7 +130,12 @@ def main(argv=None):
             sp = times[0] / times[-1] if times[-1] else float("nan")
             print(f"  {stage:>16}: " + ", ".join(f"{p}T {t:.1f} ms" for p, t in zip(threads, times))
                   + f"  speed-up {sp:.2f}x, serial fraction {s:.2f}", flush=True)
-    tag = "_quick" if a.quick else ""
+    if samples is not None:
+        import json
+
+        with atomic_open(a.samples, "w") as f:
+            json.dump({"machine": C.machine_line(), "rev": C.git_rev(), "threads": threads, "samples": samples}, f)
+    tag = ("_quick" if a.quick else "") + a.tag
     with atomic_open(C.results_path(f"scaling{tag}.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

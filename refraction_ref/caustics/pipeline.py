@@ -70,7 +70,7 @@ from ..environment import environment_lookup
 from ..graph import Stage
 from ..status import EXITED
 from .receivers import eye_buffers, hit_exact, march_eyespace, receiver_set
-from .shade import shade_points
+from .shade import shade_points, take_rows
 from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
                     splat_bilinear, splat_bilinear_groups)
 
@@ -232,15 +232,21 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
         t, face = hit_exact(rs.tris, o, d)
     else:
         t, pix = march_eyespace(cam.world_to_view(o), cam.dir_world_to_view(d), eyebuf[0], cam)
-        ok = pix[:, 0] >= 0
-        face = np.full(len(o), -1, np.int64)
-        face[ok] = eyebuf[1][pix[ok, 0], pix[ok, 1]]
+        face = np.empty(len(o), np.int64)  # the triangle seen at the hit's pixel, -1 none
+        _pixel_face_kernel(pix, np.ascontiguousarray(eyebuf[1], dtype=np.int64), face)
     P = np.empty(o.shape)
     face_out = np.empty(len(o), np.int64)
     if len(o):  # P = o + t[:, None] * d; face where t is finite, else -1: on every thread
         _hit_points_kernel(np.ascontiguousarray(o), np.ascontiguousarray(t, dtype=np.float64),
                            np.ascontiguousarray(d), np.ascontiguousarray(face, dtype=np.int64), P, face_out)
     return P, face_out
+
+
+@nb.njit(cache=True, parallel=True)
+def _pixel_face_kernel(pix, tri, face):
+    for k0 in nb.prange(pix.shape[0]):
+        k = np.int64(k0)
+        face[k] = tri[pix[k, 0], pix[k, 1]] if pix[k, 0] >= 0 else -1
 
 
 @nb.njit(cache=True, parallel=True)
@@ -720,18 +726,49 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
         The rays' colours; with ``direct``, ``(rays' colours, theirs)``.
     """
     out = np.zeros((len(o), 3))
+    d = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
     if len(o):
         P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
-        hit = face >= 0
     else:
-        P, face, hit = np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, bool)
-    pts, fcs, drs = P[hit], face[hit], d[hit]
-    if direct is not None:
-        pts, fcs, drs = (np.concatenate([a, b]) for a, b in zip((pts, fcs, drs), direct))
+        P, face = np.zeros((0, 3)), np.zeros(0, np.int64)
+    hi = np.flatnonzero(face >= 0)
+    mi = np.flatnonzero(face < 0)
+    nh = len(hi)
+    # the hit rays' points, faces and directions, then the direct points: gathered and copied
+    # into one set of rows on every thread (np.concatenate of the boolean selections, row for row)
+    nd = 0 if direct is None else len(direct[0])
+    pts, fcs, drs = np.empty((nh + nd, 3)), np.empty(nh + nd, np.int64), np.empty((nh + nd, 3))
+    _gather_rows_kernel(P, face, d, hi, pts, fcs, drs)
+    if nd:
+        _copy_rows_kernel(np.ascontiguousarray(direct[0], dtype=np.float64).reshape(-1, 3),
+                          np.ascontiguousarray(direct[1], dtype=np.int64).reshape(-1),
+                          np.ascontiguousarray(direct[2], dtype=np.float64).reshape(-1, 3), nh, pts, fcs, drs)
     c = shade_points(rs, scene.data["lights"], rgb_maps, pts, fcs, drs, vis)
-    nh = int(hit.sum())
-    out[hit] = c[:nh]
-    if (~hit).any():
-        out[~hit] = environment_lookup(scene.data["environment"], d[~hit], scene.base_dir)
+    put_rows(out, hi, c[:nh])
+    if len(mi):
+        put_rows(out, mi, environment_lookup(scene.data["environment"], take_rows(d, mi), scene.base_dir))
     return out if direct is None else (out, c[nh:])
+
+
+@nb.njit(cache=True, parallel=True)
+def _gather_rows_kernel(P, face, d, idx, pts, fcs, drs):
+    # rows idx of P, face, d into the first rows of pts, fcs, drs
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        i = idx[k]
+        fcs[k] = face[i]
+        for c in range(3):
+            pts[k, c] = P[i, c]
+            drs[k, c] = d[i, c]
+
+
+@nb.njit(cache=True, parallel=True)
+def _copy_rows_kernel(p, f, d, at, pts, fcs, drs):
+    # p, f, d into pts, fcs, drs from row `at` on
+    for k0 in nb.prange(p.shape[0]):
+        k = np.int64(k0)
+        fcs[at + k] = f[k]
+        for c in range(3):
+            pts[at + k, c] = p[k, c]
+            drs[at + k, c] = d[k, c]
 

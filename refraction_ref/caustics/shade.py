@@ -371,10 +371,12 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
         L, fall = light_direction_at(lt, P)
         _cosine_kernel(n, L, cos)
         lit = np.flatnonzero(cos > 0)
-        v = np.zeros(M)
-        if len(lit):  # v[lit] = visibility(l, P[lit], n[lit]), the rows gathered on every thread
-            v[lit] = visibility(l, P if len(lit) == M else take_rows(P, lit),
-                                n if len(lit) == M else take_rows(n, lit))
+        if len(lit) == M:  # every point faces the light: v = visibility(l, P, n), no scatter
+            v = np.ascontiguousarray(visibility(l, P, n), dtype=np.float64).reshape(M)
+        else:
+            v = np.zeros(M)
+            if len(lit):  # v[lit] = visibility(l, P[lit], n[lit]), the rows gathered on every thread
+                v[lit] = visibility(l, take_rows(P, lit), take_rows(n, lit))
         _add_direct_kernel(np.asarray(lt["radiance"], dtype=np.float64), cos, fall, v, light_sum)
     for r in range(len(rs.boxes)):
         sel = np.flatnonzero(owner == r)

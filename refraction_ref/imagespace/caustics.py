@@ -64,6 +64,26 @@ def _mul_rows(a, idx, vals):
 
 
 @nb.njit(cache=True, parallel=True)
+def _copy2_kernel(a, b, c):
+    # b[:] = a; c[:] = a (rows of (N, 3) float64)
+    for k0 in nb.prange(a.shape[0]):
+        k = np.int64(k0)
+        for j in range(3):
+            b[k, j] = a[k, j]
+            c[k, j] = a[k, j]
+
+
+@nb.njit(cache=True, parallel=True)
+def _to_float32_kernel(a, b, a32, b32):
+    # a.astype(np.float32), b.astype(np.float32): the same rounding, row by row
+    for k0 in nb.prange(a.shape[0]):
+        k = np.int64(k0)
+        for j in range(3):
+            a32[k, j] = np.float32(a[k, j])
+            b32[k, j] = np.float32(b[k, j])
+
+
+@nb.njit(cache=True, parallel=True)
 def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
     # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
     for k0 in nb.prange(idx.shape[0]):
@@ -255,9 +275,9 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
                             np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
               rtri.reshape(-1)[ri], dirs)
-    bg = ~rec & ~obj
-    if bg.any():
-        base[bg] = environment_lookup(env, rdir[bg], scene.base_dir)
+    bi = np.flatnonzero(~rec & ~obj)
+    if len(bi):  # base[bg] = environment_lookup(env, rdir[bg]): rows gathered and put on every thread
+        put_rows(base.reshape(-1, 3), bi, environment_lookup(env, take_rows(rdir_f, bi), scene.base_dir))
     if not obj.any():
         _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
                                    direct)
@@ -286,14 +306,17 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
                         np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
     base = base.reshape(-1, 3)
     put_rows(base, ri, cd)
-    full = base.copy()
-    single = base.copy()
+    full = np.empty_like(base)
+    single = np.empty_like(base)
+    _copy2_kernel(base, full, single)  # base.copy() twice, on every thread
     if n_full:
         put_rows(full, xi, c[:n_full])
-    stuck = obj & (st != 1)
-    if stuck.any():
-        full[stuck.reshape(-1)] = environment_lookup(env, tr["last_dir"][stuck], scene.base_dir)
+    si = np.flatnonzero(obj & (st != 1))
+    if len(si):  # full[stuck] = environment_lookup(env, last_dir[stuck])
+        put_rows(full, si, environment_lookup(env, take_rows(tr["last_dir"].reshape(-1, 3), si), scene.base_dir))
     _mul_rows(full, oi, trans)  # full[obj] *= trans
     put_rows(single, oi, c[n_full:])
-    full, single = full.reshape(H, W, 3), single.reshape(H, W, 3)
-    return full.astype(np.float32), single.astype(np.float32)
+    f32 = np.empty((H, W, 3), np.float32)
+    s32 = np.empty((H, W, 3), np.float32)
+    _to_float32_kernel(full, single, f32.reshape(-1, 3), s32.reshape(-1, 3))  # astype(np.float32), on every thread
+    return f32, s32
