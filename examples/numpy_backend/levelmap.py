@@ -59,6 +59,9 @@ BUGS = {
     "receiver_cos_axis": "the receiver's cosine of eq. 4-18 taken against the "
                          "box axis V instead of the receiver's normal",
     "radiance_twice": "casting: each light's map weighted by its radiance mean again (w^2 in all)",
+    "casting_mean": "casting: the lights' maps averaged (divided by the light count) instead of summed",
+    "cast_texelwise": "casting: the other lights' maps added texel by texel, not cast into light 0's frame",
+    "cast_no_depth_test": "casting: light l's map cast without the depth test (its shadows lit)",
     **IMAGE_BUGS,
 }
 
@@ -594,17 +597,29 @@ def frame(box):
     return np.stack([centre - u / 2 - v / 2 + (h / 2) * V, u, v, V])
 
 
-def casting_pass(maps, boxes, lms, Hc, Wc, weights=None):
+def casting_pass(maps, boxes, lms, Hc, Wc, weights=None, bugs=()):
     """Pass `casting`: every light's map cast into light 0's (eq. 4-20).
 
-    The maps are added as they are: each light's radiance entered once, in
-    `water`'s flux. ``weights`` (the planted ``radiance_twice``) multiplies
-    each light's map by its radiance mean again.
+    Light 0's map is taken whole; each further light's map is read at the
+    texel (floor) of light 0's own surface points in its frame, where light
+    l's level map sees the same surface (its depth within a slope-scaled
+    tolerance). The maps are added as they are: each light's radiance
+    entered once, in `water`'s flux. ``weights`` (the planted
+    ``radiance_twice``) multiplies each light's map by its radiance mean
+    again.
+
+    References
+    ----------
+    Tipprasert 2006 §4.7.1, eq. 4-20 (projective texturing of the other
+    lights' maps, summed); docs/oracle.md, Porting rules: level map, `casting`.
     """
     if weights is not None:
         maps = [m * w for m, w in zip(maps, weights)]
     out = maps[0].copy()
-    if len(maps) > 1:
+    if len(maps) > 1 and "cast_texelwise" in bugs:     # planted: texel (i, j) of every map added as is
+        for m in maps[1:]:
+            out += m
+    elif len(maps) > 1:
         c0, U0, V0, W0, (w0, h0, d0) = boxes[0]
         ii, jj = np.nonzero(lms[0]["own"] & np.isfinite(lms[0]["position"]))
         zeta = lms[0]["position"][ii, jj]
@@ -620,8 +635,12 @@ def casting_pass(maps, boxes, lms, Hc, Wc, weights=None):
             a, b = np.where(inside, a, 0), np.where(inside, b, 0)
             tsl = max(box[4, 0] / Wc, box[4, 2] / Hc)
             tol = 2 * max(tsl, ts0) / np.maximum(np.abs(np.sum(n * box[2], axis=-1)), 0.05)
-            agree = inside & lms[l]["own"][a, b] & (np.abs(lms[l]["position"][a, b] - z) <= tol)
+            agree = inside & lms[l]["own"][a, b]
+            if "cast_no_depth_test" not in bugs:       # planted: light l's shadows not tested
+                agree &= np.abs(lms[l]["position"][a, b] - z) <= tol
             np.add.at(out, (ii[agree], jj[agree]), maps[l][a[agree], b[agree]])
+    if "casting_mean" in bugs:                         # planted: the lights averaged, not summed
+        out = out / len(maps)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
 
 
@@ -686,7 +705,7 @@ def render(scene, bugs=(), passes=("image",)):
             lms.append(lm)
         weights = ([float(np.mean(li["radiance"])) for li in lights]
                    if "radiance_twice" in bugs else None)   # planted: w^2 instead of w
-        cast = casting_pass(maps, boxes, lms, Hc, Wc, weights)
+        cast = casting_pass(maps, boxes, lms, Hc, Wc, weights, bugs)
         casts.append(cast)
         boxes0.append(boxes[0])
         fr = frame(boxes[0])

@@ -12,8 +12,9 @@ rasterizer (the image-space example's, reused), ``image`` **ray-casts**:
 each eye ray against the water mesh, refracted there with the renormalised
 Phong normal, then against every receiver triangle. The ray caster is a
 two-level one, as a GPU port would build it: triangles grouped in Morton
-order into clusters of 32 with bounding boxes, every (ray, cluster) pair
-slab-tested at once, then Möller-Trumbore on the survivors only.
+order into clusters of 32, clusters into super-clusters of 32, each with
+its bounding box; the (ray, box) pairs of each level slab-tested at once,
+then Möller-Trumbore on the surviving (ray, triangle) pairs only.
 
 References
 ----------
@@ -80,9 +81,15 @@ CAMERA_DEFAULTS = {"eye": [0, 0, 2.6], "target": [0, 0, 0], "up": [0, 1, 0], "fo
 
 
 def _morton(c):
-    """Morton codes (10 bits per axis) of points ``c`` (N, 3) in their bounding box."""
-    lo, hi = c.min(axis=0), c.max(axis=0)
-    q = np.clip(((c - lo) / np.where(hi > lo, hi - lo, 1.0) * 1023).astype(np.int64), 0, 1023)
+    """Morton codes (10 bits per axis) of points ``c`` (N, 3) in their bounding cube.
+
+    One scale for all axes: a per-axis one would stretch the water's few
+    centimetres of waves over as many bits as its metres of extent, and
+    group triangles by height instead of by place.
+    """
+    lo = c.min(axis=0)
+    span = max(float(np.max(c.max(axis=0) - lo)), 1e-300)
+    q = np.clip(((c - lo) / span * 1023).astype(np.int64), 0, 1023)
     code = np.zeros(len(c), dtype=np.int64)
     for bit in range(10):
         for a in range(3):
@@ -90,18 +97,68 @@ def _morton(c):
     return code
 
 
-def build(tris):
-    """The caster's structure: triangles (T, 3, 3) sorted into clusters of ``CLUSTER`` with their boxes."""
-    order = np.argsort(_morton(tris.mean(axis=1)), kind="stable")
-    n = -(-len(order) // CLUSTER)
-    pad = np.concatenate([order, np.full(n * CLUSTER - len(order), -1)]).reshape(n, CLUSTER)
-    t = tris[np.maximum(pad, 0)]                       # (n, CLUSTER, 3, 3); padding repeats triangle 0
-    lo, hi = t.min(axis=(1, 2)), t.max(axis=(1, 2))
-    span = np.max(hi - lo)
-    return {"tris": tris, "clusters": pad, "lo": lo - 1e-9 * span, "hi": hi + 1e-9 * span}
+def _boxes(tris, ids):
+    """Bounding boxes of groups of triangles (``ids`` (n, k), -1 for padding), padded by 1e-9 of the span."""
+    t = tris[np.maximum(ids, 0)]                                   # (n, k, 3, 3)
+    real = (ids >= 0)[..., None, None]
+    lo = np.where(real, t, np.inf).min(axis=(1, 2))
+    hi = np.where(real, t, -np.inf).max(axis=(1, 2))
+    span = np.max(tris.max(axis=(0, 1)) - tris.min(axis=(0, 1)))
+    return lo - 1e-9 * span, hi + 1e-9 * span
 
 
-def first_hit(O, D, acc, tmin=0.0, chunk=4096):
+def _pad(ids, k):
+    """``ids`` split into rows of k, the last row padded with -1."""
+    n = -(-len(ids) // k)
+    return np.concatenate([ids, np.full(n * k - len(ids), -1)]).reshape(n, k)
+
+
+def build(tris, groups=None):
+    """The caster's two-level structure over triangles (T, 3, 3).
+
+    Triangles sorted in Morton order of their centroids into clusters of
+    ``CLUSTER``, clusters into super-clusters of ``CLUSTER``, each with its
+    bounding box; ``groups`` (T,) (the receiver of each triangle) keeps
+    clusters within one group, so a big floor triangle does not widen a
+    cluster of small sphere triangles.
+    """
+    groups = np.zeros(len(tris), dtype=np.int64) if groups is None else groups
+    code = _morton(tris.mean(axis=1))
+    leaves = []
+    for gid in np.unique(groups):
+        idx = np.flatnonzero(groups == gid)
+        leaves.append(_pad(idx[np.argsort(code[idx], kind="stable")], CLUSTER))
+    leaves = np.concatenate(leaves)
+    lo, hi = _boxes(tris, leaves)
+    supers = _pad(np.arange(len(leaves)), CLUSTER)
+    slo = np.where((supers >= 0)[..., None], lo[np.maximum(supers, 0)], np.inf).min(axis=1)
+    shi = np.where((supers >= 0)[..., None], hi[np.maximum(supers, 0)], -np.inf).max(axis=1)
+    return {"tris": tris, "leaves": leaves, "lo": lo, "hi": hi, "supers": supers, "slo": slo, "shi": shi}
+
+
+def _slab(o, d, lo, hi, tmin):
+    """Ray-box overlap of paired rays and boxes (all (n, 3)); a zero direction component is handled."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t0 = (lo - o) * inv
+        t1 = (hi - o) * inv
+    par = d == 0
+    inside = (o >= lo) & (o <= hi)
+    tn = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1)).max(axis=1)
+    tf = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1)).min(axis=1)
+    return (tn <= tf) & (tf >= tmin)
+
+
+def _expand(ray, node, children):
+    """(ray, child) pairs of (ray, node) pairs, padding dropped."""
+    k = children.shape[1]
+    ray = np.repeat(ray, k)
+    child = children[np.repeat(node, k), np.tile(np.arange(k), len(node))]
+    keep = child >= 0
+    return ray[keep], child[keep]
+
+
+def first_hit(O, D, acc, tmin=0.0, chunk=16384):
     """Nearest triangle hit of each ray (origins ``O``, directions ``D``, (N, 3)).
 
     Returns ``t`` (inf where none), barycentrics ``u`` (vertex b), ``v``
@@ -118,23 +175,16 @@ def first_hit(O, D, acc, tmin=0.0, chunk=4096):
     u_out = np.full(N, np.nan)
     v_out = np.full(N, np.nan)
     f_out = np.full(N, -1, dtype=np.int64)
-    tris, clusters, lo, hi = acc["tris"], acc["clusters"], acc["lo"], acc["hi"]
+    tris = acc["tris"]
+    S = len(acc["supers"])
     for s in range(0, N, chunk):
         o, d = O[s:s + chunk], D[s:s + chunk]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / d
-            t0 = (lo[None] - o[:, None]) * inv[:, None]
-            t1 = (hi[None] - o[:, None]) * inv[:, None]
-        # a zero direction component: inside the slab means (-inf, inf), outside empty
-        par = (d == 0)[:, None, :]
-        inside = (o[:, None] >= lo[None]) & (o[:, None] <= hi[None])
-        tn = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1)).max(axis=2)
-        tf = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1)).min(axis=2)
-        ray, cl = np.nonzero((tn <= tf) & (tf >= tmin))
-        ray = np.repeat(ray, CLUSTER)
-        face = clusters[np.repeat(cl, CLUSTER), np.tile(np.arange(CLUSTER), len(cl))]
-        good = face >= 0
-        ray, face = ray[good], face[good]
+        n = len(o)
+        ray, node = np.repeat(np.arange(n), S), np.tile(np.arange(S), n)
+        hit = _slab(o[ray], d[ray], acc["slo"][node], acc["shi"][node], tmin)
+        ray, node = _expand(ray[hit], node[hit], acc["supers"])
+        hit = _slab(o[ray], d[ray], acc["lo"][node], acc["hi"][node], tmin)
+        ray, face = _expand(ray[hit], node[hit], acc["leaves"])
         tri = tris[face]
         oo, dd = o[ray], d[ray]
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
@@ -265,7 +315,7 @@ def image_pass(scene, wat, recs, boxes, cmaps, eta, K, ambient, bugs=()):
     albedos = [a for _, _, _, a in recs]
     rtris = np.concatenate([v[f] for v, f, _, _ in recs])
     owner = np.concatenate([np.full(len(f), k) for k, (_, f, _, _) in enumerate(recs)])
-    racc = build(rtris)
+    racc = build(rtris, owner)
 
     # --- image_direct: the camera's rasterizer, nearest fragment, ties to the earlier receiver
     if "direct_raycast" in bugs:
