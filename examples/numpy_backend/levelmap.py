@@ -4,8 +4,10 @@ Written from ``docs/oracle.md`` ("Porting rules: level map", "Level map",
 "Stage buffers", "Conformance") and ``docs/backends.md`` alone, without reading
 the package's source, the way an outside author ports the method to a GPU: one
 function per pass (``water`` -> ``planes`` -> ``level_map`` -> ``caustics``
-(-> ``plane_maps``) -> ``casting``), each a handful of whole-array NumPy
-operations (a vertex shader, a rasterizer, a blend), no per-texel Python loop.
+(-> ``plane_maps``) -> ``casting`` -> ``image``), each a handful of
+whole-array NumPy operations (a vertex shader, a rasterizer, a blend, a ray
+caster), no per-texel Python loop. The ``image`` pass (the camera's view
+through the water, eq. 4-19) is in ``levelmap_image.py`` beside this file.
 
 ``run(golden_dir, out_dir)`` reads each level-map case's ``scene.json`` from a
 golden suite, computes every pass and writes ``out_dir/<case>/result.npz`` with
@@ -13,10 +15,10 @@ the golden key names, shapes and dtypes, ready for ``refraction-ref check``.
 ``bugs=`` plants mistakes porters really make (see ``BUGS``), to show that
 ``check`` names the pass that holds them.
 
-Only the default knobs of the contract (contract_version 5) and their
+Only the default knobs of the contract (contract_version 6) and their
 predecessors are ported (``variant = levelmap``, ``placement = component``
 or ``thesis``, ``smart_slicing`` on or off, ``smart_spacing = respace`` or
-``lattice``); the ``image`` pass (the view through the water) is not.
+``lattice``); any number of lights.
 
 References
 ----------
@@ -25,7 +27,8 @@ Caustics Using Level Map Method*, M.Eng. thesis, Chulalongkorn University,
 2006: §4.2.1 (eqs. 4-1 to 4-9, the reference box and planes), §4.2.2 (eqs.
 4-10 to 4-13, the level map), §4.3 (eqs. 2-8, 4-14, the water and its
 illumination volumes), §4.4-4.5 (eq. 4-15, intersection), eq. 4-18
-(irradiance), §4.7.1 (eq. 4-20, casting), §4.7.2 (smart slicing).
+(irradiance), §4.6 (eq. 4-19, the image), §4.7.1 (eq. 4-20, casting),
+§4.7.2 (smart slicing).
 """
 
 import json
