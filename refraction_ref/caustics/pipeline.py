@@ -661,7 +661,24 @@ def _reference_noise(rs, halves):
 
 def _splat_buffers(maps, R):
     """The splatted maps before gathering, summed over lights and channels' mean: ``splat_r`` (Hc, Wc)."""
+    if len(maps) == 1:  # one light: its channel means as they are (the sum of one map is that map)
+        return {f"splat_{r}": _float32(channel_mean(maps[0][r])) for r in range(R)}
     return {f"splat_{r}": np.sum([channel_mean(m[r]) for m in maps], axis=0).astype(np.float32) for r in range(R)}
+
+
+@nb.njit(cache=True, parallel=True)
+def _float32_kernel(a, out):
+    for k0 in nb.prange(a.shape[0]):
+        k = np.int64(k0)
+        out[k] = np.float32(a[k])
+
+
+def _float32(a):
+    """``a.astype(np.float32)`` of a float64 array, on every thread."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    out = np.empty(a.shape, np.float32)
+    _float32_kernel(a.reshape(-1), out.reshape(-1))
+    return out
 
 
 def caustic_arrays(scene, method, bufs, stats):

@@ -96,6 +96,24 @@ def _cosine_kernel(n, L, cos):
 
 
 @nb.njit(cache=True, parallel=True)
+def _count_positive(a):
+    # (a > 0).sum(): an integer sum, the same in any order
+    n = 0
+    for k0 in nb.prange(a.shape[0]):
+        if a[np.int64(k0)] > 0:
+            n += 1
+    return n
+
+
+@nb.njit(cache=True, parallel=True)
+def _take_kernel(a, idx, out):
+    # out = a[idx] (1-D)
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        out[k] = a[idx[k]]
+
+
+@nb.njit(cache=True, parallel=True)
 def _add_direct_kernel(radiance, cos, fall, v, light_sum):
     # light_sum += radiance[None, :] * (cos * fall * v)[:, None], term for term
     for k0 in nb.prange(cos.shape[0]):
@@ -361,17 +379,18 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     out = np.zeros((M, 3))
     if M == 0:
         return out
-    faces = np.asarray(faces, dtype=np.int64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1)
     n = np.empty((M, 3))
     _facing_normals_kernel(rs.normals, faces, np.ascontiguousarray(ray_dirs, dtype=np.float64).reshape(-1, 3), n)
-    owner = rs.owner[faces]
+    owner = np.empty(M, np.int64)
+    _take_kernel(np.ascontiguousarray(rs.owner, dtype=np.int64), faces, owner)  # rs.owner[faces]
     light_sum = np.zeros((M, 3))
     cos = np.empty(M)
     for l, lt in enumerate(lights):
         L, fall = light_direction_at(lt, P)
         _cosine_kernel(n, L, cos)
-        lit = np.flatnonzero(cos > 0)
-        if len(lit) == M:  # every point faces the light: v = visibility(l, P, n), no scatter
+        lit = None if _count_positive(cos) == M else np.flatnonzero(cos > 0)
+        if lit is None:  # every point faces the light: v = visibility(l, P, n), no scatter
             v = np.ascontiguousarray(visibility(l, P, n), dtype=np.float64).reshape(M)
         else:
             v = np.zeros(M)

@@ -37,7 +37,7 @@ import numpy as np
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import shadow_map_visibility, take_rows
+from ..caustics.shade import _take_kernel, shadow_map_visibility, take_rows
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -287,7 +287,9 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     ex = obj & (st == 1)
     oi = np.flatnonzero(obj)
     xi = np.flatnonzero(ex)
-    trans = beer_lambert(absorption, tr["path_length"].reshape(-1)[oi], ior)  # per pixel: only the object's
+    plen = np.empty(len(oi))
+    _take_kernel(np.ascontiguousarray(tr["path_length"], dtype=np.float64).reshape(-1), oi, plen)  # path_length[obj]
+    trans = beer_lambert(absorption, plen, ior)  # per pixel: only the object's
     o_full = take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
     d_full = take_rows(tr["exit_dir"].reshape(-1, 3), xi)
     # the thesis's final pass: refraction at the front surface only
