@@ -466,15 +466,45 @@ def shadow_vis(P, lc, lzmin, bugs=()):
     with np.errstate(divide="ignore", invalid="ignore"):
         col = (pv[:, 0] / (s * c.sx) * 0.5 + 0.5) * N
         row = (0.5 - pv[:, 1] / (s * c.sy) * 0.5) * N
+    if "no_shadow" in bugs:
+        return np.ones(len(P))
+    return np.where(_shadow_margin(col, row, dl, lc, lzmin, bugs) > 0, 0.0, 1.0)
+
+
+def _shadow_margin(col, row, dl, lc, lzmin, bugs=()):
+    """``dl - (zmin + bias)`` at the nearest texel of (col, row); -inf where no depth is compared."""
+    c, N = lc.cam, lc.N
     inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < N) & (row >= 0) & (row < N) & (dl > 0)
     off = 1 if "shadow_texel_off" in bugs else 0
     i = np.clip(np.floor(np.where(inside, row, 0)).astype(np.int64) + off, 0, N - 1)
     j = np.clip(np.floor(np.where(inside, col, 0)).astype(np.int64), 0, N - 1)
     z = lzmin[i, j]
     bias = 1e-3 * (lc.far - c.near) + 2.0 * (2.0 * c.sy / N)
+    with np.errstate(invalid="ignore"):
+        return np.where(inside & np.isfinite(z), dl - (z + bias), -np.inf)
+
+
+def shadow_buffers(P, lc, lzmin, bugs=()):
+    """``stage.caustic_final.shadow_l`` codes (1 lit, 2 in shadow) and ``shadow_margin_l`` at receiver points P.
+
+    The margin is 0 where moving the point's texel position by 5e-3 texel along an axis changes the verdict
+    (docs/oracle.md, caustic_final: a texel-edge tie).
+    """
+    c, N = lc.cam, lc.N
+    LB, leye = c.B, c.eye
+    pv = P[:, 0:1] * LB[:, 0] + P[:, 1:2] * LB[:, 1] + P[:, 2:3] * LB[:, 2] + (-leye @ LB.T)
+    dl = -pv[:, 2]
+    s = np.ones_like(dl) if c.ortho else dl
+    with np.errstate(divide="ignore", invalid="ignore"):
+        col = (pv[:, 0] / (s * c.sx) * 0.5 + 0.5) * N
+        row = (0.5 - pv[:, 1] / (s * c.sy) * 0.5) * N
+    m = _shadow_margin(col, row, dl, lc, lzmin, bugs)
     if "no_shadow" in bugs:
-        return np.ones(len(P))
-    return np.where(inside & np.isfinite(z) & (dl > z + bias), 0.0, 1.0)
+        return np.ones(len(P), np.uint8), np.full(len(P), -np.inf)
+    code = np.where(m > 0, 2, 1).astype(np.uint8)
+    for dc, dr in ((5e-3, 0.0), (-5e-3, 0.0), (0.0, 5e-3), (0.0, -5e-3)):
+        m = np.where((_shadow_margin(col + dc, row + dr, dl, lc, lzmin, bugs) > 0) != (m > 0), 0.0, m)
+    return code, m
 
 
 def shade_receiver(P, face, dirs, soup, lights, vis, rgb, Hc, Wc, bugs=()):
@@ -516,7 +546,7 @@ def shade_receiver(P, face, dirs, soup, lights, vis, rgb, Hc, Wc, bugs=()):
 
 
 def pass_caustic_final(base, c, k, data, zfront, rdepth, rtri, ray_dir, v_view, tr, shade_pts, ior,
-                       outside_ior, absorption, bugs=()):
+                       outside_ior, absorption, shadow_maps, bugs=()):
     """``caustic_final``: receivers lit directly and by the maps, seen directly or through the object.
 
     ``image_caustics`` sends the multi-layer trace's exit rays through the march; ``image_caustics_single``
@@ -539,6 +569,12 @@ def pass_caustic_final(base, c, k, data, zfront, rdepth, rtri, ray_dir, v_view, 
     f = -c.B[2]
     P = c.eye + dr * (rdepth.ravel()[ri] / (dr[:, 0] * f[0] + dr[:, 1] * f[1] + dr[:, 2] * f[2]))[:, None]
     base_img[ri] = shade_pts(P, rtri.ravel()[ri], dr)
+    shadow = {}
+    for l, (lc, lz) in enumerate(shadow_maps):        # every receiver pixel, facing the light or not
+        code, m = np.zeros(H * W, np.uint8), np.full(H * W, np.nan)
+        code[ri], m[ri] = shadow_buffers(P, lc, lz, bugs)
+        shadow[f"shadow_{l}"] = code.reshape(H, W)
+        shadow[f"shadow_margin_{l}"] = m.reshape(H, W).astype(np.float32)
     bg = ~rec & ~obj
     base_img[bg] = environment(base, env, rd[bg])
 
@@ -581,7 +617,7 @@ def pass_caustic_final(base, c, k, data, zfront, rdepth, rtri, ray_dir, v_view, 
     single[oi] = colour(base.to_world(c, np.stack([x * zf, y * zf, -zf], -1)),
                         base.to_world(c, w, point=False) + 0.0)
     return {"image_caustics": full.reshape(H, W, 3).astype(np.float32),
-            "image_caustics_single": single.reshape(H, W, 3).astype(np.float32)}
+            "image_caustics_single": single.reshape(H, W, 3).astype(np.float32), **shadow}
 
 
 # ----------------------------------------------------------------------------- driver
@@ -633,8 +669,8 @@ def run_caustics(base, c, k, data, Vw, F, ior, outside_ior, absorption, st, v_vi
 
     st["caustic_final"] = pass_caustic_final(base, c, k, data, st["minmax"]["zmin"], rdepth, rtri,
                                              st["rays"]["ray_dir"], v_view, st["trace"], shade_pts, ior,
-                                             outside_ior, absorption, bugs)
+                                             outside_ior, absorption, list(zip(lcs, zmins)), bugs)
     out = dict(ga)
-    out.update(st["caustic_final"])
+    out.update({k_: v for k_, v in st["caustic_final"].items() if k_.startswith("image_caustics")})
     out["image"] = out["image_caustics"]
     return out

@@ -38,7 +38,8 @@ from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
-__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "exact_visibility", "take_rows"]
+__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_map_margin", "exact_visibility",
+           "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -266,6 +267,58 @@ def shadow_map_visibility(lcam, zmin, points, bias):
                        _LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width),
                                   float(lcam.height), float(bias)), out)
     return out
+
+
+def shadow_map_margin(lcam, zmin, points, bias, tie=0.0):
+    """How far each point lies behind its shadow-map depth plus the bias: ``dl - (zmin + bias)``.
+
+    The shadow test of :func:`shadow_map_visibility` shadows a point where this is > 0. Points outside
+    the light's window, behind it, or over a texel no object covers get ``-inf`` (lit, no depth compared).
+    With ``tie > 0``, a point whose verdict changes when its texel position moves by ``tie`` texel along
+    either axis (it lies that close to a texel edge across which the test decides otherwise) gets 0.
+
+    Parameters
+    ----------
+    lcam : Camera
+    zmin : (N, N) float64
+    points : (M, 3) array_like
+    bias : float
+    tie : float
+        Texels.
+
+    Returns
+    -------
+    (M,) float64
+
+    References
+    ----------
+    .. [1] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return np.zeros(0)
+    zmin = np.asarray(zmin, dtype=np.float64)
+    H, W = zmin.shape
+    pv = lcam.world_to_view(p)
+    d = -pv[:, 2]
+    s = np.ones_like(d) if lcam.ortho else d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        col = (pv[:, 0] / (s * float(lcam.sx)) * 0.5 + 0.5) * float(lcam.width)
+        row = (0.5 - pv[:, 1] / (s * float(lcam.sy)) * 0.5) * float(lcam.height)
+
+    def margin(col, row):
+        inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < W) & (row >= 0) & (row < H) & (d > 0)
+        i = np.clip(np.floor(np.where(inside, row, 0.0)).astype(np.int64), 0, H - 1)
+        j = np.clip(np.floor(np.where(inside, col, 0.0)).astype(np.int64), 0, W - 1)
+        z = zmin[i, j]
+        with np.errstate(invalid="ignore"):
+            return np.where(inside & np.isfinite(z), d - (z + float(bias)), -np.inf)
+
+    m = margin(col, row)
+    if tie > 0:
+        for dc, dr in ((tie, 0.0), (-tie, 0.0), (0.0, tie), (0.0, -tie)):
+            m = np.where((margin(col + dc, row + dr) > 0) != (m > 0), 0.0, m)
+    return m
 
 
 @nb.njit(cache=True, parallel=True)

@@ -37,7 +37,7 @@ import numpy as np
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import _take_kernel, shadow_map_visibility, take_rows
+from ..caustics.shade import _take_kernel, shadow_map_margin, shadow_map_visibility, take_rows
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -186,7 +186,53 @@ def _st_final(ctx):
                                   p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
     ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
              "single-surface (the thesis's) final passes")
-    return {"image_caustics": img, "image_caustics_single": img1}
+    return {"image_caustics": img, "image_caustics_single": img1,
+            **_shadow_buffers(rd["cam"], eye["zmin"], rd["eyebuf"][0], shadow)}
+
+
+#: texels: a receiver point this close to a light texel's edge, across which the shadow test decides
+#: otherwise, is a tie (``shadow_margin_l`` 0): moving a receiver point by the ``receiver_depth`` tolerance
+#: (1e-5 of its depth, ~3e-5 on the golden cases) moves it ~5e-3 of a light texel (2 sy / N = 6.4e-3)
+SHADOW_TIE = 5e-3
+
+
+def _shadow_buffers(cam, zfront, rdepth, shadow):
+    """``shadow_l`` and ``shadow_margin_l``: light l's shadow test at every receiver pixel seen directly.
+
+    The points are the final pass's (``eye + ray_dir depth / (ray_dir . f)``), tested whether or not they
+    face the light, so that a shadow map read one texel off shows in a buffer of its own and not only in
+    the few image pixels it darkens. ``shadow_l`` (H, W) uint8: 0 no receiver seen directly, 1 lit, 2 in
+    shadow; ``shadow_margin_l`` (H, W) float32: ``dl - (zmin + bias)`` where the test compared depths,
+    ``-inf`` where it did not (outside the light's window, or no object in the texel), 0 at a texel-edge
+    tie (:data:`SHADOW_TIE`), NaN off the receiver pixels: ``check``'s ambiguity mask for ``shadow_l`` is
+    where it lies near 0.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    .. [2] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
+    """
+    H, W = cam.shape
+    obj = np.isfinite(zfront)
+    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
+    ri = np.flatnonzero(rec)
+    origin, rdir = cam.primary_rays()
+    P = _depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), np.ascontiguousarray(rdir.reshape(-1, 3)),
+                      np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, -cam.basis[2])
+    out = {}
+    for l, sh in enumerate(shadow):
+        code = np.zeros(H * W, np.uint8)
+        margin = np.full(H * W, np.nan, np.float32)
+        if sh is None:  # no light camera (no objects): nothing casts a shadow
+            code[ri], margin[ri] = 1, -np.inf
+        else:
+            lcam, zmin, bias = sh
+            code[ri] = np.where(shadow_map_visibility(lcam, zmin, P, bias) > 0, 1, 2)
+            margin[ri] = shadow_map_margin(lcam, zmin, P, bias, SHADOW_TIE)
+        out[f"shadow_{l}"] = code.reshape(H, W)
+        out[f"shadow_margin_{l}"] = margin.reshape(H, W)
+    return out
 
 
 def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
@@ -248,7 +294,8 @@ def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
               reads=("environment", "lights", "imagespace.normals", "imagespace.delta",
                      "imagespace.receiver_hit"),
               after=("geometry", "minmax", "trace", "receivers", "receiver_depth", "photon_trace", "gather"),
-              makes=("image_caustics", "image_caustics_single"),
+              makes=("image_caustics", "image_caustics_single") + per_light_names("shadow", nl)
+              + per_light_names("shadow_margin", nl),
               doc="receivers lit directly and by caustics, seen through the object (§4.1)"),
     )
 
