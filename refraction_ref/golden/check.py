@@ -44,7 +44,7 @@ import numpy as np
 
 from ..contract import CONTRACT_VERSION
 from ..files import NotNpzError, atomic_open, atomic_path, load_npz, savefig_atomic
-from .tolerances import finiteness, fmt_share, judge, tolerance_for
+from .tolerances import _elementwise, _fold, finiteness, fmt_share, judge, tolerance_for
 
 __all__ = ["check", "CheckError", "CheckReport", "CaseReport", "format_report"]
 
@@ -382,6 +382,26 @@ def face_ties(golden, name, gold, key, cand_face):
     return out
 
 
+# --------------------------------------------------------------------- shadow-test ties
+def margin_ties(gold, key, spec):
+    """Pixels where the golden's shadow test is a tie: its margin within ``atol + rtol far`` of 0.
+
+    ``key`` is ``stage.caustic_final.shadow_<l>``; the margin is the golden's ``shadow_margin_<l>``
+    (``dl - (zmin + bias)``, 0 at a texel-edge tie), ``far`` the light camera's far plane
+    (``stage.photon_trace.camera_<l>``, row 5); None where the golden lacks them.
+    """
+    head, tail = key.rsplit(".", 1)
+    light = tail.rsplit("_", 1)[-1]
+    m = gold.get(f"{head}.{spec['margin_key']}{light}")
+    if m is None or np.shape(m) != np.shape(gold[key]):
+        return None
+    cam = gold.get(f"stage.photon_trace.camera_{light}")
+    far = float(np.asarray(cam)[5, 1]) if cam is not None and np.shape(cam) == (6, 3) else 1.0
+    eps = float(spec.get("margin_atol", 0.0)) + float(spec.get("margin_rtol", 0.0)) * abs(far)
+    with np.errstate(invalid="ignore"):
+        return np.abs(np.asarray(m, np.float64)) <= eps
+
+
 # --------------------------------------------------------------------- photons matched one by one
 #: photon buffers: (pattern, set, anchors). Keys of one set share their leading axis (one row per photon, in
 #: the order the contract gives: light texel order for the mesh methods, photon index for the volumetric);
@@ -419,13 +439,47 @@ def _rows_match(c_row, g_rows):
     return ok.all(axis=1)
 
 
+def _row_matches(cand, gold):
+    """For each candidate row, the sorted golden rows it equals (:func:`_rows_match`), found through a sort.
+
+    The golden rows are sorted on their first component; a candidate row is compared only with those
+    whose first component lies within the tolerance's reach of its own (a binary search), and rows whose
+    first component is not finite only with each other: O(n log n) for rows that match few others.
+    """
+    c = np.asarray(cand, np.float64)
+    g = np.asarray(gold, np.float64)
+    if len(c) == 0 or len(g) == 0:
+        return [np.zeros(0, np.int64) for _ in range(len(c))]
+    c, g = c.reshape(len(c), -1), g.reshape(len(g), -1)
+    g0 = g[:, 0] if g.shape[1] else np.zeros(len(g))
+    fin = np.isfinite(g0)
+    order = np.flatnonzero(fin)[np.argsort(g0[fin], kind="stable")]
+    keys = g0[order]
+    odd = np.flatnonzero(~fin)
+    out = []
+    for i in range(len(c)):
+        c0 = c[i, 0] if c.shape[1] else 0.0
+        if np.isfinite(c0):
+            # |c0 - g0| <= 1e-6 + 1e-5 |g0| implies |g0| <= (|c0| + 1e-6) / (1 - 1e-5): the reach, widened a hair
+            reach = (1e-6 + 1e-5 * (abs(c0) + 1e-6) / (1.0 - 1e-5)) * (1.0 + 1e-9) + 1e-300
+            lo, hi = np.searchsorted(keys, c0 - reach, "left"), np.searchsorted(keys, c0 + reach, "right")
+            idx = order[lo:hi]
+        else:
+            idx = odd
+        if len(idx):
+            idx = np.sort(idx[_rows_match(c[i], g[idx])])
+        out.append(idx)
+    return out
+
+
 def align_photons(cand, gold, window=_ALIGN_WINDOW):
     """Match two photon lists kept in one order: pairs (golden index, candidate index), in order.
 
     Walks both lists: equal rows (within float64 rounding) pair; otherwise the nearer of the next
     candidate row equal to the golden's and the next golden row equal to the candidate's (within
     ``window``) skips the photons between as unmatched; when neither exists the two rows pair anyway (the
-    same photon, computed differently: judged, and failing, as such).
+    same photon, computed differently: judged, and failing, as such). Which rows equal which is found
+    once, through a sort on the first component (:func:`_row_matches`), so the walk is O(n log n).
 
     Parameters
     ----------
@@ -438,21 +492,30 @@ def align_photons(cand, gold, window=_ALIGN_WINDOW):
         Indices of the matched golden and candidate photons.
     """
     nc, ng = len(cand), len(gold)
+    c_to_g = _row_matches(cand, gold)
+    pairs = [(int(j), i) for i, js in enumerate(c_to_g) for j in js]
+    g_to_c = [[] for _ in range(ng)]
+    for j, i in pairs:
+        g_to_c[j].append(i)
+    g_to_c = [np.asarray(x, np.int64) for x in g_to_c]
+
+    def first_after(sorted_idx, at, limit):
+        k = np.searchsorted(sorted_idx, at, "right")
+        return int(sorted_idx[k]) if k < len(sorted_idx) and sorted_idx[k] < limit else None
+
     gi, ci = [], []
     i = j = 0
     while i < nc and j < ng:
-        if _rows_match(cand[i], gold[j:j + 1])[0]:
+        m = c_to_g[i]
+        k = np.searchsorted(m, j, "left")
+        if k < len(m) and m[k] == j:
             gi.append(j), ci.append(i)
             i, j = i + 1, j + 1
             continue
-        mg = np.flatnonzero(_rows_match(cand[i], gold[j + 1:j + window]))
-        kg = int(mg[0]) + 1 if mg.size else None
-        kc = None
-        hi = min(nc, i + window)
-        for k in range(i + 1, hi):
-            if _rows_match(cand[k], gold[j:j + 1])[0]:
-                kc = k - i
-                break
+        ng_next = first_after(m, j, j + window)
+        nc_next = first_after(g_to_c[j], i, min(nc, i + window))
+        kg = None if ng_next is None else ng_next - j
+        kc = None if nc_next is None else nc_next - i
         if kg is not None and (kc is None or kg <= kc):
             j += kg
         elif kc is not None:
@@ -494,14 +557,55 @@ def _judge_photons(key, c, g, tol, cand, gold, cache):
     n_loc = int(np.count_nonzero(bad_m)) + len(missing) + len(extra)
     frac = n_loc / max(n_info, 1)
     ok = r["ok"] and frac <= r["allowed"]
-    detail = (f"{c.shape[0]} photons where the golden has {g.shape[0]} ({nm}): matched {len(gi)} in order along "
-              f"`{a}`; golden photons with no counterpart: {_index_list(missing) or 'none'}; candidate photons "
-              f"with none: {_index_list(extra) or 'none'}; on the matched photons: {r['detail']}")
+    ca = np.asarray(cand[a], np.float64)[ci].reshape(len(ci), -1)
+    ga = np.asarray(gold[a], np.float64)[gi].reshape(len(gi), -1)
+    with np.errstate(invalid="ignore"):
+        n_eq = int(np.count_nonzero(((np.abs(ca - ga) <= 1e-6 + 1e-5 * np.abs(ga)) | (np.isnan(ca) & np.isnan(ga)))
+                                    .all(axis=1)))
+    detail = (f"{c.shape[0]} photons where the golden has {g.shape[0]} ({nm}): {len(gi)} paired in order along "
+              f"`{a}` ({n_eq} of them equal there, the rest paired where no equal row lies within "
+              f"{_ALIGN_WINDOW} photons); {len(missing)} golden photons with no counterpart "
+              f"({_index_list(missing) or 'none'}); {len(extra)} candidate photons with none ({_index_list(extra) or 'none'}); on the paired "
+              f"photons: {r['detail']}")
     counts = dict(r["counts"], located=n_loc, informative=n_info,
                   failing=int(r["counts"]["failing"]) + len(missing) + len(extra))
     return dict(r, ok=ok, failing=frac, counts=counts, detail=detail, bad=bad,
                 photons={"matched": len(gi), "missing": [int(x) for x in missing],
                          "extra": [int(x) for x in extra], "anchor": a})
+
+
+#: volumetric image keys judged with no allowance where the viewing ray stopped (status 2 limit, 4 lost)
+#: and the candidate's status agrees: the colour gathered before the stop is kept (docs/oracle.md,
+#: "smooth and view"), and a port that drops it differs on these pixels only, a share of the image
+#: below any fraction (vol_ramp_lost: 1 lost pixel of 1089)
+_STOPPED_STRICT = {"image": ("status", "stage.view.status"), "stage.view.image": ("stage.view.status", "status")}
+_STOPPED = (2, 4)
+
+
+def _stopped_strict(key, method, c, g, tol, cand, gold):
+    """Pixels judged with no allowance (not even the ambiguity mask): the golden's stopped viewing rays
+    (status 2 or 4) where the candidate's status agrees (the golden's when the candidate supplies none).
+
+    Returns ``(failing mask, shaped as the key's elementwise mask, detail)`` or None where the rule does not
+    apply.
+    """
+    names = _STOPPED_STRICT.get(key)
+    if method != "volumetric" or names is None or tol.get("kind") != "close" or g.ndim != 3:
+        return None
+    gs = next((np.asarray(gold[n]) for n in names if n in gold and np.shape(gold[n]) == g.shape[:2]), None)
+    if gs is None:
+        return None
+    cs = next((np.asarray(cand[n]) for n in names if n in cand and np.shape(cand[n]) == g.shape[:2]), gs)
+    strict = np.isin(gs, _STOPPED) & (cs == gs)
+    n = int(np.count_nonzero(strict))
+    if n == 0:
+        return None
+    el = _elementwise(np.asarray(c), np.asarray(g), tol, None)[0]  # the key's own tolerance, element by element
+    bad = strict.reshape(strict.shape + (1,) * (el.ndim - 2)) & el
+    nb = int(np.count_nonzero(_fold(bad, strict.shape) if bad.ndim > 2 else bad))
+    detail = (f"; stopped viewing rays (status 2 or 4, statuses agreeing): {nb} of {n} pixels differ, "
+              f"judged with no allowance{' FAIL' if nb else ''}")
+    return bad, detail
 
 
 def _weight_mask(key, tol, gold):
@@ -785,8 +889,11 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
                     r = None
             if r is None:
                 ps = _photon_set(k)
-                hint = (f" (supply one of {', '.join(f'`{a}`' for a in ps[1])} with the same photon count to have "
-                        "the photons matched one by one)" if ps else "")
+                have = [a for a in (ps[1] if ps else ()) if a in cand and np.shape(cand[a])[:1] == np.shape(c)[:1]]
+                hint = ("" if not ps else
+                        f" (its photons could not be matched along `{have[0]}`, which has the same count)" if have else
+                        f" (supply one of {', '.join(f'`{a}`' for a in ps[1])} with this key's photon count, "
+                        f"{np.shape(c)[0]}, to have the photons matched one by one)")
                 j.update(ok=False, detail=f"shape {tuple(c.shape)} where the golden has {tuple(spec['shape'])}" + hint)
             else:
                 r.pop("bad")  # over the golden's photons, not the candidate's: no mask file
@@ -797,6 +904,10 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
             amb = _ambiguity(k, g, tol, pics, c)
             if tol.get("face_ties"):
                 ties = face_ties(golden, name, gold, k, c)
+                if ties is not None:
+                    amb = ties if amb is None else (np.asarray(amb, bool) | ties)
+            if tol.get("margin_key"):
+                ties = margin_ties(gold, k, tol)
                 if ties is not None:
                     amb = ties if amb is None else (np.asarray(amb, bool) | ties)
             try:
@@ -815,6 +926,14 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
                                         f"tolerance) does; against the oracle's pass run on it: " + r2["detail"])
                         r2["explained_by"] = ups
                         r = r2
+            st = _stopped_strict(k, entry["method"], c, g, tol, cand, gold)
+            if st is not None:
+                sbad, sdetail = st
+                r["detail"] = r.get("detail", "") + sdetail
+                if np.any(sbad):
+                    r["ok"] = False
+                    rb = r.get("bad")
+                    r["bad"] = sbad if rb is None or np.shape(rb) != sbad.shape else (np.asarray(rb, bool) | sbad)
             bad = r.pop("bad")
             if tol.get("default"):
                 r["detail"] = "default tolerance (no rule names this key): " + r["detail"]

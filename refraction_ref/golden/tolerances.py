@@ -143,6 +143,19 @@ TOLERANCES = [
                           "why": "as stage.peel.depth_complexity"}),
     ("stage.receiver_depth.triangle", {"kind": "exact", "fraction": 0.0, "over": "all", "locate": True,
                                        "own_edges": True, "why": "triangle ids tie on shared edges"}),
+    ("stage.caustic_final.shadow_margin_*", {
+        "kind": "close", "atol": 1e-6, "rtol": 1e-5, "fraction": 0.005, "over": "finite", "locate": True,
+        "why": "how far a receiver point lies behind the shadow map's depth plus the bias: float64 arithmetic "
+               "of the point and the light's view (1e-6 + 1e-5 |g|, 0.5 % of the compared pixels); 0 at a "
+               "texel-edge tie, -inf where no depth was compared"}),
+    ("stage.caustic_final.shadow_*", {
+        "kind": "exact", "fraction": 0.0, "over": "nonzero", "locate": True,
+        "margin_key": "shadow_margin_", "margin_atol": 1e-6, "margin_rtol": 1e-5,
+        "why": "the shadow test's verdict at every receiver pixel seen directly (1 lit, 2 in shadow): equal, "
+               "but where the golden's shadow_margin_l is within 1e-6 + 1e-5 far of 0 (the depths compared "
+               "agree to the positions' tolerance at the light's far plane, or the point lies within 5e-3 of "
+               "a light texel's edge across which the verdict changes) and at object silhouettes and the "
+               "receivers' outline; a shadow map read one texel off fails"}),
     ("stage.receiver_hit.hit_face_*", {"kind": "exact", "fraction": 0.005, "over": "all", "locate": True,
                                        "face_ties": True, "inside": 1.0,
                                        "why": "a photon whose hit lies within two camera pixels of an edge two "
@@ -555,6 +568,17 @@ def flux_error(cand, gold):
     return np.atleast_1d(err), np.atleast_1d(ratio)
 
 
+def _total_ratio(ratio, err):
+    """One group's total against the golden's, for the report: never NaN where a total is zero.
+
+    ``"1.0012 x the golden's"``; ``"both empty"`` where both totals are 0 (a receiver no photon reaches);
+    ``"the golden's total is 0, the candidate's is not"`` where only the candidate has flux.
+    """
+    if np.isfinite(ratio):
+        return f"{ratio:.5g} x the golden's"
+    return "both empty" if err == 0 else "the golden's total is 0, the candidate's is not"
+
+
 def moments_test(cand, batches, alpha):
     """The second test of ``ztest`` maps: the map's total and centroid against the K batches' (Student's t).
 
@@ -680,8 +704,8 @@ def judge(cand, gold, spec, batches=None, ambiguous=None, judged=None):
         ok_flux = bool(np.all(fe <= spec["flux"]))
         err["flux_error"] = float(np.max(fe)) if fe.size else 0.0
         v["ok"] = v["ok"] and ok_flux
-        per = ", ".join(f"{r:.5g}" for r in ratio[:8])
-        detail += (f"; total {per} x the golden's (largest error {100 * err['flux_error']:.3g} %, tolerance "
+        per = ", ".join(_total_ratio(r, e) for r, e in zip(ratio[:8], fe[:8]))
+        detail += (f"; total {per} (largest error {100 * err['flux_error']:.3g} %, tolerance "
                    f"{100 * spec['flux']:.3g} %{'' if ok_flux else ' FAIL'})")
         v["flux_ok"] = ok_flux
     if spec["kind"] == "ztest" and batches is not None and spec.get("moments", True) and g.ndim == 2:
