@@ -46,8 +46,10 @@ def test_every_caustic_stage_buffer_is_the_same_on_one_and_two_threads(on_one_an
     a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method=method, keep="stages")))
     stages = {k.split(".")[1] for k in a if k.startswith("stage.")}
     want = {"receivers", "photon_trace", "receiver_hit", "splat", "gather", "caustic_final"}
-    if method == "imagespace" and "receiver_hit" not in over:
-        want.add("receiver_depth")
+    if method == "imagespace":
+        want.add("peel")
+        if "receiver_hit" not in over:
+            want.add("receiver_depth")
     assert want <= stages
     assert a["caustic_map_0"].sum() > 0  # photons reached the floor
     same_arrays(a, b)
@@ -506,3 +508,61 @@ def test_tiled_eyespace_march_equals_testing_every_sample(on_one_and_two_threads
         a, b = on_one_and_two_threads(lambda: march_eyespace(ov, dv, depth, cam))
         for got in (a, b):
             assert np.array_equal(got[0], want[0], equal_nan=True) and np.array_equal(got[1], want[1])
+
+
+def test_caustic_stages_at_a_larger_size_are_the_same_on_one_and_two_threads(on_one_and_two_threads, same_arrays):
+    """The default caustics scene at 192^2 (several 32-pixel tiles of the march, photon bands over many
+    rows): receiver_depth, peel, splat, gather and caustic_final's buffers, bit for bit."""
+    sc = rr.load_scene(SCENE, {"camera.width": 192, "camera.height": 192, "imagespace.photons": 160,
+                               "caustics.map_size": 160})
+    a, b = on_one_and_two_threads(lambda: _arrays(rr.render(sc, method="imagespace", keep="stages")))
+    for stage in ("receiver_depth", "peel", "splat", "gather", "caustic_final"):
+        assert any(k.startswith(f"stage.{stage}.") for k in a), stage
+    assert np.isfinite(a["stage.receiver_depth.depth"]).mean() > 0.5 and a["caustic_map_0"].sum() > 0
+    same_arrays(a, b)
+
+
+def _shade_rays_numpy(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct):
+    """shade_rays as it was (boolean indexing, np.concatenate), the reference of its row kernels."""
+    from refraction_ref.caustics.pipeline import receiver_hits
+    from refraction_ref.environment import environment_lookup
+
+    out = np.zeros((len(o), 3))
+    P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
+    hit = face >= 0
+    pts, fcs, drs = P[hit], face[hit], d[hit]
+    pts, fcs, drs = (np.concatenate([x, y]) for x, y in zip((pts, fcs, drs), direct))
+    c = shade.shade_points(rs, scene.data["lights"], rgb_maps, pts, fcs, drs, vis)
+    nh = int(hit.sum())
+    out[hit] = c[:nh]
+    out[~hit] = environment_lookup(scene.data["environment"], d[~hit], scene.base_dir)
+    return out, c[nh:]
+
+
+@pytest.mark.parametrize("mode", ["eyespace", "exact"])
+def test_shade_rays_row_kernels_equal_boolean_indexing(on_one_and_two_threads, mode):
+    from refraction_ref.camera import Camera
+    from refraction_ref.caustics.pipeline import shade_rays
+    from refraction_ref.caustics.receivers import eye_buffers, receiver_set
+
+    sc = rr.load_scene(SCENE, SMALL)
+    cam = Camera.from_dict(sc.data["camera"])
+    rs = receiver_set(sc, sc.data["lights"][0], 32)
+    eyebuf = eye_buffers(rs, cam)
+    rng = np.random.default_rng(31)
+    o = rng.uniform(-0.6, 0.6, (3000, 3))
+    d = rng.normal(size=(3000, 3)) + [0.0, -0.5, 0.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    maps = [rng.random(b.size + (3,)) for b in rs.boxes]
+    dp = rng.uniform(-1.5, 1.5, (500, 3))
+    dp[:, 1] = -0.5
+    direct = (dp, rng.integers(0, len(rs.tris), 500), np.tile([0.0, -1.0, 0.0], (500, 1)))
+
+    def vis(l, p, nrm):
+        return (p[:, 0] > 0.1).astype(np.float64)
+
+    want = _shade_rays_numpy(sc, rs, cam, o, d, mode, eyebuf, maps, vis, direct)
+    assert 0 < (want[0].sum(axis=1) > 0).sum() and want[1].std() > 0
+    a, b = on_one_and_two_threads(lambda: shade_rays(sc, rs, cam, o, d, mode, eyebuf, maps, vis, direct))
+    for got in (a, b):
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
