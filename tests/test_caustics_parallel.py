@@ -566,3 +566,53 @@ def test_shade_rays_row_kernels_equal_boolean_indexing(on_one_and_two_threads, m
     a, b = on_one_and_two_threads(lambda: shade_rays(sc, rs, cam, o, d, mode, eyebuf, maps, vis, direct))
     for got in (a, b):
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def _shadow_map_margin_numpy(lcam, zmin, points, bias, tie=0.0):
+    """shadow_map_margin as it was written (NumPy), the reference of its kernel."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    zmin = np.asarray(zmin, dtype=np.float64)
+    H, W = zmin.shape
+    pv = lcam.world_to_view(p)
+    d = -pv[:, 2]
+    s = np.ones_like(d) if lcam.ortho else d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        col = (pv[:, 0] / (s * float(lcam.sx)) * 0.5 + 0.5) * float(lcam.width)
+        row = (0.5 - pv[:, 1] / (s * float(lcam.sy)) * 0.5) * float(lcam.height)
+
+    def margin(col, row):
+        inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < W) & (row >= 0) & (row < H) & (d > 0)
+        i = np.clip(np.floor(np.where(inside, row, 0.0)).astype(np.int64), 0, H - 1)
+        j = np.clip(np.floor(np.where(inside, col, 0.0)).astype(np.int64), 0, W - 1)
+        z = zmin[i, j]
+        with np.errstate(invalid="ignore"):
+            return np.where(inside & np.isfinite(z), d - (z + float(bias)), -np.inf)
+
+    m = margin(col, row)
+    if tie > 0:
+        for dc, dr in ((tie, 0.0), (-tie, 0.0), (0.0, tie), (0.0, -tie)):
+            m = np.where((margin(col + dc, row + dr) > 0) != (m > 0), 0.0, m)
+    return m
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_shadow_map_margin_kernel_equals_numpy(on_one_and_two_threads, ortho):
+    from refraction_ref.camera import Camera
+
+    rng = np.random.default_rng(37)
+    lcam = Camera.from_dict({"eye": [0.3, 3.0, 0.2], "target": [0, 0, 0], "up": [0, 0, 1], "fov_y": 40,
+                             "width": 32, "height": 32, "near": 0.1, "far": 10, "ortho": ortho,
+                             **({"ortho_height": 2.0} if ortho else {})})
+    zmin = rng.uniform(2.5, 3.5, (32, 32))
+    zmin[rng.random((32, 32)) < 0.2] = np.inf
+    p = rng.uniform(-1.5, 1.5, (4000, 3))
+    p[::500] = np.nan
+    p[1::500] = [0.3, 5.0, 0.2]  # behind the light
+    for tie in (0.0, 5e-3, 0.3):
+        want = _shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
+        assert (want > 0).sum() > 100 and (want == -np.inf).sum() > 100
+        if tie >= 0.3:
+            assert (want == 0).sum() > 100
+        a, b = on_one_and_two_threads(lambda: shade.shadow_map_margin(lcam, zmin, p, 0.01, tie))
+        for got in (a, b):
+            assert np.array_equal(got, want)

@@ -297,28 +297,49 @@ def shadow_map_margin(lcam, zmin, points, bias, tie=0.0):
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0:
         return np.zeros(0)
-    zmin = np.asarray(zmin, dtype=np.float64)
-    H, W = zmin.shape
     pv = lcam.world_to_view(p)
-    d = -pv[:, 2]
-    s = np.ones_like(d) if lcam.ortho else d
-    with np.errstate(divide="ignore", invalid="ignore"):
-        col = (pv[:, 0] / (s * float(lcam.sx)) * 0.5 + 0.5) * float(lcam.width)
-        row = (0.5 - pv[:, 1] / (s * float(lcam.sy)) * 0.5) * float(lcam.height)
+    out = np.empty(len(p))
+    # per point on every thread: the NumPy expressions of the test, element by element
+    _shadow_margin_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64),
+                          _LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width),
+                                     float(lcam.height), float(bias)), float(tie), out)
+    return out
 
-    def margin(col, row):
-        inside = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < W) & (row >= 0) & (row < H) & (d > 0)
-        i = np.clip(np.floor(np.where(inside, row, 0.0)).astype(np.int64), 0, H - 1)
-        j = np.clip(np.floor(np.where(inside, col, 0.0)).astype(np.int64), 0, W - 1)
-        z = zmin[i, j]
-        with np.errstate(invalid="ignore"):
-            return np.where(inside & np.isfinite(z), d - (z + float(bias)), -np.inf)
 
-    m = margin(col, row)
-    if tie > 0:
-        for dc, dr in ((tie, 0.0), (-tie, 0.0), (0.0, tie), (0.0, -tie)):
-            m = np.where((margin(col + dc, row + dr) > 0) != (m > 0), 0.0, m)
-    return m
+@nb.njit(cache=True, inline="always")
+def _margin_at(col, row, d, zmin, bias):
+    """``dl - (zmin + bias)`` at screen position (col, row), ``-inf`` where no depth is compared."""
+    H, W = zmin.shape
+    if not (math.isfinite(col) and math.isfinite(row) and col >= 0 and col < W and row >= 0 and row < H
+            and d > 0):
+        return -np.inf
+    i = min(max(np.int64(math.floor(row)), 0), H - 1)
+    j = min(max(np.int64(math.floor(col)), 0), W - 1)
+    z = zmin[i, j]
+    if not math.isfinite(z):
+        return -np.inf
+    return d - (z + bias)
+
+
+@nb.njit(cache=True, parallel=True)
+def _shadow_margin_kernel(pv, zmin, view, tie, out):
+    # shadow_map_margin per point: Camera.to_screen as _shadow_map_kernel has it, the margin, and the
+    # four tie probes in their order (each compared with the margin as the probes before left it)
+    sx, sy, ortho, width, height, bias = view.sx, view.sy, view.ortho, view.width, view.height, view.bias
+    for k0 in nb.prange(pv.shape[0]):
+        k = np.int64(k0)
+        d = -pv[k, 2]
+        s = 1.0 if ortho else d
+        col = (pv[k, 0] / (s * sx) * 0.5 + 0.5) * width
+        row = (0.5 - pv[k, 1] / (s * sy) * 0.5) * height
+        m = _margin_at(col, row, d, zmin, bias)
+        if tie > 0:
+            for q in range(4):
+                dc = tie if q == 0 else (-tie if q == 1 else 0.0)
+                dr = tie if q == 2 else (-tie if q == 3 else 0.0)
+                if (_margin_at(col + dc, row + dr, d, zmin, bias) > 0) != (m > 0):
+                    m = 0.0
+        out[k] = m
 
 
 @nb.njit(cache=True, parallel=True)
