@@ -212,7 +212,7 @@ def first_hit(O, D, acc, tmin=0.0, chunk=16384):
 
 
 def _refract(I, N, eta):
-    """Snell in vector form with the normal turned to face I (as `water`'s eq. 2-8); NaN and tir where k < 0."""
+    """Snell in vector form, the normal turned to face I (`water`'s eq. 2-8); NaN and ``tir`` where k < 0."""
     c = -(I[..., 0] * N[..., 0] + I[..., 1] * N[..., 1] + I[..., 2] * N[..., 2])
     flip = c < 0
     N = np.where(flip[..., None], -N, N)
