@@ -56,7 +56,14 @@ def _cmd_render(a):
 
     _check_keep(a.keep)
     scene = load_scene(a.scene, _parse_sets(a.set))
-    check_writable(output_paths(a.out), overwrite=a.force)  # before any work, not after it
+    check_writable(output_paths(a.out), overwrite=a.force, cli=True)  # before any work, not after it
+    if a.keep:  # the stage names against the method's plan now, before its kernels are compiled or loaded
+        from .graph import _keep_names, get_method
+
+        m = get_method(a.method)
+        if m.check is not None:
+            m.check(scene)
+        _keep_names(m.name, tuple(m.stages(scene)), a.keep)
     why = ignored_content(scene.data, a.method)
     if why:
         print(f"refraction-ref: warning: {why}", file=sys.stderr, flush=True)
@@ -102,6 +109,12 @@ def _cmd_compare(a):
     from .compare import check_comparable, compare_arrays, format_comparison
     from .result import load_result
 
+    if a.plot:  # before reading the runs: an existing PNG is replaced only with --force, like render's --out
+        from .files import check_out_file
+
+        if os.path.exists(a.plot) and not a.force:
+            raise FileExistsError(f"'{a.plot}' exists; choose another --plot file or pass --force to replace it")
+        check_out_file(a.plot, "--plot")
     A = load_result(a.a)
     B = load_result(a.b)
     diff = check_comparable(A.meta, B.meta, force=a.force)
@@ -297,7 +310,7 @@ def main(argv=None):
                    "(water runs: images and caustic maps)")
     c.add_argument("--force", action="store_true",
                    help="compare runs of different scenes anyway (by default refused, naming the first key that "
-                        "differs)")
+                        "differs), and replace an existing --plot PNG")
     c.set_defaults(fn=_cmd_compare)
     s = sub.add_parser("scene", help="print the resolved scene (defaults filled in) as JSON")
     s.add_argument("scene", nargs="?", default=None, help="scene JSON (docs/oracle.md); omit for the default scene")

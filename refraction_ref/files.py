@@ -10,6 +10,7 @@ name in the destination folder and renames it into place when complete
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 
@@ -50,7 +51,14 @@ def _probe_folder(folder, what):
         os.close(fd)
         os.remove(probe)
     except OSError as e:
-        raise OutputError(f"cannot write {what} in '{folder or '.'}' ({e.strerror or e}); choose a folder you "
+        f = folder or "."
+        if os.path.isdir(f) and not made and e.errno in (errno.ENOENT, errno.EROFS, errno.EACCES, errno.EPERM):
+            # the folder exists (/proc, /sys, a read-only mount): "No such file or directory" alone misleads
+            why = ("read-only" if e.errno == errno.EROFS else "no permission" if e.errno in (errno.EACCES, errno.EPERM)
+                   else "it is a virtual or special file system, such as /proc or /sys")
+            raise OutputError(f"cannot create files for {what} in '{f}': the folder exists but new files cannot be "
+                              f"made there ({why}); choose a folder you can write to") from None
+        raise OutputError(f"cannot write {what} in '{f}' ({e.strerror or e}); choose a folder you "
                           "can write to") from None
     finally:
         for m in reversed(made):

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .validation import SceneError
+from .validation import SceneError, show
 
 __all__ = ["LIGHT_TYPES", "validate_lights", "light_camera", "light_direction_at"]
 
@@ -68,9 +68,13 @@ def validate_lights(data):
         raise SceneError("scene: 'lights' must be a list of lights")
     for k, lt in enumerate(data["lights"] or []):
         if not isinstance(lt["type"], str) or lt["type"] not in LIGHT_TYPES:
-            raise SceneError(f"scene: 'lights[{k}].type' is {str(lt['type'])[:40]!r}; use 'directional' or 'point'")
+            raise SceneError(f"scene: 'lights[{k}].type' is {show(lt['type'])}; use \"directional\" or \"point\"")
+        # every key the light holds is checked whether or not its kind reads it: a junk 'position' on a
+        # directional light (or 'direction' on a point light) is a typo the user should hear about
+        d = check_vector(lt["direction"], 3, f"lights[{k}].direction")
+        if lt["position"] is not None:
+            check_vector(lt["position"], 3, f"lights[{k}].position")
         if lt["type"] == "directional":
-            d = check_vector(lt["direction"], 3, f"lights[{k}].direction")
             if not np.linalg.norm(d) > 0:
                 raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
             if top is not None and d[1] >= 0:
@@ -79,7 +83,8 @@ def validate_lights(data):
                                  "give the direction a negative y component")
         else:
             if lt["position"] is None:
-                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give [x, y, z]")
+                raise SceneError(f"scene: 'lights[{k}]' is a point light without 'position'; give [x, y, z], e.g. "
+                             f"--set 'lights.{k}.position=[0, 3, 0]'")
             pos = check_vector(lt["position"], 3, f"lights[{k}].position")
             if top is not None and pos[1] <= top:
                 raise SceneError(f"scene: 'lights[{k}].position' y = {pos[1]} is not above the water "

@@ -121,7 +121,7 @@ def output_paths(prefix, png=True):
     return [prefix + ".npz"] + ([prefix + ".png"] if png else [])
 
 
-def check_writable(paths, overwrite=False):
+def check_writable(paths, overwrite=False, cli=False):
     """Refuse, before any work, outputs that cannot be written (:class:`~refraction_ref.files.OutputError`: a
     folder that is a file or not writable) or that exist, unless ``overwrite`` (``FileExistsError``).
     Nothing is left on disk.
@@ -132,6 +132,8 @@ def check_writable(paths, overwrite=False):
         Output files (:func:`output_paths`).
     overwrite : bool
         Existing files may be replaced.
+    cli : bool
+        Word the message for the command line (``--out``, ``--force``) rather than for Python.
 
     Returns
     -------
@@ -139,7 +141,8 @@ def check_writable(paths, overwrite=False):
     """
     for p in paths:
         if not overwrite and os.path.exists(p):
-            raise FileExistsError(f"'{p}' exists; choose another --out prefix or pass overwrite (CLI: --force)")
+            raise FileExistsError(f"'{p}' exists; choose another {'--out prefix' if cli else 'prefix'} or "
+                                  f"{'pass --force to replace it' if cli else 'pass overwrite=True'}")
         check_out_file(p, "the output")
 
 

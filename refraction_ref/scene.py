@@ -16,6 +16,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -173,15 +174,16 @@ def validate(data, base_dir="."):
     # below 0.1 degree a pixel's footprint falls under the float32 depth and projection precision of the
     # image-space buffers: every pixel reads "missed" there while the exact trace hits
     check_number(c["fov_y"], "camera.fov_y", FOV_MIN, 179.0)
-    check_number(c["width"], "camera.width", 1, integer=True)
-    check_number(c["height"], "camera.height", 1, integer=True)
+    # the real limit is the pixel count (MAX_PIXELS, checked below); one side alone may take all of it
+    check_number(c["width"], "camera.width", 1, MAX_PIXELS, integer=True)
+    check_number(c["height"], "camera.height", 1, MAX_PIXELS, integer=True)
     check_number(c["near"], "camera.near", 0.0, lo_open=True)
     check_number(c["far"], "camera.far", c["near"], lo_open=True)
     if np.linalg.norm(target - eye) < 1e-9 * max(1.0, float(np.abs(eye).max())):
         raise SceneError("scene: camera.eye and camera.target nearly coincide (no view direction); move the target")
-    if c["width"] * c["height"] > 16384 * 16384:
-        raise SceneError(f"scene: camera {c['width']}x{c['height']} is too large for memory; "
-                         "use at most 16384x16384 pixels")
+    if c["width"] * c["height"] > MAX_PIXELS:
+        raise SceneError(f"scene: camera.width x camera.height is {c['width']}x{c['height']}, too large for memory; "
+                         f"give at most {MAX_PIXELS} pixels in all (16384x16384)")
     check_number(data["outside_ior"], "outside_ior", 0.0, lo_open=True)
     if not isinstance(data["objects"], list):
         raise SceneError("scene: 'objects' must be a list")
@@ -243,14 +245,18 @@ def validate(data, base_dir="."):
             block.merge(data)
     validate_lights(data)
     for k, r in enumerate(data["receivers"] or []):
-        alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo", limit=1.0)
-        if np.any(alb < 0):
-            raise SceneError(f"scene: 'receivers[{k}].albedo' is {r['albedo']}; it must be >= 0")
+        alb = check_vector(r["albedo"], 3, f"receivers[{k}].albedo", limit=None)
+        if np.any(alb < 0) or np.any(alb > 1):  # a reflectance: a surface reflects at most what reaches it
+            raise SceneError(f"scene: 'receivers[{k}].albedo' is {show(r['albedo'])}; each component is a "
+                             "reflectance and must be in [0, 1]")
     _check_volume_files(data, base_dir)  # the files first: a folder or a truncated file named as such
     for name, block in BLOCKS.items():  # each method's own checks, beside the code that reads them
         block.validate(data, base_dir)
     return data
 
+
+#: The most pixels a camera may have (width x height; 16384 x 16384): the buffers of one render fit in memory.
+MAX_PIXELS = 16384 * 16384
 
 #: The smallest ``camera.fov_y`` (degrees): below it the image-space buffers' float32 precision no longer
 #: separates a pixel's rays (every pixel read "missed" at 1e-6 degree while the exact trace hit).
@@ -267,46 +273,66 @@ def _check_fit_size(o, w):
 
 
 def _check_volume_files(data, base_dir):
-    """Read every ``.npy`` the ``volume`` block names, now: a truncated file, an object array or a folder is
-    refused when the scene loads, not when the volumetric method reaches its first stage."""
+    """Read every array the ``volume`` block gives (``.npy`` file or inline), now: a truncated file, an object
+    array, a folder, a wrong shape or a non-positive index is refused when the scene loads, naming the key and
+    the file, not when the volumetric method reaches its first stage."""
     vol = data.get("volume")
     if not isinstance(vol, dict):
         return
+    ior_shape = None
     for k in ("ior", "extinction", "scattering"):
         x = vol.get(k)
+        if x is None:
+            continue
+        name = f"'volume.{k}'"
         if isinstance(x, (str, os.PathLike)):
             p = os.fspath(x)
             p = p if os.path.isabs(p) else os.path.join(base_dir, p)
+            shown = printable(os.fspath(x))
+            name = f"'volume.{k}' ('{shown if len(shown) <= 80 else '...' + shown[-77:]}')"  # the file's own name
             if os.path.isdir(p):
-                raise SceneError(f"scene: 'volume.{k}' names '{x}', which is a folder; give a .npy file "
-                                 "(numpy.save) or an array")
+                raise SceneError(f"scene: {name} is a folder; give a .npy file (numpy.save) or an array")
             if not os.path.isfile(p):
-                continue  # the volume block's own check names the missing file
+                raise SceneError(f"scene: {name} does not exist (looked for {p}); give an existing .npy file or "
+                                 "an array")
             with open(p, "rb") as f:
                 npy = f.read(6) == b"\x93NUMPY"
             if not npy:  # NumPy would read it as a pickle, and advise loading it unsafely
                 from .files import file_kind
 
-                raise SceneError(f"scene: 'volume.{k}' names '{x}', which is not a .npy array ({file_kind(p)}); "
-                                 "save the array with numpy.save")
+                raise SceneError(f"scene: {name} is not a .npy array ({file_kind(p)}); save the array with "
+                                 "numpy.save")
             try:
                 a = np.load(p, allow_pickle=False, mmap_mode="r")
                 a = np.asarray(a)
             except Exception as e:  # NumPy raises several types for a bad file
-                raise SceneError(f"scene: 'volume.{k}' names '{x}', which cannot be read as a .npy array "
-                                 f"({type(e).__name__}: {str(e)[:80]}); save the array with numpy.save") from None
+                raise SceneError(f"scene: {name} cannot be read as a .npy array ({type(e).__name__}: "
+                                 f"{str(e)[:80]}); save the array with numpy.save") from None
             if a.dtype.kind not in "fiu":
-                raise SceneError(f"scene: 'volume.{k}' ('{x}') holds {a.dtype} values; give real numbers")
-            if not np.all(np.isfinite(a)):
-                raise SceneError(f"scene: 'volume.{k}' ('{x}') holds NaN or infinite values; give finite numbers")
-        elif x is not None:
+                raise SceneError(f"scene: {name} holds {a.dtype} values; give real numbers")
+        else:
             try:
                 a = np.asarray(x, dtype=np.float64)
             except (TypeError, ValueError, OverflowError):
-                raise SceneError(f"scene: 'volume.{k}' must be a numeric array or a .npy path") from None
-            if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1e6):
-                raise SceneError(f"scene: 'volume.{k}' holds NaN, infinite or huge values; give finite numbers "
-                                 "within +-1e6")
+                raise SceneError(f"scene: {name} must be a numeric array or a .npy path, got {show(x, 40)}") from None
+        if not np.all(np.isfinite(a)):
+            raise SceneError(f"scene: {name} holds NaN or infinite values; give finite numbers")
+        if a.size and np.abs(a).max() > 1e6:
+            raise SceneError(f"scene: {name} holds values beyond +-1e6; give finite numbers within +-1e6")
+        if k == "ior":
+            if a.ndim != 3 or min(a.shape) < 4:
+                raise SceneError(f"scene: {name} has shape {a.shape}; give a 3D (nx, ny, nz) array with at "
+                                 "least 4 voxels along every axis")
+            if a.min() <= 0:
+                raise SceneError(f"scene: {name} has values <= 0 (min {a.min():g}); an index of refraction "
+                                 "must be > 0")
+            ior_shape = a.shape
+            continue
+        if ior_shape is not None and a.shape not in ((), (3,), ior_shape, ior_shape + (3,)):
+            raise SceneError(f"scene: {name} has shape {a.shape}; give a number, [r, g, b], {ior_shape} or "
+                             f"{ior_shape + (3,)} to match volume.ior")
+        if a.size and a.min() < 0:
+            raise SceneError(f"scene: {name} has negative values (min {a.min():g}); coefficients must be >= 0")
 
 
 def ignored_content(data, method):
@@ -342,7 +368,7 @@ def ignored_content(data, method):
     return None
 
 
-def _coerce_cli_value(v):
+def _coerce_cli_value(v, key="?"):
     if not isinstance(v, str):
         return v
     low = v.lower()
@@ -357,16 +383,84 @@ def _coerce_cli_value(v):
     except ValueError as e:  # not JSON (a plain word), or an integer beyond Python's int-string limit
         if "digits" in str(e) and v.lstrip("-+").isdigit():
             raise SceneError(f"--set value is a {len(v)}-digit number; give a number within +-1e6") from None
-        return v
+        if v.lstrip()[:1] in ("{", "[", '"'):  # meant as JSON (an object, a list, a quoted string): say it broke
+            raise SceneError(f"--set {key}: the value '{printable(v)[:50]}' did not parse as JSON "
+                             f"({str(e).split(':')[0]}, character {getattr(e, 'pos', '?')}); fix the JSON "
+                             "(double quotes, no trailing comma)") from None
+        return v  # a plain word (a mesh name, a path) is a string
     check_depth(out, f"--set value {show(v)}")
     return out
+
+
+#: An example of a valid value for keys whose default is null and that are not blocks (the --set hint)
+_NULL_LEAF_EXAMPLES = {"position": [0.0, 3.0, 0.0], "fit": 1.0, "size": [1.0, 1.0], "name": "glass",
+                       "path": "sky.hdr", "bounds": [[-1, -1, -1], [1, 1, 1]]}
+#: Keys a block cannot do without, with a valid example: the --set hint for a null block includes them
+_REQUIRED = {"volume": {"ior": "vol.npy", "bounds": [[-1, -1, -1], [1, 1, 1]]}}
+
+
+def _documented(parts):
+    """The documented defaults (a dict) of the block at the dotted path ``parts``, or None when it is no block."""
+    from .levelmap.knobs import WATER_DEFAULTS, WAVE_DEFAULTS
+    from .volumetric.knobs import VOLUME_KEYS
+
+    p = [("#" if x.isdigit() else x) for x in parts]
+    items = {"objects": DEFAULT_OBJECT, "receivers": DEFAULT_RECEIVER, "lights": DEFAULT_LIGHT}
+    if len(p) == 1:
+        if p[0] == "water":
+            return WATER_DEFAULTS
+        if p[0] == "volume":
+            return dict.fromkeys(VOLUME_KEYS)
+        d = DEFAULTS.get(p[0])
+        return d if isinstance(d, dict) else None
+    if len(p) == 2 and p[1] == "#":
+        return items.get(p[0])
+    if p[:2] == ["water", "waves"] and len(p) == 3:
+        return WAVE_DEFAULTS
+    if len(p) == 3 and p[1] == "#" and p[0] in items:
+        if p[0] == "objects" and p[2] == "deform":
+            return DEFAULT_DEFORM
+        d = items[p[0]].get(p[2])
+        return d if isinstance(d, dict) else None
+    return None
+
+
+def _null_hint(key, full, rest, value):
+    """The --set hint for ``key`` run into the null ``full``: a value that is valid when followed."""
+    parts = full.split(".")
+    doc = _documented(parts)
+    shown = value if not isinstance(value, str) else _coerce_cli_value(value, key)
+    if doc is None:  # not a block (a position, a fit): the key is set whole, with a value of its own kind
+        ex = _NULL_LEAF_EXAMPLES.get(parts[-1])
+        eg = f", e.g. --set '{full}={json.dumps(ex)}'" if ex is not None else ""
+        return (f"override '{key}': '{full}' is null and holds no keys; set it whole{eg} (docs/oracle.md)")
+    block = dict(_REQUIRED.get(full, {}))
+    then = ""
+    if len(rest) == 1:
+        block[rest[0]] = shown
+    elif len(rest) == 3 and rest[1] == "0":  # the first item of a list in the block (a wave)
+        block[rest[0]] = [{rest[2]: shown}]
+    else:  # a key deeper inside (a wave of the water): add the block, then the key is there to set
+        then = f", then --set {key}=..."
+    text = json.dumps(block, default=str)
+    return (f"override '{key}': the scene has no '{full}' block (it is null); add the block itself, e.g. "
+            f"--set '{full}={text}'{then} (other keys take their defaults; docs/oracle.md)")
+
+
+def _brackets_to_dots(key):
+    """``objects[0].material.ior`` (how messages name list items) -> ``objects.0.material.ior``."""
+    return re.sub(r"\[\s*(\d+)\s*\]", r".\1", key)
 
 
 def apply_overrides(data, overrides):
     """Set dotted keys, e.g. ``{"imagespace.iterations": 10, "objects.0.material.ior": 1.5}``.
 
     String values are parsed as JSON where they can be (``"10"`` -> 10,
-    ``"[0,0,3]"`` -> a list), so CLI ``--set key=value`` works unchanged.
+    ``"[0,0,3]"`` -> a list), so CLI ``--set key=value`` works unchanged; a
+    value that starts as JSON (``{``, ``[``, ``"``) and does not parse is refused.
+    A list item may be named as error messages name it (``objects[0].fit``).
+    A key of a block's documented defaults may be set although the block as
+    given leaves it out (``volume.extinction``, ``water.ior``).
 
     Parameters
     ----------
@@ -390,7 +484,7 @@ def apply_overrides(data, overrides):
     for key, value in (overrides or {}).items():
         if not isinstance(key, str):
             raise SceneError(f"override {show(key)}: keys are dotted strings, e.g. 'camera.width'")
-        parts = key.split(".")
+        parts = _brackets_to_dots(key).split(".")
         key = printable(key)
         if len(parts) == 2:
             parts[0], parts[1] = _alias(parts[0], parts[1])
@@ -401,10 +495,7 @@ def apply_overrides(data, overrides):
             elif isinstance(node, dict) and p in node:
                 if node[p] is None:
                     full = f"{where}.{p}" if where else p
-                    shown = str(value) if isinstance(value, str) else json.dumps(value, default=str)
-                    raise SceneError(f"override '{key}': the scene has no '{full}' block (it is null); add the "
-                                     f"block itself, e.g. --set '{full}={{\"{'.'.join(parts[i + 1:])}\": "
-                                     f"{shown[:30]}}}' (other keys take their defaults; docs/oracle.md)")
+                    raise SceneError(_null_hint(key, full, parts[i + 1:], value))
                 node = node[p]
             elif isinstance(node, dict):
                 raise SceneError(f"override '{key}': unknown key '{p}'; known keys "
@@ -415,15 +506,20 @@ def apply_overrides(data, overrides):
             where = f"{where}.{p}" if where else p
         last = parts[-1]
         if isinstance(node, list):
-            node[_list_index(node, last, key, where)] = _coerce_cli_value(value)
+            node[_list_index(node, last, key, where)] = _coerce_cli_value(value, key)
         elif isinstance(node, dict):
             if last not in node:
-                if not node:
+                doc = _documented(where.split(".")) if where else None
+                if doc is not None and last in doc:  # left out of the block as given: its default is documented
+                    node[last] = _coerce_cli_value(value, key)
+                    continue
+                known = sorted(set(node) | set(doc or ()))
+                if not known:
                     raise SceneError(f"override '{key}': '{where}' is empty; set it whole, e.g. --set "
                                      f"'{where}={{\"{last}\": ...}}'")
                 raise SceneError(f"override '{key}': unknown key '{last}'; known keys here: "
-                                 f"{', '.join(sorted(node))}")
-            node[last] = _coerce_cli_value(value)
+                                 f"{', '.join(known)}")
+            node[last] = _coerce_cli_value(value, key)
         else:
             raise SceneError(f"override '{key}': cannot set a key inside a {type(node).__name__}")
     return data

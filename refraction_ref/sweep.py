@@ -72,6 +72,8 @@ import json
 import os
 import time
 
+from .validation import show
+
 __all__ = ["load_spec", "tasks_of", "run_task", "run_function", "run_reference", "sweep", "SweepError",
            "ERROR_METRICS", "output_files"]
 
@@ -199,8 +201,12 @@ def load_spec(src):
             f.setdefault("grid", {})
     grids = [f["grid"] for f in spec["families"]] if "families" in spec else [spec["grid"]]
     for g in grids:
-        if not isinstance(g, dict) or not all(isinstance(v, list) and v for v in g.values()):
-            raise SweepError("sweep: 'grid' must map dotted keys to non-empty lists of values")
+        if not isinstance(g, dict):
+            raise SweepError(f"sweep: 'grid' must map dotted keys to non-empty lists of values, got {show(g, 40)}")
+        for k, vals in g.items():
+            if not (isinstance(vals, list) and vals):
+                raise SweepError(f"sweep: grid key {json.dumps(k)} is {show(vals, 40)}; give a non-empty list of "
+                                 f"values, e.g. {json.dumps({k: [vals] if not isinstance(vals, list) else [1]})}")
         for k, vals in g.items():
             n = len(k.split(","))
             if n > 1 and not all(isinstance(v, list) and len(v) == n for v in vals):

@@ -10,6 +10,7 @@ scene loader (or a method) to validate its own keys.
 from __future__ import annotations
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -32,10 +33,16 @@ class SceneError(ValueError):
 
 
 def show(x, n=60):
-    """``repr(x)`` cut to ``n`` characters, so that a 5,000-digit number stays a one-line message."""
+    """``x`` as JSON (``true``, ``null``, ``"abc"``: as the user typed it in a scene file or ``--set``), cut to
+    ``n`` characters, so that a 5,000-digit number stays a one-line message; ``repr`` for what JSON cannot hold."""
     try:
-        r = repr(x)
-    except ValueError:  # an int beyond Python's int-string limit
+        r = json.dumps(x, allow_nan=True)
+    except (TypeError, ValueError, RecursionError):
+        try:
+            r = repr(x)
+        except ValueError:  # an int beyond Python's int-string limit
+            return "a number of more than 4,300 digits"
+    if len(r) > 4300 and isinstance(x, int) and not isinstance(x, bool):
         return "a number of more than 4,300 digits"
     return r if len(r) <= n else r[: n - 4] + " ..."
 

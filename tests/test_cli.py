@@ -219,7 +219,7 @@ def test_inputs_that_are_not_what_the_scene_says_are_refused_at_load(tmp_path, c
     err = capsys.readouterr().err
     assert "environment.path" in err and "is not an image imageio can read (a text file" in err
     (tmp_path / "ior.npy").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))
-    with pytest.raises(SceneError, match=r"'volume.ior' names .* which is not a .npy array \(a PNG image\)") as e:
+    with pytest.raises(SceneError, match=r"^scene: 'volume.ior' \('.*ior.npy'\) is not a .npy array \(a PNG image\)") as e:
         load_scene({"volume": {"ior": str(tmp_path / "ior.npy"), "bounds": [[0, 0, 0], [1, 1, 1]]}})
     assert "pickle" not in str(e.value)
 

@@ -346,3 +346,177 @@ def test_check_reads_a_corrupt_candidate_npz_as_a_problem_of_the_case(tmp_path, 
     trunc.write_bytes(p.read_bytes()[:40])
     got, problem = _read_result(str(trunc))
     assert got is None and _one_line(problem)
+
+
+# ---------------------------------------------------------------- the CLI outsider's findings (after issue 30)
+
+@pytest.mark.parametrize("kind", ["directional", "point"])
+@pytest.mark.parametrize("key,value", [("position", {"0": 1}), ("position", "abc"), ("position", [1, True, 0]),
+                                       ("direction", "down"), ("direction", [0, float("nan"), 0])])
+def test_every_light_key_is_checked_whatever_the_kind(kind, key, value):
+    light = {"type": kind, "position": [0, 3, 0]}
+    light[key] = value
+    with pytest.raises(SceneError) as e:
+        rr.load_scene({**TINY, "lights": [light]})
+    assert f"'lights[0].{key}'" in _one_line(str(e.value))
+    rc, _, err = _run(["scene", "--set", f"lights.0.type={kind}", "--set", "lights.0.position=[0, 3, 0]",
+                       "--set", f"lights.0.{key}={json.dumps(value)}"])
+    assert rc == 2 and f"lights[0].{key}" in _one_line(err)
+
+
+def test_set_into_a_null_key_suggests_a_value_that_is_valid():
+    """The hint for a null key that is no block (a light's position) is a 3-vector, and following it works."""
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(TINY, {"lights.0.position.0": "1"})
+    msg = _one_line(str(e.value))
+    hint = msg.split("--set '", 1)[1].split("'", 1)[0]
+    assert '{"0"' not in msg and hint.startswith("lights.0.position=[")
+    key, value = hint.split("=", 1)
+    assert rr.load_scene(TINY, {key: value, "lights.0.type": "point"}).data["lights"][0]["position"] == \
+        json.loads(value)
+
+
+@pytest.mark.parametrize("key,value", [("volume.ior", "vol.npy"), ("volume.extinction", "0.1"),
+                                       ("water.height", "0.2"), ("water.waves.0.amplitude", "0.01"),
+                                       ("objects.0.deform.amplitude", "0.05")])
+def test_null_block_hint_is_valid_json_that_loads_when_followed(tmp_path, key, value):
+    np.save(tmp_path / "vol.npy", np.full((4, 4, 4), 1.2))
+    base = {"camera": {"width": 8, "height": 8, "eye": [0, 2, 2.6]},
+            "objects": [] if key.startswith(("volume", "water")) else [{"mesh": "sphere"}]}
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(base))
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(str(scene), {key: value})
+    hint = _one_line(str(e.value)).split("--set '", 1)[1].split("'", 1)[0]
+    block, text = hint.split("=", 1)
+    json.loads(text)  # valid JSON: the value quoted where it is a string
+    s = rr.load_scene(str(scene), {block: text})  # and it loads as given (the volume's bounds included)
+    node = s.data
+    for p in key.split("."):
+        node = node[int(p)] if isinstance(node, list) else node[p]
+    assert node == json.loads(value) if value[0].isdigit() else node == value
+
+
+def test_documented_keys_left_out_of_a_block_are_settable_one_at_a_time(tmp_path):
+    np.save(tmp_path / "vol.npy", np.full((4, 4, 4), 1.2))
+    vol = {"camera": {"width": 8, "height": 8}, "objects": [],
+           "volume": {"ior": "vol.npy", "bounds": [[-1, -1, -1], [1, 1, 1]]}}
+    (tmp_path / "v.json").write_text(json.dumps(vol))
+    s = rr.load_scene(str(tmp_path / "v.json"), {"volume.extinction": "0.25", "volume.scattering": "[0.1, 0.1, 0.1]"})
+    assert s.data["volume"]["extinction"] == 0.25 and s.data["volume"]["scattering"] == [0.1, 0.1, 0.1]
+    w = rr.load_scene({"camera": {"width": 8, "height": 8, "eye": [0, 2, 2.6]}, "objects": []},
+                      {"water": '{"height": 0.1}', "water.ior": "1.4"})
+    assert w.data["water"]["ior"] == 1.4 and w.data["water"]["height"] == 0.1
+    o = rr.load_scene({**TINY, "objects": [{"mesh": "sphere", "transform": {"scale": 2}}]},
+                      {"objects.0.transform.rotate": "[0, 90, 0]"})
+    assert o.data["objects"][0]["transform"]["rotate"] == [0, 90, 0]
+    with pytest.raises(SceneError, match="unknown key 'iorr'; known keys here: absorption, height, ior"):
+        rr.load_scene({**TINY, "water": {"height": 0.1}}, {"water.iorr": "1.4"})
+
+
+def test_albedo_above_one_says_it_is_a_reflectance():
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(_with({"receivers.0.albedo": [2, 0, 0]}))
+    msg = _one_line(str(e.value))
+    assert "must be in [0, 1]" in msg and "overflow" not in msg
+
+
+@pytest.mark.parametrize("value", ['{"mesh": "sphere",}', "[1, 2", '"abc'])
+def test_set_value_that_is_broken_json_says_so(value):
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(TINY, {"objects.0": value})
+    msg = _one_line(str(e.value))
+    assert "did not parse as JSON" in msg and "got str" not in msg and "objects.0" in msg
+    assert rr.load_scene(TINY, {"objects.0.mesh": "sphere"}).data["objects"][0]["mesh"] == "sphere"  # a plain word
+
+
+def test_messages_show_values_as_json_and_set_takes_the_bracket_key():
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(_with({"lights.0.type": True}))
+    assert "is true;" in str(e.value) and "True" not in str(e.value)
+    with pytest.raises(SceneError, match=r'\'receivers\[0\].fit\' must be a number, got "abc"'):
+        rr.load_scene(_with({"receivers.0.fit": "abc"}))
+    # a key as messages name it (objects[0].material.ior) works in --set as objects.0.material.ior does
+    assert rr.load_scene(TINY, {"objects[0].material.ior": "1.4"}).data["objects"][0]["material"]["ior"] == 1.4
+
+
+def test_camera_width_limit_is_the_real_one():
+    from refraction_ref.scene import MAX_PIXELS
+
+    with pytest.raises(SceneError, match=f"it must be <= {MAX_PIXELS}"):
+        rr.load_scene(_with({"camera.width": 10**11}))
+    with pytest.raises(SceneError, match=f"at most {MAX_PIXELS} pixels"):
+        rr.load_scene(_with({"camera.width": 20000, "camera.height": 20000}))
+
+
+def test_out_in_proc_says_the_folder_refuses_files(tmp_path):
+    if not os.path.isdir("/proc/sys"):
+        pytest.skip("no /proc")
+    rc, _, err = _run(["render", "--set", "camera.width=8", "--out", "/proc/sys/r"])
+    assert rc == 2 and "exists but new files cannot be made there" in _one_line(err)
+
+
+def test_existing_output_names_force_on_the_cli_and_overwrite_in_python(tmp_path):
+    from refraction_ref.result import check_writable
+
+    (tmp_path / "r.npz").write_bytes(b"old")
+    rc, _, err = _run(["render", "--set", "camera.width=8", "--out", tmp_path / "r"])
+    assert rc == 2 and "pass --force to replace it" in _one_line(err) and "overwrite" not in err
+    with pytest.raises(FileExistsError, match="overwrite=True"):
+        check_writable([str(tmp_path / "r.npz")])
+
+
+@pytest.mark.parametrize("name,words", [("truncated", "cannot be read"), ("flat", "has shape (64,)"),
+                                        ("zero", "<= 0"), ("missing", "does not exist")])
+def test_npy_errors_name_the_key_and_file_and_start_with_scene(tmp_path, name, words):
+    p = tmp_path / f"{name}.npy"
+    if name == "truncated":
+        np.save(p, np.full((4, 4, 4), 1.2))
+        p.write_bytes(p.read_bytes()[:-50])
+    elif name == "flat":
+        np.save(p, np.full(64, 1.2))
+    elif name == "zero":
+        np.save(p, np.zeros((4, 4, 4)))
+    with pytest.raises(SceneError) as e:
+        rr.load_scene(_volume_scene(str(p)))
+    msg = _one_line(str(e.value))
+    assert msg.startswith("scene: 'volume.ior'") and f"{name}.npy" in msg and words in msg, msg
+
+
+def test_npy_extinction_shape_checked_at_load(tmp_path):
+    np.save(tmp_path / "ior.npy", np.full((4, 4, 4), 1.2))
+    np.save(tmp_path / "ext.npy", np.ones((5, 4, 4)))
+    raw = _volume_scene(str(tmp_path / "ior.npy"))
+    raw["volume"]["extinction"] = str(tmp_path / "ext.npy")
+    with pytest.raises(SceneError, match=r"^scene: 'volume.extinction' \('.*ext.npy'\) has shape \(5, 4, 4\)"):
+        rr.load_scene(raw)
+
+
+def test_sweep_grid_message_names_the_key():
+    from refraction_ref.sweep import SweepError, load_spec
+
+    with pytest.raises(SweepError, match='grid key "imagespace.iterations" is 5; give a non-empty list'):
+        load_spec({"scenes": {"a": TINY}, "grid": {"camera.width": [8], "imagespace.iterations": 5}})
+
+
+def test_keep_names_checked_before_compiling(tmp_path, monkeypatch):
+    import refraction_ref.warm as warm
+
+    def no_compile(*a, **k):
+        raise AssertionError("compiled before --keep was checked")
+
+    monkeypatch.setattr(warm, "compile_report", no_compile)
+    rc, _, err = _run(["render", "--keep", "peal", "--set", "camera.width=8", "--out", tmp_path / "r"])
+    assert rc == 2 and "unknown stage 'peal'" in _one_line(err) and "peel" in err
+    assert os.listdir(tmp_path) == []
+
+
+def test_compare_plot_refuses_to_overwrite_without_force(tmp_path):
+    a = _npz(tmp_path / "a.npz", meta=np.array("{}"), status=np.ones((2, 2), np.int8))
+    png = tmp_path / "p.png"
+    png.write_bytes(b"old")
+    rc, out, err = _run(["compare", a, a, "--plot", png])
+    assert rc == 2 and "p.png' exists" in _one_line(err) and "--force" in err and out == ""
+    assert png.read_bytes() == b"old"
+    rc, out, err = _run(["compare", "-h"])
+    assert "and replace an existing --plot PNG" in " ".join(out.split())
