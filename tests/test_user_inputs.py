@@ -520,3 +520,24 @@ def test_compare_plot_refuses_to_overwrite_without_force(tmp_path):
     assert png.read_bytes() == b"old"
     rc, out, err = _run(["compare", "-h"])
     assert "and replace an existing --plot PNG" in " ".join(out.split())
+
+
+def test_the_outsiders_guesses_are_in_the_docs():
+    """Each sentence a new CLI user had to guess is in the doc it names (checked against the source above)."""
+    root = os.path.join(os.path.dirname(__file__), "..")
+
+    def text(p):
+        return " ".join(open(os.path.join(root, p)).read().split())
+
+    readme, oracle, sweep = text("README.md"), text("docs/oracle.md"), text("docs/sweep.md")
+    for phrase in ["are fractions of the pixels hit in B", "`hit agree` is over every pixel", "`--json` adds `mean`",
+                   "dominated by the caustic focus", "replaced only with `--force`", "creates missing parent folders",
+                   "before its kernels are compiled or loaded", "`receiver_hit` are in"]:
+        assert phrase in readme, phrase
+    for phrase in ["`--set` takes that key as it is or as `objects.0.material.ior`", "did not parse as JSON",
+                   "pixels that show only a receiver have `hit` false and status 0",
+                   "whether or not its kind reads the key", "`--set volume.extinction=0.1`"]:
+        assert phrase in oracle, phrase
+    for phrase in ["sum|A - B| / sum|B|", 'mode="constant"', "`base` (not `grid`) overrides apply to the reference",
+                   "created if missing", "`ok` for a task that succeeded", "`caustic_rel_l1.caustic_map_<k>`"]:
+        assert phrase in sweep, phrase
