@@ -78,7 +78,7 @@ def validate_lights(data):
             if not np.linalg.norm(d) > 0:
                 raise SceneError(f"scene: 'lights[{k}].direction' is zero; give the direction the light travels")
             if top is not None and d[1] >= 0:
-                raise SceneError(f"scene: 'lights[{k}].direction' is {lt['direction']}: the light comes from "
+                raise SceneError(f"scene: 'lights[{k}].direction' is {show(lt['direction'])}: the light comes from "
                                  "below the horizon (or along it) and never enters the water from above; "
                                  "give the direction a negative y component")
         else:
@@ -91,7 +91,7 @@ def validate_lights(data):
                                  f"(its crests reach y = {top}); raise the light above the water")
         rad = check_vector(lt["radiance"], 3, f"lights[{k}].radiance")
         if np.any(rad < 0):
-            raise SceneError(f"scene: 'lights[{k}].radiance' is {lt['radiance']}; it must be >= 0")
+            raise SceneError(f"scene: 'lights[{k}].radiance' is {show(lt['radiance'])}; it must be >= 0")
         check_number(float(rad.max()), f"lights[{k}].radiance")
     return data
 

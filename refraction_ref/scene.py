@@ -122,7 +122,7 @@ def _check_mesh_ref(mesh, where, base_dir):
         return
     if not isinstance(mesh, str):
         raise SceneError(f"scene: '{where}' must be a built-in mesh name ({', '.join(BUILTIN_MESHES)}) "
-                         f"or a path to a mesh file, got {mesh!r}")
+                         f"or a path to a mesh file, got {show(mesh)}")
     if mesh in BUILTIN_MESHES:
         return
     p = mesh if os.path.isabs(mesh) else os.path.join(base_dir, mesh)
@@ -196,13 +196,13 @@ def validate(data, base_dir="."):
         check_number(m["ior"], f"{w}.material.ior", 0.0, lo_open=True)
         a = check_vector(m["absorption"], 3, f"{w}.material.absorption")
         if np.any(a < 0):
-            raise SceneError(f"scene: '{w}.material.absorption' is {m['absorption']}; "
+            raise SceneError(f"scene: '{w}.material.absorption' is {show(m['absorption'])}; "
                              "absorption coefficients must be >= 0")
         if o["deform"] is not None and not callable(o["deform"]) and o["deform"] != "<python callable>":
             o["deform"] = merge_defaults(DEFAULT_DEFORM, o["deform"], f"{w}.deform")
             d = o["deform"]
             if d["type"] != "sine":
-                raise SceneError(f"scene: '{w}.deform.type' is {d['type']!r}; only 'sine' is known")
+                raise SceneError(f"scene: '{w}.deform.type' is {show(d['type'])}; only \"sine\" is known")
             check_number(d["amplitude"], f"{w}.deform.amplitude")
             check_number(d["wavelength"], f"{w}.deform.wavelength", 0.0, lo_open=True)
             if not np.linalg.norm(check_vector(d["direction"], 3, f"{w}.deform.direction")) > 0:
@@ -576,8 +576,8 @@ def _unalias(raw):
             target = dict(target) if isinstance(target, dict) else {}
             if nk in target and target[nk] != v:
                 first = given_as.get((nb, nk), f"{nb}.{nk}")
-                raise SceneError(f"scene: '{name}.{k}' (now '{nb}.{nk}') is {v!r} but '{first}' gives "
-                                 f"{target[nk]!r}; they are one knob: give it once, as '{nb}.{nk}'")
+                raise SceneError(f"scene: '{name}.{k}' (now '{nb}.{nk}') is {show(v)} but '{first}' gives "
+                                 f"{show(target[nk])}; they are one knob: give it once, as '{nb}.{nk}'")
             target[nk] = v
             given_as[(nb, nk)] = f"{name}.{k}"
             out[nb] = target

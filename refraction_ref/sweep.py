@@ -185,7 +185,7 @@ def load_spec(src):
                              f"{type(spec[k]).__name__} (docs/sweep.md)")
     for k in ("repeats", "threads"):
         if isinstance(spec[k], bool) or not isinstance(spec[k], int) or not 1 <= spec[k] <= 1000:
-            raise SweepError(f"sweep: '{k}' is {str(spec[k])[:30]}; give a whole number from 1 to 1000")
+            raise SweepError(f"sweep: '{k}' is {show(spec[k], 30)}; give a whole number from 1 to 1000")
     if not spec.get("task"):
         _check_columns(spec)
     if "families" in spec:
