@@ -216,25 +216,27 @@ def report(o):
         f"| trace with 0 / 10 search iterations | {v['iterations_0']:.1f} / {v['iterations_10']:.1f} | |",
         f"| trace with `filter = nearest` | {v['filter_nearest']:.1f} | |",
         "", "## Where the rest goes", "",
-        f"* One bisection step costs {o['ns_per_search_iteration']:.0f} ns (the slope from 0 to 10 iterations) "
-        f"for {o['bytes_per_search_iteration']} bytes of texels: {o['bytes_per_search_iteration'] / max(o['ns_per_search_iteration'], 1e-9):.2f} GB/s, "
-        f"against {max(bw['numba_read'], bw['numpy_sum']):.1f} GB/s the memory streams. The default 5 steps are "
-        f"{probe_ms:.1f} ms of the {o['trace_ms_1thread']:.1f} ms.",
-        "* The steps are a dependent chain: each probe's texel address comes from the previous probe's "
-        "comparison, and each needs a projection (a division), a floor, four loads and the bilinear blend; "
-        "the four texels are almost always in cache (the probes stay within a few pixels of the ray's pixel, "
-        "and neighbouring rays read the same texels). The trace is bound by the latency of that chain and by "
-        "arithmetic, not by memory: its texels come from L1/L2, so a floor set by DRAM bandwidth is not "
-        "what limits it.",
-        "* The rest of the time (the trace at 0 iterations) is per event: the filtered normal (four "
-        "central-difference normals, each two unprojections and a normalisation: divisions and a square "
-        "root), Snell's law (a square root), the early-exit test, the first layer and the outputs.",
-        f"* Target (within 3x of the floor on one thread): missed; what stands in the way is that work, not "
-        "memory traffic. Reaching it would take a trace that is memory-bound: fewer dependent steps per "
-        "search (a bracket from the reduced bounds, §3.7, before bisecting), normals read from the "
-        "normals stage's buffer instead of recomputed per event, and the rays of a tile traced together "
-        "so that their probes' latency overlaps. None of those keeps the outputs bit-identical, which "
-        "this issue requires, so none is done here.",
+        f"* Memory is not what the trace waits for: it reads {c['read_bytes'] / 1e6:.0f} MB of texels "
+        f"({c['texels_per_ray']:.0f} per ray) and the whole LDI is {o['ldi_bytes'] / 2**20:.1f} MiB, which "
+        "fits this machine's 32 MiB L3; the probes of a ray stay within a few pixels of its own, and "
+        "neighbouring rays read the same texels, so nearly every read hits L1/L2.",
+        f"* The filter is: `filter = nearest` runs the trace in {v['filter_nearest']:.0f} ms against "
+        f"{o['trace_ms_1thread']:.0f} ms bilinear. Per event the bilinear normal is four central-difference "
+        "normals (24 texel reads, 8 unprojections with a division each, 5 normalisations with a square root) "
+        "blended, where nearest filtering computes one.",
+        f"* The search iterations are cheap: 0 and 10 iterations take {v['iterations_0']:.0f} and "
+        f"{v['iterations_10']:.0f} ms ({o['ns_per_search_iteration']:.0f} ns per iteration and search, "
+        f"{o['bytes_per_search_iteration']} bytes of texels each; within this VM's run-to-run noise of "
+        "+-30 % on one thread). The rest is per event and per ray: Snell's law, the early-exit test, the "
+        "first layer and the outputs.",
+        "* Target (within 3x of the floor on one thread): missed. What stands in the way is arithmetic per "
+        "event (the filtered normal above), not memory traffic: the trace is compute-bound. Closing the gap "
+        "would take normals read from a precomputed per-layer normal buffer (the `normals` stage already "
+        "makes one) instead of recomputed per event and per corner, which changes the normal's rounding: "
+        "this issue requires bit-identical outputs, so it is not done here.",
+        "* Timings on this 2-vCPU VM swing by tens of percent between runs even when idle (the same trace "
+        "took 45 to 114 ms on one thread in the scaling runs of the same hour); the ratios above are "
+        "order-of-magnitude statements.",
     ])
 
 
