@@ -182,12 +182,12 @@ def _st_final(ctx):
 
     # the eye's front depth per image pixel (the grid texel under it when imagespace.grid differs)
     eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape)}
-    img, img1 = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"], vis,
-                                  p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
+    img, img1, (ri, points) = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"],
+                                                vis, p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
     ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
              "single-surface (the thesis's) final passes")
     return {"image_caustics": img, "image_caustics_single": img1,
-            **_shadow_buffers(rd["cam"], eye["zmin"], rd["eyebuf"][0], shadow)}
+            **_shadow_buffers(rd["cam"].shape, ri, points, shadow)}
 
 
 #: texels: a receiver point this close to a light texel's edge, across which the shadow test decides
@@ -196,7 +196,7 @@ def _st_final(ctx):
 SHADOW_TIE = 5e-3
 
 
-def _shadow_buffers(cam, zfront, rdepth, shadow):
+def _shadow_buffers(shape, ri, P, shadow):
     """``shadow_l`` and ``shadow_margin_l``: light l's shadow test at every receiver pixel seen directly.
 
     The points are the final pass's (``eye + ray_dir depth / (ray_dir . f)``), tested whether or not they
@@ -205,7 +205,8 @@ def _shadow_buffers(cam, zfront, rdepth, shadow):
     shadow; ``shadow_margin_l`` (H, W) float32: ``dl - (zmin + bias)`` where the test compared depths,
     ``-inf`` where it did not (outside the light's window, or no object in the texel), 0 at a texel-edge
     tie (:data:`SHADOW_TIE`), NaN off the receiver pixels: ``check``'s ambiguity mask for ``shadow_l`` is
-    where it lies near 0.
+    where it lies near 0. ``ri`` are the flat indices of those pixels and ``P`` their points, as the final
+    pass computed them (:func:`_final_imagespace`).
 
     References
     ----------
@@ -213,13 +214,7 @@ def _shadow_buffers(cam, zfront, rdepth, shadow):
        Objects", M.S. thesis, UMBC, 2008, §4.1.
     .. [2] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
     """
-    H, W = cam.shape
-    obj = np.isfinite(zfront)
-    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
-    ri = np.flatnonzero(rec)
-    origin, rdir = cam.primary_rays()
-    P = _depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), np.ascontiguousarray(rdir.reshape(-1, 3)),
-                      np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, -cam.basis[2])
+    H, W = shape
     out = {}
     for l, sh in enumerate(shadow):
         code = np.zeros(H * W, np.uint8)
@@ -301,7 +296,8 @@ def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
 
 
 def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
-    """The final pass (§4.1): ``image_caustics`` (multi-layer) and ``image_caustics_single`` (the thesis's)."""
+    """The final pass (§4.1): ``image_caustics`` (multi-layer), ``image_caustics_single`` (the thesis's), and
+    ``(ri, points)``: the receiver pixels seen directly (flat indices) and their points, for the shadow buffers."""
     H, W = cam.shape
     tr = eye["trace"]
     zfront = eye["zmin"]
@@ -328,7 +324,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     if not obj.any():
         _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
                                    direct)
-        return base.astype(np.float32), base.astype(np.float32)
+        return base.astype(np.float32), base.astype(np.float32), (ri, direct[0])
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
     st = tr["status"]
     ex = obj & (st == 1)
@@ -368,4 +364,4 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     f32 = np.empty((H, W, 3), np.float32)
     s32 = np.empty((H, W, 3), np.float32)
     _to_float32_kernel(full, single, f32.reshape(-1, 3), s32.reshape(-1, 3))  # astype(np.float32), on every thread
-    return f32, s32
+    return f32, s32, (ri, direct[0])
