@@ -211,26 +211,43 @@ class _LightView(NamedTuple):
     bias: float
 
 
+@nb.njit(cache=True, inline="always")
+def _light_screen(pv, k, view):
+    """Camera.to_screen of view-space point k in its operations' order: (col, row, depth along the view)."""
+    d = -pv[k, 2]
+    s = 1.0 if view.ortho else d
+    col = (pv[k, 0] / (s * view.sx) * 0.5 + 0.5) * view.width
+    row = (0.5 - pv[k, 1] / (s * view.sy) * 0.5) * view.height
+    return col, row, d
+
+
+@nb.njit(cache=True, inline="always")
+def _margin_at(col, row, d, zmin, bias):
+    """``dl - (zmin + bias)`` at screen position (col, row), ``-inf`` where no depth is compared.
+
+    Outside the light's window (which covers the objects) or over a texel no object covers nothing is
+    compared: lit. For finite values ``d - (z + bias) > 0`` exactly when ``d > z + bias`` (IEEE
+    subtraction is 0 only for equal operands), so the shadow test is this margin's sign.
+    """
+    H, W = zmin.shape
+    if not (math.isfinite(col) and math.isfinite(row) and col >= 0 and col < W and row >= 0 and row < H
+            and d > 0):
+        return -np.inf
+    i = min(max(np.int64(math.floor(row)), 0), H - 1)
+    j = min(max(np.int64(math.floor(col)), 0), W - 1)
+    z = zmin[i, j]
+    if not math.isfinite(z):
+        return -np.inf
+    return d - (z + bias)
+
+
 @nb.njit(cache=True, parallel=True)
 def _shadow_map_kernel(pv, zmin, view, out):
-    # Camera.to_screen and the depth test, per point, in their operations' order
-    sx, sy, ortho, width, height, bias = view.sx, view.sy, view.ortho, view.width, view.height, view.bias
-    H, W = zmin.shape
+    # the depth test per point: shadowed where the margin is positive
     for k0 in nb.prange(pv.shape[0]):
         k = np.int64(k0)
-        d = -pv[k, 2]
-        s = 1.0 if ortho else d
-        col = (pv[k, 0] / (s * sx) * 0.5 + 0.5) * width
-        row = (0.5 - pv[k, 1] / (s * sy) * 0.5) * height
-        out[k] = 1.0
-        if not (math.isfinite(col) and math.isfinite(row) and col >= 0 and col < W and row >= 0 and row < H
-                and d > 0):
-            continue  # outside the light's window: lit (the window covers the objects)
-        i = min(max(np.int64(math.floor(row)), 0), H - 1)
-        j = min(max(np.int64(math.floor(col)), 0), W - 1)
-        z = zmin[i, j]
-        if math.isfinite(z) and d > z + bias:
-            out[k] = 0.0
+        col, row, d = _light_screen(pv, k, view)
+        out[k] = 0.0 if _margin_at(col, row, d, zmin, view.bias) > 0 else 1.0
 
 
 def shadow_map_visibility(lcam, zmin, points, bias):
@@ -306,32 +323,14 @@ def shadow_map_margin(lcam, zmin, points, bias, tie=0.0):
     return out
 
 
-@nb.njit(cache=True, inline="always")
-def _margin_at(col, row, d, zmin, bias):
-    """``dl - (zmin + bias)`` at screen position (col, row), ``-inf`` where no depth is compared."""
-    H, W = zmin.shape
-    if not (math.isfinite(col) and math.isfinite(row) and col >= 0 and col < W and row >= 0 and row < H
-            and d > 0):
-        return -np.inf
-    i = min(max(np.int64(math.floor(row)), 0), H - 1)
-    j = min(max(np.int64(math.floor(col)), 0), W - 1)
-    z = zmin[i, j]
-    if not math.isfinite(z):
-        return -np.inf
-    return d - (z + bias)
-
-
 @nb.njit(cache=True, parallel=True)
 def _shadow_margin_kernel(pv, zmin, view, tie, out):
-    # shadow_map_margin per point: Camera.to_screen as _shadow_map_kernel has it, the margin, and the
+    # shadow_map_margin per point: the light's screen position, the margin, and the
     # four tie probes in their order (each compared with the margin as the probes before left it)
-    sx, sy, ortho, width, height, bias = view.sx, view.sy, view.ortho, view.width, view.height, view.bias
+    bias = view.bias
     for k0 in nb.prange(pv.shape[0]):
         k = np.int64(k0)
-        d = -pv[k, 2]
-        s = 1.0 if ortho else d
-        col = (pv[k, 0] / (s * sx) * 0.5 + 0.5) * width
-        row = (0.5 - pv[k, 1] / (s * sy) * 0.5) * height
+        col, row, d = _light_screen(pv, k, view)
         m = _margin_at(col, row, d, zmin, bias)
         if tie > 0:
             for q in range(4):
