@@ -244,12 +244,20 @@ def _cmd_warmup(a):
     from .graph import method_names
     from .warm import compile_report, kernels_cached, warm
 
+    from .scene import load_scene
+
     for m in a.method or method_names():
         t0, before = time.perf_counter(), kernels_cached(m)
         with compile_report(m):  # a bar of kernels on terminals, a line each way in logs
             warm(m)
         print(f"{m}: kernels {'already cached' if before else 'compiled and cached'} "
               f"({time.perf_counter() - t0:.1f} s)", flush=True)
+        for path in a.scene or ():
+            # a scene's own plan (e.g. caustics: the light-view trace, splat, gather) compiles kernels the
+            # default scene's plan does not use; warming it here keeps later processes from compiling them
+            t0 = time.perf_counter()
+            warm(m, load_scene(path))
+            print(f"{m}: {os.path.basename(path)}'s kernels ready ({time.perf_counter() - t0:.1f} s)", flush=True)
     return 0
 
 
@@ -379,6 +387,8 @@ def main(argv=None):
                                       "later runs load them from Numba's cache)")
     u.add_argument("--method", action="append", choices=list(method_names()),
                    help="only this method (repeatable; default: every method)")
+    u.add_argument("--scene", action="append", metavar="SCENE",
+                   help="also the kernels this scene's plan needs, for each method named (repeatable)")
     u.set_defaults(fn=_cmd_warmup)
     a = p.parse_args(argv)
     from .compare import CompareError
