@@ -220,23 +220,17 @@ def _cmd_sweep(a):
 
 
 def _cmd_tables(a):
-    from .tables.common import HELD, NOT_COMPARABLE, NOT_HELD
-    from .tables.report import run_tables, unreliable
+    from .tables.report import run_tables, summary_line, unreliable
 
     log = (lambda m: print(m, file=sys.stderr, flush=True)) if not a.quiet else (lambda m: None)
     only = [k for k in a.only.split(",") if k] if a.only else None
     reports = run_tables(a.out, quick=a.quick, only=only, log=log)
-    claims = [c for r in reports for c in r.claims]
-    held = sum(c.verdict == HELD for c in claims)
-    not_held = sum(c.verdict == NOT_HELD for c in claims)
-    nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
     bad = sum(unreliable(r, c) for r in reports for c in r.claims)
     if bad:  # shown under --quiet too: the verdicts below it are not to be trusted
         print(f"refraction-ref: warning: the machine was busy (other processes used up to "
               f"{100 * max(r.other_load for r in reports):.0f}% of the CPUs); {bad} timing verdicts are marked "
               "unreliable in claims.csv and tables.md", file=sys.stderr, flush=True)
-    print(f"{held} claims held, {not_held} not held, {nc} not comparable, {len(claims) - held - not_held - nc} "
-          f"not measured; wrote {os.path.join(a.out, 'tables.md')}")
+    print(f"{summary_line(reports)}; wrote {os.path.join(a.out, 'tables.md')}")
     return 0
 
 

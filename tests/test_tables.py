@@ -5,9 +5,10 @@ import csv
 import numpy as np
 import pytest
 
-from refraction_ref.tables.common import (BUSY, HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, Claim, LoadProbe,
-                                          Report, Table, other_load)
-from refraction_ref.tables.report import TablesError, markdown, run_tables, write_report
+from refraction_ref.tables.common import (BUSY, BY_CONSTRUCTION, HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, SPLIT,
+                                          VERDICTS, Claim, LoadProbe, Report, Table, other_load)
+from refraction_ref.tables.report import (TablesError, markdown, run_tables, sentence_verdict, sentences, summary,
+                                          summary_line, write_report)
 
 
 def _fake():
@@ -22,7 +23,8 @@ def test_report_markdown_and_csv(tmp_path):
     reps = _fake()
     write_report(reps, tmp_path)
     md = (tmp_path / "tables.md").read_text()
-    assert "1 held, 1 not held, 0 not comparable, 0 not measured." in md
+    assert "2 quoted sentences in 2 rows" in md and "1 held, 1 not held, 0 split" in md
+    assert "Rows: 1 held, 1 not held, 0 not comparable, 0 not measured, 0 by construction" in md
     assert "“It is \\| small.”" in md            # a pipe in a quote does not break the table
     assert "| b | 12,345 | 2 |" in md and "| a | 1.5 | — |" in md
     assert "## Q 2001\n\nNot measured in this build." in md
@@ -31,7 +33,63 @@ def test_report_markdown_and_csv(tmp_path):
     assert rows == [["row", "paper ms", "ours ms"], ["a", "1.5", ""], ["b", "12345", "2.0"]]
     claims = list(csv.DictReader(open(tmp_path / "claims.csv")))
     assert [c["verdict"] for c in claims] == [HELD, NOT_HELD]
+    assert [c["sentence"] for c in claims] == ["S1", "S2"]
     assert markdown(reps, quick=True).count("Quick run") == 1
+
+
+def _rows(spec):
+    """Claims of one paper from ``{quote: [verdict, ...]}``; by-construction rows carry their reason."""
+    return [Claim("P 2000", f"§{k}", q, v, "1.0x", "because", rule="held if > 1",
+                  construction="the code computes it" if v == BY_CONSTRUCTION else "")
+            for k, (q, vs) in enumerate(spec.items()) for v in vs]
+
+
+def test_each_sentence_counts_once_with_its_sub_verdicts(tmp_path):
+    spec = {"A is by design.": [BY_CONSTRUCTION],
+            "B holds.": [HELD, BY_CONSTRUCTION],
+            "C holds here, not there.": [HELD, NOT_HELD],
+            "D is fast, and faster.": [NOT_COMPARABLE, HELD],
+            "E fails.": [NOT_HELD, BY_CONSTRUCTION],
+            "F is not measured.": [BY_CONSTRUCTION, NOT_MEASURED]}
+    rep = [Report("P 2000", [], _rows(spec), 1.0)]
+    ss = sentences(rep)
+    assert [s["id"] for s in ss] == ["S1", "S2", "S3", "S4", "S5", "S6"]
+    assert [s["verdict"] for s in ss] == [BY_CONSTRUCTION, HELD, SPLIT, HELD, NOT_HELD, NOT_MEASURED]
+    assert [len(s["rows"]) for s in ss] == [1, 2, 2, 2, 2, 2]
+    sm = summary(rep)
+    assert (sm["sentences"], sm["rows"], sm["evidence_rows"]) == (6, 11, 5)
+    assert sm["sentence_counts"] == {HELD: 2, NOT_HELD: 1, SPLIT: 1, NOT_COMPARABLE: 0, NOT_MEASURED: 1,
+                                     BY_CONSTRUCTION: 1}
+    assert sm["row_counts"] == {HELD: 3, NOT_HELD: 2, NOT_COMPARABLE: 1, NOT_MEASURED: 1, BY_CONSTRUCTION: 4}
+    assert summary_line(rep).startswith("6 quoted sentences: 2 held, 1 not held, 1 split, 0 not comparable, "
+                                        "1 not measured, 1 by construction only; 11 rows (3 held")
+    write_report(rep, tmp_path)
+    md = (tmp_path / "tables.md").read_text()
+    assert "6 quoted sentences in 11 rows" in md and "### Sentences" in md
+    assert "| S3 | P 2000 | §2 | held / not held | **split** |" in md
+    assert md.count("the code computes it") == 4          # every by-construction row shows its reason
+    rows = list(csv.DictReader(open(tmp_path / "claims.csv")))
+    assert [r["sentence"] for r in rows] == ["S1", "S2", "S2", "S3", "S3", "S4", "S4", "S5", "S5", "S6", "S6"]
+    assert {r["sentence_verdict"] for r in rows if r["sentence"] == "S2"} == {HELD}
+
+
+def test_a_by_construction_row_is_never_counted_as_evidence():
+    # whatever a by-construction row shows, the sentence's verdict and the evidence count do not move
+    for other in (HELD, NOT_HELD):
+        base = _rows({"It holds.": [other]})
+        more = _rows({"It holds.": [other, BY_CONSTRUCTION, BY_CONSTRUCTION]})
+        a, b = summary([Report("P", [], base)]), summary([Report("P", [], more)])
+        assert a["sentence_counts"] == b["sentence_counts"] and a["evidence_rows"] == b["evidence_rows"] == 1
+        assert b["row_counts"][BY_CONSTRUCTION] == 2
+    assert sentence_verdict([BY_CONSTRUCTION]) == BY_CONSTRUCTION
+    assert sentence_verdict([BY_CONSTRUCTION, NOT_COMPARABLE]) == NOT_COMPARABLE
+    assert sentence_verdict([BY_CONSTRUCTION, NOT_HELD]) == NOT_HELD
+    # a by-construction verdict needs its reason; a verdict outside the list is refused
+    with pytest.raises(ValueError, match="reason"):
+        Claim("P", "§1", "q", BY_CONSTRUCTION, "1", "w")
+    with pytest.raises(ValueError, match="choose from"):
+        Claim("P", "§1", "q", "probably", "1", "w")
+    assert SPLIT not in VERDICTS          # a sentence's verdict, never a row's
 
 
 def test_busy_machine_marks_timing_verdicts_unreliable(tmp_path):
@@ -110,7 +168,7 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     bunny = next(r for r in rows if r["model"] == "Bunny I")
     assert int(bunny["our triangles"]) == 69451
     claims = list(csv.DictReader(open(tmp_path / "claims.csv")))
-    assert len(claims) == 13 and all(c["verdict"] in (HELD, NOT_HELD, NOT_COMPARABLE, NOT_MEASURED) for c in claims)
+    assert len(claims) == 13 and all(c["verdict"] in VERDICTS for c in claims)
     assert all(c["rule"] for c in claims)                    # every verdict has its rule
     # a GPU's frame rate is not judged on a CPU; the quick run has one grid, so the trend is not measured
     assert [c["verdict"] for c in claims if c["section"] == "§4.1"] == [NOT_COMPARABLE, NOT_MEASURED]

@@ -321,7 +321,7 @@ def bounds_study(res=128, scenes=("bunny", "sphere"), rounds=5, log=None):
             for _ in range(2):  # warm-up
                 layered(prep, "tight", 5)
                 layered(prep, "loose", n_loose)
-            rs, ft, fl = [], [], []
+            rs, ft, fl, sh = [], [], [], []
             for _ in range(max(1, int(rounds))):
                 a, b = {}, {}
                 layered(prep, "tight", 5, a)
@@ -329,8 +329,10 @@ def bounds_study(res=128, scenes=("bunny", "sphere"), rounds=5, log=None):
                 rs.append(b["frame"] / a["frame"])
                 ft.append(a["frame"])
                 fl.append(b["frame"])
+                sh.append(a["reduce"] / a["frame"])
             timing[name] = {"n_loose": n_loose, "ratio": (statistics.median(rs), min(rs), max(rs)),
-                            "tight_ms": statistics.median(ft), "loose_ms": statistics.median(fl), "rounds": len(rs)}
+                            "tight_ms": statistics.median(ft), "loose_ms": statistics.median(fl), "rounds": len(rs),
+                            "reduce_share": statistics.median(sh)}
         else:
             timing[name] = {"n_loose": None}
         if log:

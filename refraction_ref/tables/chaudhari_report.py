@@ -23,8 +23,8 @@ import numpy as np
 
 from . import chaudhari as T
 from . import chaudhari_quality as Q
-from .common import (HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, ratio_spread,
-                     straddles, table_threads)
+from .common import (BY_CONSTRUCTION, HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report,
+                     Table, ratio_spread, straddles, table_threads)
 
 __all__ = ["run", "decimate", "lowpoly_bunny", "models", "shell_models"]
 
@@ -609,17 +609,19 @@ def _claims(rows41, t42, res42, cmp, cols):
     ii_a, i_a, ii_b, i_b = cmp["quad"]
     r = [("I-A/I-B", ratio(i_a, i_b, "peel"), ratio(i_a, i_b, "reduce")),
          ("II-A/II-B", ratio(ii_a, ii_b, "peel"), ratio(ii_a, ii_b, "reduce"))]
-    held = all(0.67 <= x[0] <= 1.5 and 0.67 <= y[0] <= 1.5 for _, x, y in r)
+    band = all(0.67 <= x[0] <= 1.5 and 0.67 <= y[0] <= 1.5 for _, x, y in r)
     out.append(Claim(
-        PAPER, "§4.2, Table 4.2", Q_PEEL, HELD if held else NOT_HELD,
-        "; ".join(f"{k}: peel {_rs(x)}, reduce {_rs(y)}" for k, x, y in r),
-        "Both passes read only the bitmask and the depth images, whose size is the grid's, not the mesh's."
-        if held else "A ratio left the 0.67-1.5 band: the bitmask's fill differs between the decimated and the "
-        "full mesh in this view.",
-        rule=("Held if peel and reduce of the full-bunny scene are within 0.67-1.5x of the low-poly one's "
-              f"(median of per-round ratios), for I-A/I-B and II-A/II-B, one camera ({cmp['one_two_view']}, "
-              "distance 4.8)."), timing=True,
-        straddles=any(_straddles(x, 0.67, 1.5) or _straddles(y, 0.67, 1.5) for _, x, y in r)))
+        PAPER, "§4.2, Table 4.2", Q_PEEL, BY_CONSTRUCTION,
+        "; ".join(f"{k}: peel {_rs(x)}, reduce {_rs(y)}" for k, x, y in r)
+        + ("; every ratio within 0.67-1.5" if band else "; a ratio outside 0.67-1.5 (timing noise or the "
+           "bitmask's fill)"),
+        "Shown for the sizes only: a departure from 1 here is timing noise or a different bitmask fill, never "
+        "the triangles.",
+        rule=("Not judged: the ratios of peel and reduce between the full-bunny and the low-poly scenes (median of "
+              f"per-round ratios), I-A/I-B and II-A/II-B, one camera ({cmp['one_two_view']}, distance 4.8), "
+              "shown beside the band 0.67-1.5 the row was judged on before."), timing=True,
+        construction=("both passes read only the bitmask and the depth images, whose size is the grid's: no "
+                      "code path of either reads a triangle, so they cannot depend on the triangle count")))
 
     rule_12 = ("One camera for both (distance 4.8, I-A's view of highest depth complexity, II-A = I-A less one "
                "bunny): held if the trace of one full bunny takes at most 0.9x that of two (median of per-round "
@@ -763,19 +765,45 @@ def _quality_claims(ns, bs, res, rows41, cols):
              f"scene ({setup})."))
 
     tim = bs["timing"]
-    gains = {s: v["ratio"] for s, v in tim.items() if v["n_loose"]}
-    ok = all(r[0] >= NO_GAIN for r in gains.values())
-    out.append(Claim(
-        PAPER, "§4.2", Q_LOOSE, HELD if ok else NOT_HELD,
-        "; ".join(f"{s}: loose needs {v['n_loose']} iterations for similar output, frame loose/tight {_rs(v['ratio'])}"
-                  if v["n_loose"] else f"{s}: loose reaches similar output in no count up to 16" for s, v in tim.items()),
-        "Dropping the reduction buys nothing once the loose search must match the tight one's output." if ok else
-        "The loose search reaches similar output cheaply enough to outrun the tight one with its reduction here.",
-        rule=(f"Similar output: the fewest iterations n (5-16) whose exit median and p90 are within 5% of tight(5)'s "
-              f"({setup}); held if the frame loose(n) / tight(5) (min/max to trace, reduction only in tight; median "
-              f"of per-round ratios, {TABLE_THREADS} thread) is at least {NO_GAIN} on every scene, i.e. no gain "
-              "above 5%; a scene where no n reaches similar output shows no gain."), timing=True,
-        straddles=any(_straddles(r, NO_GAIN) for r in gains.values())))
+    # The thesis's alternative can only gain where a loose search with FEWER iterations than the tight one's 5
+    # reaches similar output: with 5 or more it does at least the tight search's work and skips only the
+    # reduction, so its frame is at least (1 - the reduction's share) of the tight one's by construction.
+    timed = {s: v for s, v in tim.items() if v["n_loose"]}
+    fewer = {s: v for s, v in timed.items() if v["n_loose"] < 5}
+    never = [s for s, v in tim.items() if not v["n_loose"]]
+    share = {s: v.get("reduce_share", float("nan")) for s, v in timed.items()}
+    parts = [f"{s}: loose needs {v['n_loose']} iterations for similar output, frame loose/tight {_rs(v['ratio'])}, "
+             f"the reduction {100 * share[s]:.1f}% of the tight frame" for s, v in timed.items()]
+    parts += [f"{s}: no loose count from {min(Q.LOOSE_ITERATIONS)} to {max(Q.LOOSE_ITERATIONS)} reaches similar "
+              "output (the alternative cannot be run there)" for s in never]
+    rule = (f"The alternative exercised: loose (no reduction, the object's Zmax) with "
+            f"{', '.join(map(str, Q.LOOSE_ITERATIONS))} iterations; similar output: the fewest n whose exit median "
+            f"and p90 are within 5% of tight(5)'s ({setup}); held if the frame loose(n) / tight(5) (min/max to "
+            f"trace, reduction only in tight; median of per-round ratios, {TABLE_THREADS} thread) is at least "
+            f"{NO_GAIN} on every scene where n < 5 reaches similar output. Where the fewest similar n is 5 or "
+            "more the ratio is at least 1 minus the reduction's share by construction, and a scene where no n "
+            "reaches similar output cannot run the alternative: neither counts as evidence.")
+    if fewer:
+        ok = all(v["ratio"][0] >= NO_GAIN for v in fewer.values())
+        out.append(Claim(
+            PAPER, "§4.2", Q_LOOSE, HELD if ok else NOT_HELD, "; ".join(parts),
+            "A loose search with fewer iterations reaches similar output but its frame is not cheaper by more than "
+            "5%." if ok else
+            "A loose search with fewer iterations than 5 reaches the tight search's output and its frame is "
+            "cheaper: avoiding the reduction gains here.",
+            rule=rule, timing=True, straddles=any(_straddles(v["ratio"], NO_GAIN) for v in fewer.values())))
+    else:
+        out.append(Claim(
+            PAPER, "§4.2", Q_LOOSE, BY_CONSTRUCTION, "; ".join(parts),
+            "No loose search with fewer than 5 iterations reaches the tight search's output, so the comparison "
+            "the thesis describes cannot show a gain here.",
+            rule=rule, timing=True,
+            construction=("the loose runs that reach similar output do at least the tight run's 5 iterations and "
+                          "skip only the reduction ("
+                          + ", ".join(f"{s} {100 * x:.1f}%" for s, x in share.items())
+                          + " of the tight frame), so loose / tight >= 1 minus that share, above "
+                          f"{NO_GAIN} whatever the machine" if timed else
+                          "no loose run reaches similar output, so no gain can be shown")))
 
     srch = bs["searches"]
     b = srch.get("bunny")

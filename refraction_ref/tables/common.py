@@ -23,11 +23,21 @@ import statistics
 import time
 from dataclasses import dataclass, field
 
-__all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BUSY", "LoadProbe", "straddles",
+__all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BY_CONSTRUCTION", "SPLIT",
+           "VERDICTS", "EVIDENCE", "BUSY", "LoadProbe", "straddles",
            "cpu_jiffies", "other_load", "TABLE_THREADS", "table_threads", "Spread", "spread", "ratio_spread",
            "time_rounds"]
 
 HELD, NOT_HELD, NOT_MEASURED, NOT_COMPARABLE = "held", "not held", "not measured", "not comparable"
+#: a row whose outcome follows from how the code is built (a formula the tables compute, code the two sides
+#: share, a count that cannot differ): shown with its numbers and its reason, never counted as evidence
+BY_CONSTRUCTION = "by construction"
+#: a sentence whose evidence rows disagree (held on one set-up or part, not held on another); never a row's verdict
+SPLIT = "split"
+#: the verdicts a row may carry
+VERDICTS = (HELD, NOT_HELD, NOT_COMPARABLE, NOT_MEASURED, BY_CONSTRUCTION)
+#: the verdicts that count as evidence for or against a sentence
+EVIDENCE = (HELD, NOT_HELD)
 
 #: share of the machine's CPUs other processes may take while a paper is measured before its timing
 #: verdicts are marked unreliable (on a 2-core machine one busy process elsewhere is 0.5)
@@ -75,7 +85,9 @@ class Claim:
     quote : str
         The claim, verbatim from the seed.
     verdict : str
-        :data:`HELD`, :data:`NOT_HELD`, :data:`NOT_COMPARABLE` or :data:`NOT_MEASURED`.
+        One of :data:`VERDICTS`: :data:`HELD`, :data:`NOT_HELD`, :data:`NOT_COMPARABLE`,
+        :data:`NOT_MEASURED` or :data:`BY_CONSTRUCTION` (the outcome follows from how the code is
+        built; shown, never counted as evidence).
     measured : str
         The measured number or ratio that decides it (``"1.9x (teapot, 101 planes)"``).
     why : str
@@ -89,6 +101,12 @@ class Claim:
         threshold decides the verdict: the median decides it, and the report
         says that a re-run may give the other verdict (the threshold is not
         moved to avoid it).
+    construction : str
+        Why the row's outcome follows from how the code is built (required when
+        the verdict is :data:`BY_CONSTRUCTION`).
+    differs : str
+        How the set-up differs from the paper's (empty: the paper's set-up, as
+        far as we have it).
     """
 
     paper: str
@@ -100,6 +118,15 @@ class Claim:
     rule: str = ""
     timing: bool = False
     straddles: bool = False
+    construction: str = ""
+    differs: str = ""
+
+    def __post_init__(self):
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"Claim: verdict {self.verdict!r}; choose from {', '.join(VERDICTS)}")
+        if self.verdict == BY_CONSTRUCTION and not self.construction:
+            raise ValueError(f"Claim ({self.paper} {self.section}): a by-construction verdict needs its reason "
+                             "(construction)")
 
 
 @dataclass

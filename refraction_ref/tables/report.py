@@ -23,9 +23,11 @@ import importlib
 import os
 import time
 
-from .common import BUSY, HELD, NOT_COMPARABLE, NOT_HELD, LoadProbe, Report
+from .common import (BUSY, BY_CONSTRUCTION, EVIDENCE, HELD, NOT_COMPARABLE, NOT_HELD, NOT_MEASURED, SPLIT,
+                     LoadProbe, Report)
 
-__all__ = ["TablesError", "PAPERS", "run_tables", "write_report", "markdown", "unreliable"]
+__all__ = ["TablesError", "PAPERS", "run_tables", "write_report", "markdown", "unreliable", "sentences",
+           "sentence_verdict", "summary", "summary_line"]
 
 class TablesError(ValueError):
     """A request the tables command cannot serve (an unknown paper)."""
@@ -123,8 +125,110 @@ def unreliable(report, claim):
     return bool(claim.timing) and report.other_load > BUSY
 
 
+def sentence_verdict(verdicts):
+    """One quoted sentence's verdict from its rows' verdicts.
+
+    Only :data:`.common.EVIDENCE` rows (held, not held) decide: all held is
+    held, all not held is not held, both is :data:`.common.SPLIT`. A sentence
+    with no evidence row takes, in this order, not comparable, not measured,
+    by construction: a by-construction row is shown but never counts for or
+    against the sentence.
+
+    Parameters
+    ----------
+    verdicts : iterable of str
+        The verdicts of the sentence's rows.
+
+    Returns
+    -------
+    str
+    """
+    vs = list(verdicts)
+    ev = {v for v in vs if v in EVIDENCE}
+    if ev:
+        return ev.pop() if len(ev) == 1 else SPLIT
+    for v in (NOT_COMPARABLE, NOT_MEASURED, BY_CONSTRUCTION):
+        if v in vs:
+            return v
+    raise ValueError("sentence_verdict: no rows")
+
+
+def sentences(reports):
+    """Each quoted sentence once, in the order of its first row, with its rows and its verdict.
+
+    Parameters
+    ----------
+    reports : list of Report
+
+    Returns
+    -------
+    list of dict
+        ``id`` (``"S1"``, ...), ``paper``, ``quote``, ``sections`` (in row
+        order, without repeats), ``rows`` (the (report, claim) pairs),
+        ``verdicts`` (the rows' verdicts) and ``verdict`` (:func:`sentence_verdict`).
+    """
+    out, by = [], {}
+    for r in reports:
+        for c in r.claims:
+            key = (c.paper, " ".join(c.quote.split()))
+            if key not in by:
+                by[key] = {"id": f"S{len(out) + 1}", "paper": c.paper, "quote": c.quote, "sections": [],
+                           "rows": []}
+                out.append(by[key])
+            s = by[key]
+            if c.section not in s["sections"]:
+                s["sections"].append(c.section)
+            s["rows"].append((r, c))
+    for s in out:
+        s["verdicts"] = [c.verdict for _, c in s["rows"]]
+        s["verdict"] = sentence_verdict(s["verdicts"])
+    return out
+
+
+def _counts(verdicts, order):
+    return {v: sum(x == v for x in verdicts) for v in order}
+
+
+def summary(reports):
+    """Counts of the report: rows by verdict, and each quoted sentence once by its verdict.
+
+    Parameters
+    ----------
+    reports : list of Report
+
+    Returns
+    -------
+    dict
+        ``rows`` and ``sentences`` (the totals), ``row_counts`` (verdict ->
+        rows, :data:`.common.VERDICTS`), ``sentence_counts`` (verdict ->
+        sentences, with :data:`.common.SPLIT`), ``evidence_rows`` (rows that
+        count for or against a sentence), ``unreliable`` and ``straddles`` (rows).
+    """
+    from .common import VERDICTS
+
+    ss = sentences(reports)
+    rows = [(r, c) for r in reports for c in r.claims]
+    return {"rows": len(rows), "sentences": len(ss),
+            "row_counts": _counts([c.verdict for _, c in rows], VERDICTS),
+            "sentence_counts": _counts([s["verdict"] for s in ss], (HELD, NOT_HELD, SPLIT) + VERDICTS[2:]),
+            "evidence_rows": sum(c.verdict in EVIDENCE for _, c in rows),
+            "unreliable": sum(unreliable(r, c) for r, c in rows), "straddles": sum(c.straddles for _, c in rows)}
+
+
+def summary_line(reports):
+    """One line: the sentences by verdict, then the rows (the command's last line)."""
+    s = summary(reports)
+    sc, rc = s["sentence_counts"], s["row_counts"]
+    return (f"{s['sentences']} quoted sentences: {sc[HELD]} held, {sc[NOT_HELD]} not held, {sc[SPLIT]} split, "
+            f"{sc[NOT_COMPARABLE]} not comparable, {sc[NOT_MEASURED]} not measured, {sc[BY_CONSTRUCTION]} by "
+            f"construction only; {s['rows']} rows ({rc[HELD]} held, {rc[NOT_HELD]} not held, {rc[NOT_COMPARABLE]} "
+            f"not comparable, {rc[NOT_MEASURED]} not measured, {rc[BY_CONSTRUCTION]} by construction)")
+
+
 def _verdict(report, claim):
     v = f"**{claim.verdict}**"
+    if claim.construction and claim.verdict != BY_CONSTRUCTION:
+        v += f" (partly by construction: {claim.construction})"
     if unreliable(report, claim):
         v += f" (timing unreliable: other load {100 * report.other_load:.0f}%)"
     if claim.straddles:
@@ -162,22 +266,36 @@ def markdown(reports, quick=False):
                   + ", ".join(r.paper for r in busy) + " are marked unreliable. Re-run on an idle machine.", ""]
     pairs = [(r, c) for r in reports for c in r.claims]
     if pairs:
-        claims = [c for _, c in pairs]
-        n_held = sum(c.verdict == HELD for c in claims)
-        n_not = sum(c.verdict == NOT_HELD for c in claims)
-        n_nc = sum(c.verdict == NOT_COMPARABLE for c in claims)
-        n_bad = sum(unreliable(r, c) for r, c in pairs)
-        n_close = sum(c.straddles for c in claims)
+        sm = summary(reports)
+        ss = sentences(reports)
+        sid = {id(c): s["id"] for s in ss for _, c in s["rows"]}
+        sc, rc = sm["sentence_counts"], sm["row_counts"]
         lines += ["## Claims", "",
-                  f"{n_held} held, {n_not} not held, {n_nc} not comparable, "
-                  f"{len(claims) - n_held - n_not - n_nc} not measured"
-                  + (f"; {n_bad} timing verdicts unreliable (busy machine)" if n_bad else "")
-                  + (f"; {n_close} timing verdicts decided by a median whose single rounds fall on both sides "
-                     "of the threshold (a re-run may flip them)" if n_close else "") + ".", "",
-                  "Each claim's rule (the quantity, the threshold, the set-up) was fixed before measuring.", "",
-                  _md_table(["paper", "section", "claim", "rule", "verdict", "measured", "why"],
-                            [[c.paper, c.section, f"“{c.quote}”", c.rule or "—", _verdict(r, c), c.measured, c.why]
-                             for r, c in pairs]), ""]
+                  f"{sm['sentences']} quoted sentences in {sm['rows']} rows. Each sentence is counted once, from "
+                  f"its rows' verdicts: {sc[HELD]} held, {sc[NOT_HELD]} not held, {sc[SPLIT]} split (held on one "
+                  f"set-up or part, not held on another), {sc[NOT_COMPARABLE]} not comparable, "
+                  f"{sc[NOT_MEASURED]} not measured, {sc[BY_CONSTRUCTION]} by construction only. "
+                  f"Rows: {rc[HELD]} held, {rc[NOT_HELD]} not held, {rc[NOT_COMPARABLE]} not comparable, "
+                  f"{rc[NOT_MEASURED]} not measured, {rc[BY_CONSTRUCTION]} by construction "
+                  "(the outcome follows from how the code is built: shown with its reason, never counted as "
+                  "evidence)"
+                  + (f"; {sm['unreliable']} timing verdicts unreliable (busy machine)" if sm["unreliable"] else "")
+                  + (f"; {sm['straddles']} timing verdicts decided by a median whose single rounds fall on both "
+                     "sides of the threshold (a re-run may flip them)" if sm["straddles"] else "") + ".", "",
+                  "Each claim's rule (the quantity, the threshold, the set-up) was fixed before measuring; the "
+                  "set-up column says where ours differs from the paper's.", "",
+                  _md_table(["#", "paper", "section", "claim", "rule", "set-up", "verdict", "measured", "why"],
+                            [[sid[id(c)], c.paper, c.section, f"“{c.quote}”", c.rule or "—",
+                              f"differs: {c.differs}" if c.differs else "the paper's",
+                              _verdict(r, c) + (f" — {c.construction}" if c.verdict == BY_CONSTRUCTION else ""),
+                              c.measured, c.why]
+                             for r, c in pairs]), "",
+                  "### Sentences", "",
+                  "Each quoted sentence once, with its rows' verdicts (by-construction, not-comparable and "
+                  "not-measured rows never decide a sentence that has a held or not-held row).", "",
+                  _md_table(["#", "paper", "section", "rows' verdicts", "sentence"],
+                            [[s["id"], s["paper"], ", ".join(s["sections"]), " / ".join(s["verdicts"]),
+                              f"**{s['verdict']}**"] for s in ss]), ""]
     for r in reports:
         lines += [f"## {r.paper}", ""]
         if not r.tables and not r.claims:
@@ -218,11 +336,14 @@ def write_report(reports, out, quick=False):
     with atomic_open(os.path.join(out, "claims.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["paper", "section", "quote", "rule", "verdict", "measured", "why", "timing", "other_load",
-                    "reliable", "straddles"])
+                    "reliable", "straddles", "sentence", "sentence_verdict", "construction", "differs"])
+        ss = sentences(reports)
+        sent = {id(c): s for s in ss for _, c in s["rows"]}
         for r in reports:
             for c in r.claims:
                 w.writerow([c.paper, c.section, c.quote, c.rule, c.verdict, c.measured, c.why,
                             "yes" if c.timing else "no", f"{r.other_load:.2f}", "no" if unreliable(r, c) else "yes",
-                            "yes" if c.straddles else "no"])
+                            "yes" if c.straddles else "no", sent[id(c)]["id"], sent[id(c)]["verdict"],
+                            c.construction, c.differs])
     with atomic_open(os.path.join(out, "tables.md"), "w") as f:
         f.write(markdown(reports, quick))

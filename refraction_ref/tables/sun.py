@@ -36,8 +36,8 @@ import time
 
 import numpy as np
 
-from .common import (HELD, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, spread, straddles,
-                     table_threads, time_rounds)
+from .common import (BY_CONSTRUCTION, HELD, NOT_HELD, NOT_MEASURED, TABLE_THREADS, Claim, Report, Table, spread,
+                     straddles, table_threads, time_rounds)
 
 __all__ = ["run", "PAPER_T1", "PAPER_T2", "luneburg"]
 
@@ -173,7 +173,7 @@ def _run(quick, out, log):
     size = f"{N}^3 volume, {M}^2 initial photons, {W}x{H} image"
     table1, t1 = _table1(N, M, cam, small, size, quick, log)
     table2, t2 = _table2(N, M, cam, small, size, log)
-    claims = [_claim_proxy(t2), _claim_scaling(t1, M), _claim_linear(t1, M, quick, small), _claim_adaptive(N, M)]
+    claims = [_claim_proxy(t2), *_claim_scaling(t1, M), _claim_linear(t1, M, quick, small), _claim_adaptive(N, M)]
     log("Sun et al. 2008: caustic quality against the exact reference (blur, tolerance, resolution) ...")
     table3, qclaims = quality_study(quick, log)
     claims += qclaims
@@ -328,40 +328,49 @@ def _claim_proxy(t2):
     ph_ratio = [r["a"]["photons_propagated"] / r["b"]["photons_propagated"] for r in mesh_rows]
     st_ratio = [r["a"]["photon_steps"] / r["b"]["photon_steps"] for r in mesh_rows]
     ok = all(x < 1 for x in st_ratio) and all(x < 1 for x in ph_ratio)
+    tm = [r["ta"]["march"] / r["tb"]["march"] for r in mesh_rows]
     return Claim(
         PAPER, "§4.3",
         "We can reduce the amount of time we will spend tracing photons through this empty space by generating "
         "the photons as close as possible to the interesting parts of the volume.",
-        HELD if ok else NOT_HELD,
-        f"proxy/box photons {min(ph_ratio):.2f}-{max(ph_ratio):.2f}, steps {min(st_ratio):.2f}-{max(st_ratio):.2f} "
-        "(Table 2 mesh rows)",
-        "Texels whose ray misses the inflated mesh make no photon, and the others skip the empty space before it."
-        if ok else "Some mesh row took no fewer steps with the proxy than with box photons.",
-        rule="Held if every mesh row of Table 2 propagates fewer photons and takes fewer steps with the proxy than "
-             "with photons on the volume's box (counts, not times).")
+        BY_CONSTRUCTION,
+        f"proxy/box photons {min(ph_ratio):.2f}-{max(ph_ratio):.2f}, steps {min(st_ratio):.2f}-{max(st_ratio):.2f}, "
+        f"march time {min(tm):.2f}-{max(tm):.2f} (Table 2 mesh rows)",
+        "Shown for the size of the saving (the paper gives none)."
+        + ("" if ok else " A row with no fewer photons or steps would be a bug in the proxy."),
+        rule="Not judged: the proxy's photons, steps and march time over the box's on every mesh row of Table 2.",
+        construction=("the inflated mesh lies inside the volume's box, so the texels it covers from the light are a "
+                      "subset of the box's, and each of its photons starts on the path a box photon would take, "
+                      "past the empty space before the proxy: fewer photons and fewer steps follow from the "
+                      "geometry whatever the march does"))
 
 
 def _claim_scaling(t1, M):
-    """§6, Table 1: steps grow with the initial photons and the occupied voxels; a :class:`Claim`."""
+    """§6, Table 1: steps against the initial photons (by construction) and the occupied voxels; two :class:`Claim`."""
     by = {(r["tris"], r["fit"], r["ph"]): r for r in t1}
     s_full, s_quarter = by[(20480, 0.8, M)]["a"]["photon_steps"], by[(20480, 0.8, M // 4)]["a"]["photon_steps"]
     s_small = by[(20480, 0.5, M)]["a"]["photon_steps"]
     occ_full, occ_small = by[(20480, 0.8, M)]["a"]["occupied_voxels"], by[(20480, 0.5, M)]["a"]["occupied_voxels"]
     r_ph, r_occ = s_full / s_quarter, s_full / s_small
     paper_ph, paper_occ = 3.81 / 0.24, 3.81 / 1.12
-    ok = 8 <= r_ph <= 24 and r_occ > 1.5
-    return Claim(
-        PAPER, "§6, Table 1",
-        "Table 1 demonstrates how our algorithm's performance depends on several parameters, including the number "
-        "of triangles in the input mesh, the number of occupied voxels, and the number of initial photons.",
-        HELD if ok else NOT_HELD,
-        f"steps x{r_ph:.1f} for 16x the initial photons (paper x{paper_ph:.1f}); x{r_occ:.2f} for "
-        f"{occ_full / max(occ_small, 1):.1f}x the occupied voxels (paper x{paper_occ:.2f} for 4.2x)",
-        "Steps grow with the photons (each covered texel is one photon) and with the occupied voxels (the proxy "
-        "covers more texels and photons cross more voxels)." if ok else
-        "The step counts do not follow the photons and occupied voxels as in the paper.",
-        rule="Held if 16x the initial photons give 8-24x the steps and the largest sphere more than 1.5x the steps "
-             "of the smallest (counts, not times).")
+    ok = r_occ > 1.5
+    return [Claim(
+        PAPER, "§6, Table 1", QUOTE_T1, BY_CONSTRUCTION,
+        f"steps x{r_ph:.1f} for 16x the initial photons (paper x{paper_ph:.1f})",
+        "Shown beside the paper's ratio; the photon half of the sentence cannot fail here.",
+        rule="Not judged: the steps at 16x the initial photons (Table 1's photon rows), beside the 8-24x band the "
+             "row was judged on before.",
+        construction=("each covered texel of the photon texture is one photon and a photon's march does not depend "
+                      "on the others, so 16x the texels give 16x the photons on the same paths: the steps scale "
+                      "with the photon count by construction")),
+        Claim(
+        PAPER, "§6, Table 1", QUOTE_T1, HELD if ok else NOT_HELD,
+        f"steps x{r_occ:.2f} for {occ_full / max(occ_small, 1):.1f}x the occupied voxels (paper x{paper_occ:.2f} "
+        "for 4.2x)",
+        "The larger sphere covers more texels of the photon texture and its photons cross more varying voxels."
+        if ok else "The step count does not follow the occupied voxels as in the paper.",
+        rule="The occupied-voxel half: held if the largest sphere (Table 1's radius rows) takes more than 1.5x the "
+             "steps of the smallest (counts, not times).")]
 
 
 #: the rule of §5.1: the per-step cost of the added steps (slope between consecutive photon rows) may change by
@@ -459,6 +468,8 @@ def _claim_adaptive(N, M):
         timing=False)
 
 
+QUOTE_T1 = ("Table 1 demonstrates how our algorithm's performance depends on several parameters, including the number "
+            "of triangles in the input mesh, the number of occupied voxels, and the number of initial photons.")
 QUOTE_BLUR = ("we saw a small improvement as the blur kernel increased in size from 5 to 7 to 9, but no substantial "
               "change as the kernel size increased to 11.")
 QUOTE_TOL = ("A slight increase in the tolerance may cause many octree nodes to be merged, resulting in much larger "

@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from .common import HELD, NOT_HELD, Claim, Report, Table, ratio_spread, straddles
+from .common import BY_CONSTRUCTION, HELD, NOT_HELD, Claim, Report, Table, ratio_spread, straddles
 
 __all__ = ["run", "uv_sphere", "model_scene", "thesis_rows", "SUN_TOP"]
 
@@ -606,16 +606,19 @@ def claims(rows):
     worst = min(range(len(rows)), key=lambda k: ratio[k])
     w = rows[worst]
     ok = all(x > 1.0 for x in ratio)
-    out.append(Claim(PAPER, "§5.2.4, Experiment 1, Table 5-1", QUOTE_5_1, HELD if ok else NOT_HELD,
+    out.append(Claim(PAPER, "§5.2.4, Experiment 1, Table 5-1", QUOTE_5_1, BY_CONSTRUCTION,
                      f"volumetric / level map >= {vr[worst].text('x')} over the rounds ({w['mesh']}, {w['planes']} "
-                     f"planes); median over the cells {statistics.median(ratio):.2f}x",
-                     "The baseline renders one slice image of the receiver per plane (T(I), eq. 5-3) where the level "
-                     "map renders its position map once (T(DP), eq. 5-5); the intersection triangles cost both alike."
-                     if ok else "At the fewest planes the slice images cost less than the position map pass here.",
-                     rule="Held if the volumetric baseline is slower than the level map in every (model, planes) cell: "
-                          "the median over interleaved repeats (after an untimed render of each, on one thread) of "
-                          "each round's volumetric / level-map time above 1.", timing=True,
-                     straddles=any(straddles(x.low, x.high, 1.0) for x in vr)))
+                     f"planes); median over the cells {statistics.median(ratio):.2f}x"
+                     + ("; above 1 in every cell" if ok else "; not above 1 in every cell (timing noise)"),
+                     "Shown for the size of the gap; the falsifiable part of the thesis's argument, slice images "
+                     "against the one position/diffuse pass (eq. 5-6), is judged on its own times.",
+                     rule="Not judged: the median over interleaved repeats (after an untimed render of each, on one "
+                          "thread) of each round's volumetric / level-map time in every (model, planes) cell.",
+                     timing=True,
+                     construction=("our baseline renders the level map's position and diffuse maps too (its slices "
+                                   "take their triangles' set-up from that pass), then draws the same intersection "
+                                   "triangles over the same maps, plus one slice image per plane: it does strictly "
+                                   "more work than the level map, so it is slower in every cell")))
     r2s, why, rounds_r2 = [], [], []
     for mesh in dict.fromkeys(r["mesh"] for r in rows):
         rs = [r for r in rows if r["mesh"] == mesh]
@@ -697,35 +700,38 @@ def claims(rows):
     per_obj_lm = 2 * 512 * 512 * 2 / 2 ** 20
     per_obj_vol = (101 if top < 101 else top + 1) * 512 * 512 * 2 / 2 ** 20  # the thesis's 100 planes: 101 slices
     ok = mem >= 10.0 and flat
-    out.append(Claim(PAPER, "§5.1", QUOTE_MEMORY, HELD if ok else NOT_HELD,
+    out.append(Claim(PAPER, "§5.1", QUOTE_MEMORY, BY_CONSTRUCTION,
                      f"slice stack / level map's two maps = {mem:.1f}x at {top} planes (16-bit texels, "
                      f"{top_rows[0]['memory_volumetric_b'] / 2 ** 20:.2f} MiB against "
                      f"{top_rows[0]['memory_levelmap_b'] / 2 ** 20:.2f} MiB per object at our map size); the "
                      f"level map's memory {'does not change' if flat else 'changes'} with the planes; the thesis's "
                      f"scene (100 objects, 100 planes, 512^2) from our counts: {100 * per_obj_lm:.0f} MiB against "
                      f"{100 * per_obj_vol:,.0f} MiB",
-                     "The baseline keeps one slice image per plane (planes + 1 with the front slice), the level map "
-                     "a position and a diffuse map per object whatever the plane count: the ratio is the thesis's "
-                     "arithmetic, confirmed on the buffers our two implementations count."
-                     if ok else "The slice stack is not an order of magnitude larger than the level map's maps here.",
-                     rule=f"16-bit texels as the thesis counts: held if the volumetric baseline's slice stack (its "
-                          f"reported memory_bytes) is at least 10x the level map's two maps at the most planes "
-                          f"measured ({top}) for every model, and the level map's memory is the same at every plane "
-                          "count. Counts of buffers, not a measured process footprint."))
+                     "The thesis's arithmetic, reproduced: (planes + 1) / 2 at every plane count."
+                     + ("" if ok else " (less than 10x or not flat: a bug in the counting)"),
+                     rule=f"Not judged: 16-bit texels as the thesis counts, the volumetric baseline's slice stack (its "
+                          f"reported memory_bytes) against the level map's two maps at the most planes measured "
+                          f"({top}), and whether the level map's count changes with the planes.",
+                     construction=("both sides are formulas, not measured footprints: the baseline reports "
+                                   "memory_bytes = (planes + 1) Hc Wc 2 and the tables count the level map as "
+                                   "2 Hc Wc 2, so the ratio is (planes + 1) / 2 whatever runs")))
     lv = max(r["luv_levelmap_volumetric"] for r in rows)
     px = max(r["image_max_diff_volumetric"] for r in rows)
     same = all(r["maps_identical_volumetric"] for r in rows)
     ok = px < 0.5 / 255.0
-    out.append(Claim(PAPER, "§6.2", QUOTE_IDENTICAL, HELD if ok else NOT_HELD,
+    out.append(Claim(PAPER, "§6.2", QUOTE_IDENTICAL, BY_CONSTRUCTION,
                      f"largest pixel difference {px:.3g} (Luv {lv:.3g}) between the level map's image and the "
                      f"volumetric baseline's over {len(rows)} (model, planes) cells; caustic maps "
                      f"{'bit-identical in every cell' if same else 'not bit-identical in every cell'}",
-                     "Both accept a texel on the same plane (the slab half way to the neighbouring planes) and draw "
-                     "the same intersection triangles; only the order of work differs." if ok else
-                     "The baseline's slices accept some texels on other planes than the level map's test.",
-                     rule="Held if no pixel of the final image differs by half an 8-bit step (0.5/255) or more between "
-                          "the level map and the volumetric baseline, in every (model, planes) cell of Table 5-1 "
-                          "(normal slicing, the same planes)."))
+                     "Shown as a check of our two code paths: " + ("identical, as built." if ok else
+                                                                   "not identical: a bug in one of them."),
+                     rule="Not judged: the largest pixel difference between the level map's final image and the "
+                          "volumetric baseline's, in every (model, planes) cell of Table 5-1 (normal slicing, the "
+                          "same planes), beside half an 8-bit step (0.5/255).",
+                     construction=("our baseline shares the level map's plane lattice, acceptance slabs and splat "
+                                   "kernel (levelmap/volumetric.py calls splat_plane with the same planes): the images "
+                                   "are identical by design, so the row tests our code, not the thesis's two "
+                                   "algorithms")))
     frac = [r["profiling_ms"] / (1e3 * r["smart_s"]) for r in rows]  # medians of the repeats, both
     ok = max(frac) < 0.05
     out.append(Claim(PAPER, "§5.2.4, Experiment 2 (depth profiling cost)", QUOTE_PROFILE, HELD if ok else NOT_HELD,
