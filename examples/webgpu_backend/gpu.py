@@ -286,6 +286,19 @@ def texture(data, fmt="r32float", layers=1, usage_extra=0):
     return t
 
 
+def empty_texture(width, height, layers=1, fmt="r32float", storage=True):
+    """An uninitialised 2D array texture (zeroed by WebGPU) a compute pass writes (``storage``) and others read."""
+    import wgpu
+    U = wgpu.TextureUsage
+    usage = U.TEXTURE_BINDING | U.COPY_SRC | U.COPY_DST | (U.STORAGE_BINDING if storage else 0)
+    return device().create_texture(size=(int(width), int(height), max(int(layers), 1)), format=fmt, usage=usage)
+
+
+def array_view(tex):
+    """A ``2d-array`` view of every layer of ``tex`` (a one-layer texture defaults to a ``2d`` view)."""
+    return tex.create_view(dimension="2d-array")
+
+
 def read_texture(tex, dtype, channels=1):
     """A texture (all its array layers) back as (layers, H, W[, channels]) of ``dtype``."""
     W, H, L = tex.size
@@ -305,9 +318,19 @@ def sampler(filter="linear"):
 
 
 # ----------------------------------------------------------------------------- timing
+_FENCE = None
+
+
 def finish():
-    """Wait until the queue has run everything submitted."""
-    device().queue.on_submitted_work_done_sync()
+    """Wait until the queue has run everything submitted.
+
+    (wgpu-py 0.32's ``on_submitted_work_done_sync`` fails on a callback signature; reading back a
+    4-byte buffer maps it after the queue's earlier work, which is the same wait.)
+    """
+    global _FENCE
+    if _FENCE is None:
+        _FENCE = storage(nbytes=4)
+    device().queue.read_buffer(_FENCE)
 
 
 class Timer:
