@@ -2,7 +2,9 @@
 
 Used by the tests of every method (exact tracer and image-space
 approximations): the two-interface refraction of rays through a homogeneous
-sphere, and the icosphere mesh that approximates that sphere.
+sphere, the icosphere mesh that approximates that sphere, and the paths
+through a Luneburg lens (the graded-index reference,
+:mod:`refraction_ref.exact.grin`).
 
 References
 ----------
@@ -18,7 +20,7 @@ import numpy as np
 
 from . import optics
 
-__all__ = ["sphere_refraction", "icosphere_mesh"]
+__all__ = ["sphere_refraction", "icosphere_mesh", "luneburg_lens"]
 
 
 def _dot(a, b):
@@ -142,3 +144,57 @@ def icosphere_mesh(subdivisions=5, radius=0.5):
 
     m = trimesh.creation.icosphere(subdivisions=int(subdivisions), radius=float(radius))
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
+def luneburg_lens(origins, dirs, center, radius):
+    """Closed-form paths through a Luneburg lens ``n = sqrt(2 - r^2 / R^2)`` (index 1 outside).
+
+    With ``v = n dx/ds`` and the parameter ``tau`` (``dx/dtau = v``), the ray
+    equation ``d/ds (n dx/ds) = grad n`` becomes ``d^2 x / dtau^2 = grad(n^2
+    / 2) = -(x - c) / R^2``: a harmonic oscillator. A ray that meets the lens
+    at ``P`` (where ``n = 1``) along the unit ``d`` follows ``x - c = (P - c)
+    cos(tau / R) + R d sin(tau / R)``, which meets the sphere again at
+    ``tau = pi R / 2``: every ray leaves at ``c + R d``, the point of the lens
+    facing its direction, along ``(c - P) / R`` (parallel rays focus on the
+    far side; Luneburg 1944).
+
+    Parameters
+    ----------
+    origins, dirs : (N, 3) array_like of float
+        Ray origins outside the lens and unit directions.
+    center : (3,) array_like of float
+        Lens centre.
+    radius : float
+        Lens radius, > 0.
+
+    Returns
+    -------
+    dict of ndarray
+        ``hit`` (N,) bool (the ray meets the lens); ``entry_pos``, ``exit_pos``
+        and ``exit_dir`` (N, 3), NaN for misses.
+
+    References
+    ----------
+    .. [1] R. K. Luneburg, *Mathematical Theory of Optics*, Brown University,
+       1944, §28 (the lens focusing a parallel beam on its surface).
+    .. [2] M. Born, E. Wolf, *Principles of Optics*, 7th ed., §3.2.1 (the ray
+       equation) and §4.2 (the Maxwell fish-eye and Luneburg lenses).
+    """
+    o = np.atleast_2d(np.asarray(origins, dtype=np.float64))
+    d = np.atleast_2d(np.asarray(dirs, dtype=np.float64))
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    if o.shape != d.shape or o.shape[-1] != 3:
+        raise ValueError(f"origins and dirs must both be (N, 3), got {o.shape}, {d.shape}")
+    if not radius > 0:
+        raise ValueError("radius must be > 0")
+    r = float(radius)
+    oc = o - c
+    b = _dot(d, oc)
+    cc = _dot(oc, oc) - r * r
+    disc = b * b - cc
+    hit = (disc >= 0.0) & (cc >= 0.0) & (b < 0.0)
+    t1 = -b - np.sqrt(np.where(hit, disc, 0.0))
+    entry = np.where(hit[:, None], o + t1[:, None] * d, np.nan)
+    exit_pos = np.where(hit[:, None], c + r * d, np.nan)
+    exit_dir = np.where(hit[:, None], (c - entry) / r, np.nan)
+    return {"hit": hit, "entry_pos": entry, "exit_pos": exit_pos, "exit_dir": exit_dir}

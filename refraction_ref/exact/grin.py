@@ -1,0 +1,950 @@
+"""A converged reference for graded-index volumes: the ray equation by an adaptive 8th-order solver.
+
+The volumetric method (Sun et al. 2008) marches photons and viewing rays
+through an index volume with fixed-form steps (eqs. 4-5, or RK4) whose
+length the octree sets (§4.2, §4.4, §5.3). This module integrates the *same*
+ray equation through the *same* continuous field with Dormand and Prince's
+explicit Runge-Kutta method of order 8 (DOP853) and adaptive steps, tightened
+until the answer stops moving, so that what differs from the method is the
+integration alone.
+
+The equation
+------------
+With ``v = n dx/ds`` (s the arc length) the ray equation
+``d/ds (n dx/ds) = grad n`` (Sun et al. 2008, §3, eq. 1; Born and Wolf
+§3.2, eq. 3.2(2)) is the first-order system (eqs. 2-3)::
+
+    dx/ds = v / n(x),      dv/ds = grad n(x)
+
+integrated in the state ``y = (x, v)`` (6 components) over the parameter s.
+
+The field
+---------
+Exactly the one the method samples: the packed float32 array
+``(n, dn/dx, dn/dy, dn/dz)`` of
+:func:`~refraction_ref.volumetric.gradient.gradient_field` (n at voxel
+centres, its gradient by central differences, one-sided on the faces;
+eq. 3) read at any point by
+:func:`~refraction_ref.volumetric.march.sample_field`: trilinear between
+voxel centres, clamped to the outermost centres. The gradient is thus the
+interpolated central difference, not the derivative of the interpolated n
+(that one jumps at every voxel face, and the method never uses it), so
+``|v| = n`` is not an exact invariant of this system; the drift is
+reported (``drift``), as the march reports its own.
+
+The solver
+----------
+scipy's DOP853 (``scipy.integrate.solve_ivp(method="DOP853")``): its
+tableau (``scipy.integrate._ivp.dop853_coefficients``), its error norm (the
+5th- and 3rd-order estimates combined, Hairer et al. II.10), its initial step
+(Hairer et al. II.4) and its step controller (safety 0.9, factors 0.2 to 10,
+exponent -1/8), the per-component scale ``atol + rtol max(|y|, |y_new|)``,
+written out in Numba so that every ray runs on every thread without
+Python in the loop. :func:`trace_rays_scipy` integrates the same rays with
+``solve_ivp`` itself (a terminal event at the box) and
+``tests/test_grin_reference.py`` checks that both agree. Steps are also
+capped at ``max_step`` voxels, so that the polyline of accepted steps
+resolves what is evaluated along the path (the material level set,
+extinction voxel by voxel, receivers).
+
+Entry and exit rules (the method's, :mod:`refraction_ref.volumetric`)
+---------------------------------------------------------------------
+* Photons start where the method's ``photons`` stage puts them (on the
+  volume box, or on the proxy), with ``v = n(x0) d``; a photon that starts
+  on a proxy carries the transmittance of the straight segment it skipped
+  (the march's ``entry`` rule, eq. 6).
+* Viewing rays enter the box by the method's slab test
+  (:func:`~refraction_ref.volumetric.view.box_entry_one`), with ``v = n d``.
+* A path ends where it leaves the box: the step that crosses a face is
+  redone to the crossing (a bracketed root of the distance to the box on the
+  step's own 8th-order map ``h -> y(s + h)``), the exit point is put on the
+  face, and the exit direction is ``v / |v|`` there (no refraction at the
+  box: the index is continuous there, as for the method).
+* A step whose chord meets a receiver triangle (the march's
+  ``_segment_receiver``) is redone to the curved path's crossing of the
+  triangle's plane; a photon that leaves the box goes on straight to the
+  first receiver outside it (the march's ``_exit_receivers``).
+* "Met refractive material" (the photons' ``touched``, the viewing ray's
+  ``hit``) and the viewing ray's ``interfaces`` and ``path_length`` are the
+  method's half-contrast level set
+  (:func:`~refraction_ref.volumetric.march.half_contrast`), tested at every
+  accepted step's end (the start included); ``path_length`` splits a step
+  that crosses the level linearly in n.
+* Transmittance: ``exp(-integral of kappa)`` along the chords of the accepted
+  steps, voxel by voxel (kappa is constant per voxel, as the method holds it;
+  the march applies the kappa of a step's first voxel to the whole step).
+* Stops: ``LIMIT`` at the method's path budget in length (photons
+  ``8 max(shape)`` voxels, viewing rays ``4 (nx + ny + nz)`` voxels: the
+  march's and the viewing pass's step limits at one voxel a step); ``LOST``
+  where ``|v|`` collapses (photons below ``1e-12 n``, viewing rays below
+  ``1e-12``, as the method), ``n <= 0``, a non-finite state, or a step below
+  scipy's minimum. No ``min_radiance`` cut and no stopping rule: every path
+  runs to its end.
+
+References
+----------
+.. [1] X. Sun, K. Zhou, E. Stollnitz, J. Shi, B. Guo, "Interactive
+   Relighting of Dynamic Refractive Objects", ACM TOG 27(3), Article 35,
+   2008: §3 eqs. 1-3 (the ray equation and its first-order form), §4.3
+   (photon entry), §4.4 eqs. 4-6 (the march this reference converges), §4.5
+   (viewing rays), §5.3 (the step tolerances).
+.. [2] M. Born, E. Wolf, *Principles of Optics*, 7th ed., §3.2.1 (the ray
+   equation d/ds (n dr/ds) = grad n).
+.. [3] E. Hairer, S. P. Norsett, G. Wanner, *Solving Ordinary Differential
+   Equations I: Nonstiff Problems*, 2nd ed., §II.4 (initial step), §II.5 and
+   §II.10 (DOP853 and its error estimate).
+.. [4] R. K. Luneburg, *Mathematical Theory of Optics*, 1944 (the lens
+   ``n = sqrt(2 - r^2 / R^2)`` checked in the tests).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from ..status import EXITED, LIMIT, LOST, MISSED
+from ..volumetric.march import (_exit_receivers, _geometry, _segment_receiver, _skipped_attenuation,
+                                half_contrast, receiver_tuple, sample_field)
+from ..volumetric.view import box_entry_one
+
+__all__ = ["trace_rays", "trace_photons", "trace_view", "trace_rays_scipy", "tolerance_sweep", "RTOL", "ATOL",
+           "MAX_STEP", "RECEIVED", "FIELD_SAMPLED", "FIELD_LUNEBURG"]
+
+#: the converged tolerance (``benchmarks/results/grin_error_vs_time.md``, "Convergence"): one more
+#: decade changes photon exits by less than 1e-8 world units on the catalogue's lenses
+RTOL = 1e-10
+#: absolute tolerance on positions (world units) and on v (index units)
+ATOL = 1e-12
+#: longest accepted step, in voxels of the smallest side: the polyline on which the level set,
+#: extinction and receivers are evaluated (it never lengthens a step the tolerance asks)
+MAX_STEP = 0.25
+
+#: a photon stopped on a receiver inside the volume (the march's ``PHOTON_RECEIVED``)
+RECEIVED = 5
+
+#: ``kind`` of the field: the method's sampled volume (:func:`~refraction_ref.volumetric.march.sample_field`)
+FIELD_SAMPLED = 0
+#: ``kind`` of the field: the closed-form Luneburg lens ``n = sqrt(2 - r^2 / R^2)``, 1 outside (tests)
+FIELD_LUNEBURG = 1
+
+try:  # scipy's own DOP853 tableau, so that the Numba integrator is scipy's method
+    from scipy.integrate._ivp import dop853_coefficients as _dc
+except ImportError:  # pragma: no cover - scipy moved it
+    _dc = None
+
+
+def _tableau():
+    if _dc is None:  # pragma: no cover
+        raise ImportError("scipy.integrate._ivp.dop853_coefficients is needed for the DOP853 tableau")
+    ns = int(_dc.N_STAGES)
+    return _Tab(np.ascontiguousarray(_dc.A[:ns, :ns], dtype=np.float64), np.ascontiguousarray(_dc.B, np.float64),
+                np.ascontiguousarray(_dc.C[:ns], np.float64), np.ascontiguousarray(_dc.E3, np.float64),
+                np.ascontiguousarray(_dc.E5, np.float64))
+
+
+class _Tab(NamedTuple):
+    """DOP853's tableau (scipy's arrays): 12 stages, B, C, and the two error estimators (13 entries)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    E3: np.ndarray
+    E5: np.ndarray
+
+
+class _Field(NamedTuple):
+    """What the right-hand side reads: the packed field (or a closed form), extinction, the box."""
+
+    kind: int  # FIELD_SAMPLED or FIELD_LUNEBURG
+    field: np.ndarray  # (nx, ny, nz, 4) float32: n and grad n (FIELD_SAMPLED)
+    prm: np.ndarray  # (4,) float64: centre and radius (FIELD_LUNEBURG)
+    ext: np.ndarray  # (nx, ny, nz, 3) float32 kappa; read when has_ext
+    has_ext: int
+    lo: np.ndarray
+    hi: np.ndarray
+    ih: np.ndarray
+
+
+class _Cfg(NamedTuple):
+    """Tolerances, the step cap and budget, the material level set and the lost rule."""
+
+    rtol: float
+    atol: float
+    max_step: float  # world units
+    s_max: float  # path budget, world units
+    n_half: float
+    side: float
+    lost_rel: int  # 1: |v| <= 1e-12 n is lost (photons); 0: |v| <= 1e-12 (viewing rays)
+
+
+class _Out(NamedTuple):
+    """Per-ray results (:func:`trace_rays`, Returns)."""
+
+    status: np.ndarray  # (R,) int8
+    end_pos: np.ndarray  # (R, 3)
+    end_dir: np.ndarray  # (R, 3)
+    hit_tri: np.ndarray  # (R,) int32
+    tau: np.ndarray  # (R, 3) optical depth
+    met: np.ndarray  # (R,) bool
+    crossings: np.ndarray  # (R,) int32
+    path_len: np.ndarray  # (R,)
+    length: np.ndarray  # (R,) parameter s at the end
+    steps: np.ndarray  # (R,) int32 accepted steps
+    rejected: np.ndarray  # (R,) int32 rejected steps
+    drift: np.ndarray  # (R,) max ||v| - n| / n
+
+
+# --------------------------------------------------------------------- right-hand side
+@nb.njit(cache=True)
+def _sample(fk, x, y, z):
+    """``(n, dn/dx, dn/dy, dn/dz)`` at a world point: the method's trilinear field, or the closed-form lens."""
+    if fk.kind == 0:
+        return sample_field(fk.field, fk.lo, fk.ih, x, y, z)
+    p = fk.prm
+    dx, dy, dz = x - p[0], y - p[1], z - p[2]
+    R2 = p[3] * p[3]
+    r2 = (dx * dx + dy * dy + dz * dz) / R2
+    if r2 >= 1.0:
+        return 1.0, 0.0, 0.0, 0.0
+    n = math.sqrt(2.0 - r2)
+    c = -1.0 / (R2 * n)  # grad sqrt(2 - r^2/R^2) = -(x - c) / (R^2 n)
+    return n, c * dx, c * dy, c * dz
+
+
+@nb.njit(cache=True)
+def _rhs(fk, y, out):
+    """``out = (v / n, grad n)`` at state ``y = (x, v)``; returns n (Sun et al. 2008, eqs. 2-3)."""
+    n, gx, gy, gz = _sample(fk, y[0], y[1], y[2])
+    out[0] = y[3] / n
+    out[1] = y[4] / n
+    out[2] = y[5] / n
+    out[3] = gx
+    out[4] = gy
+    out[5] = gz
+    return n
+
+
+@nb.njit(cache=True)
+def _rk_step(fk, tab, y, f, h, K, tmp, ynew):
+    """One DOP853 step of size h from (y, f = rhs(y)) into ``ynew``; K[12] = rhs(ynew). Returns n(ynew).
+
+    scipy's ``rk_step``: stage s at ``y + h sum_j A[s, j] K[j]``, the solution ``y + h sum_j B[j] K[j]``.
+    """
+    A, B = tab.A, tab.B
+    for c in range(6):
+        K[0, c] = f[c]
+    for s in range(1, 12):
+        for c in range(6):
+            acc = 0.0
+            for j in range(s):
+                acc += K[j, c] * A[s, j]
+            tmp[c] = y[c] + acc * h
+        _rhs(fk, tmp, K[s])
+    for c in range(6):
+        acc = 0.0
+        for j in range(12):
+            acc += K[j, c] * B[j]
+        ynew[c] = y[c] + h * acc
+    return _rhs(fk, ynew, K[12])
+
+
+@nb.njit(cache=True)
+def _error_norm(tab, K, h, y, ynew, rtol, atol):
+    """scipy's ``DOP853._estimate_error_norm``: ``|h| e5^2 / sqrt((e5^2 + 0.01 e3^2) 6)`` in scaled RMS."""
+    e5 = 0.0
+    e3 = 0.0
+    for c in range(6):
+        sc = atol + max(abs(y[c]), abs(ynew[c])) * rtol
+        a5 = 0.0
+        a3 = 0.0
+        for j in range(13):
+            a5 += K[j, c] * tab.E5[j]
+            a3 += K[j, c] * tab.E3[j]
+        e5 += (a5 / sc) ** 2
+        e3 += (a3 / sc) ** 2
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 6.0)
+
+
+@nb.njit(cache=True)
+def _initial_step(fk, y0, f0, bound, max_step, rtol, atol, tmp, f1):
+    """scipy's ``select_initial_step`` for an error estimator of order 7 (Hairer et al. II.4)."""
+    d0 = 0.0
+    d1 = 0.0
+    for c in range(6):
+        sc = atol + abs(y0[c]) * rtol
+        d0 += (y0[c] / sc) ** 2
+        d1 += (f0[c] / sc) ** 2
+    d0 = math.sqrt(d0 / 6.0)
+    d1 = math.sqrt(d1 / 6.0)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, bound)
+    for c in range(6):
+        tmp[c] = y0[c] + h0 * f0[c]
+    _rhs(fk, tmp, f1)
+    d2 = 0.0
+    for c in range(6):
+        sc = atol + abs(y0[c]) * rtol
+        d2 += ((f1[c] - f0[c]) / sc) ** 2
+    d2 = math.sqrt(d2 / 6.0) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, min(h1, min(bound, max_step)))
+
+
+# --------------------------------------------------------------------- events
+@nb.njit(cache=True)
+def _box_excess(lo, hi, y):
+    """How far the point y[:3] lies outside the box (<= 0 inside), the largest over the faces."""
+    e = -np.inf
+    for a in range(3):
+        e = max(e, max(y[a] - hi[a], lo[a] - y[a]))
+    return e
+
+
+@nb.njit(cache=True)
+def _event_value(mode, fk, tab, y, f, h, K, tmp, yt, pl):
+    """The event function after a step h from y: box excess (mode 1) or signed plane distance (mode 2)."""
+    _rk_step(fk, tab, y, f, h, K, tmp, yt)
+    if mode == 1:
+        return _box_excess(fk.lo, fk.hi, yt)
+    # pl: the triangle's normal (0:3), the sign that makes the start side negative (4), a vertex (5:8)
+    return pl[4] * ((yt[0] - pl[5]) * pl[0] + (yt[1] - pl[6]) * pl[1] + (yt[2] - pl[7]) * pl[2])
+
+
+@nb.njit(cache=True)
+def _root(mode, fk, tab, y, f, ha, ga, hb, gb, K, tmp, yt, pl):
+    """The step in [ha, hb] where the event function crosses 0 (ga <= 0 < gb): Illinois regula falsi.
+
+    Returns a step whose end has event value >= 0 (at or just past the crossing), within a few ulp of it.
+    """
+    side = 0
+    for _ in range(200):
+        if hb - ha <= 4e-16 * hb or gb == 0.0:
+            break
+        hc = (ha * gb - hb * ga) / (gb - ga)
+        if not (hc > ha and hc < hb):
+            hc = 0.5 * (ha + hb)
+            if not (hc > ha and hc < hb):
+                break
+        gc = _event_value(mode, fk, tab, y, f, hc, K, tmp, yt, pl)
+        if gc >= 0.0:
+            hb, gb = hc, gc
+            if side == 1:
+                ga *= 0.5
+            side = 1
+        else:
+            ha, ga = hc, gc
+            if side == -1:
+                gb *= 0.5
+            side = -1
+    return hb
+
+
+@nb.njit(cache=True)
+def _optical_depth(ext, lo, ih, a, b):
+    """``integral of kappa`` per channel along the segment a -> b, voxel by voxel (the march's walk)."""
+    nx, ny, nz = ext.shape[0], ext.shape[1], ext.shape[2]
+    u0 = (a[0] - lo[0]) * ih[0]
+    w0 = (a[1] - lo[1]) * ih[1]
+    t0 = (a[2] - lo[2]) * ih[2]
+    du = (b[0] - lo[0]) * ih[0] - u0
+    dw = (b[1] - lo[1]) * ih[1] - w0
+    dt = (b[2] - lo[2]) * ih[2] - t0
+    wx, wy, wz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+    tr, tg, tb = 0.0, 0.0, 0.0
+    if not length > 0.0:
+        return tr, tg, tb
+    i = min(max(int(math.floor(u0)), 0), nx - 1)
+    j = min(max(int(math.floor(w0)), 0), ny - 1)
+    k = min(max(int(math.floor(t0)), 0), nz - 1)
+    si = 1 if du > 0 else -1
+    sj = 1 if dw > 0 else -1
+    sk = 1 if dt > 0 else -1
+    ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else np.inf
+    tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else np.inf
+    tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else np.inf
+    di = abs(1.0 / du) if du != 0.0 else np.inf
+    dj = abs(1.0 / dw) if dw != 0.0 else np.inf
+    dk = abs(1.0 / dt) if dt != 0.0 else np.inf
+    t = 0.0
+    for _ in range(nx + ny + nz + 3):
+        tn = min(ti, min(tj, min(tk, 1.0)))
+        w = (tn - t) * length
+        if w > 0.0:
+            tr += ext[i, j, k, 0] * w
+            tg += ext[i, j, k, 1] * w
+            tb += ext[i, j, k, 2] * w
+        if tn >= 1.0:
+            break
+        if ti <= tj and ti <= tk:
+            i = min(max(i + si, 0), nx - 1)
+            ti += di
+        elif tj <= tk:
+            j = min(max(j + sj, 0), ny - 1)
+            tj += dj
+        else:
+            k = min(max(k + sk, 0), nz - 1)
+            tk += dk
+        t = tn
+    return tr, tg, tb
+
+
+# --------------------------------------------------------------------- one ray
+@nb.njit(cache=True)
+def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
+    """Integrate ray r from x0 along d0 (unit) to its end; fills row r of ``out``."""
+    y = np.empty(6)
+    f = np.empty(6)
+    ynew = np.empty(6)
+    tmp = np.empty(6)
+    yt = np.empty(6)
+    K = np.empty((13, 6))
+    Kt = np.empty((13, 6))
+    pl = np.zeros(8)
+    lo, hi = fk.lo, fk.hi
+    rtol, atol = cfg.rtol, cfg.atol
+    n_half, side = cfg.n_half, cfg.side
+    nrecv = recv.tris.shape[0]
+    n0 = _sample(fk, x0[0], x0[1], x0[2])[0]
+    for c in range(3):
+        y[c] = x0[c]
+        y[3 + c] = n0 * d0[c]
+    n = _rhs(fk, y, f)
+    a_prev = side * (n - n_half)
+    inside = a_prev > 0.0
+    met = inside
+    crossings = 0
+    plen = 0.0
+    tau_r, tau_g, tau_b = 0.0, 0.0, 0.0
+    drift = 0.0
+    s = 0.0
+    steps = 0
+    rej = 0
+    status = LIMIT
+    hit_q = -1
+    s_max = cfg.s_max
+    h_abs = _initial_step(fk, y, f, s_max, cfg.max_step, rtol, atol, tmp, ynew)
+    err_exp = -1.0 / 8.0
+    while True:
+        if not (s < s_max):
+            status = LIMIT
+            break
+        # ---- one accepted step, scipy's controller (RungeKutta._step_impl)
+        min_step = 10.0 * abs(np.nextafter(s, np.inf) - s)
+        if h_abs > cfg.max_step:
+            h_abs = cfg.max_step
+        elif h_abs < min_step:
+            h_abs = min_step
+        rejected = False
+        accepted = False
+        h = 0.0
+        h_next = 0.0
+        n1 = n
+        while True:
+            if h_abs < min_step:
+                break
+            s_new = s + h_abs
+            if s_new > s_max:
+                s_new = s_max
+            h = s_new - s
+            h_abs = abs(h)
+            n1 = _rk_step(fk, tab, y, f, h, K, tmp, ynew)
+            en = _error_norm(tab, K, h, y, ynew, rtol, atol)
+            if en < 1.0:
+                if en == 0.0:
+                    factor = 10.0
+                else:
+                    factor = min(10.0, 0.9 * en ** err_exp)
+                if rejected:
+                    factor = min(1.0, factor)
+                h_next = h_abs * factor
+                accepted = True
+                break
+            h_abs *= max(0.2, 0.9 * en ** err_exp)
+            rejected = True
+            rej += 1
+        finite = True
+        for c in range(6):
+            if not math.isfinite(ynew[c]):
+                finite = False
+        if not accepted or not finite or not (n1 > 0.0):
+            status = LOST
+            break
+        # ---- events on this step: the box face, then a receiver on the (shortened) step
+        ev = 0
+        h_end = h
+        ex = _box_excess(lo, hi, ynew)
+        if ex > 0.0:
+            g0 = min(_box_excess(lo, hi, y), 0.0)
+            h_end = _root(1, fk, tab, y, f, 0.0, g0, h, ex, Kt, tmp, yt, pl)
+            n1 = _rk_step(fk, tab, y, f, h_end, Kt, tmp, ynew)
+            # put the point on the face it crossed (the root leaves it within a few ulp past it)
+            best = -1
+            bex = -np.inf
+            for a in range(3):
+                e = max(ynew[a] - hi[a], lo[a] - ynew[a])
+                if e > bex:
+                    bex = e
+                    best = a
+            ynew[best] = hi[best] if ynew[best] - hi[best] >= lo[best] - ynew[best] else lo[best]
+            for a in range(3):
+                ynew[a] = min(max(ynew[a], lo[a]), hi[a])
+            ev = 1
+        if nrecv > 0:
+            th, q = _segment_receiver(recv, y[0], y[1], y[2], ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2], 1.0)
+            if q >= 0:
+                v0x, v0y, v0z = recv.tris[q, 0, 0], recv.tris[q, 0, 1], recv.tris[q, 0, 2]
+                e1x, e1y, e1z = recv.tris[q, 1, 0] - v0x, recv.tris[q, 1, 1] - v0y, recv.tris[q, 1, 2] - v0z
+                e2x, e2y, e2z = recv.tris[q, 2, 0] - v0x, recv.tris[q, 2, 1] - v0y, recv.tris[q, 2, 2] - v0z
+                pl[0] = e1y * e2z - e1z * e2y
+                pl[1] = e1z * e2x - e1x * e2z
+                pl[2] = e1x * e2y - e1y * e2x
+                pl[5], pl[6], pl[7] = v0x, v0y, v0z
+                da = (y[0] - v0x) * pl[0] + (y[1] - v0y) * pl[1] + (y[2] - v0z) * pl[2]
+                db = (ynew[0] - v0x) * pl[0] + (ynew[1] - v0y) * pl[1] + (ynew[2] - v0z) * pl[2]
+                pl[4] = -1.0 if da > 0.0 or (da == 0.0 and db < 0.0) else 1.0
+                ga, gb = pl[4] * da, pl[4] * db
+                if gb > 0.0 and ga <= 0.0:
+                    h_end = _root(2, fk, tab, y, f, 0.0, ga, h_end, gb, Kt, tmp, yt, pl)
+                    n1 = _rk_step(fk, tab, y, f, h_end, Kt, tmp, ynew)
+                ev = 2
+                hit_q = q
+        # ---- along the chord y -> ynew: extinction, the material level set, drift
+        cx, cy, cz = ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2]
+        chord = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if fk.has_ext:
+            dr, dg, db_ = _optical_depth(fk.ext, lo, fk.ih, y, ynew)
+            tau_r += dr
+            tau_g += dg
+            tau_b += db_
+        a1 = side * (n1 - n_half)
+        if a_prev > 0.0 and a1 > 0.0:
+            plen += chord
+        elif a_prev > 0.0:
+            plen += chord * a_prev / (a_prev - a1)
+        elif a1 > 0.0:
+            plen += chord * a1 / (a1 - a_prev)
+        now = a1 > 0.0
+        if now != inside:
+            crossings += 1
+            inside = now
+            met = True
+        a_prev = a1
+        vn = math.sqrt(ynew[3] * ynew[3] + ynew[4] * ynew[4] + ynew[5] * ynew[5])
+        dr_ = abs(vn - n1) / n1
+        if dr_ > drift:
+            drift = dr_
+        s += h_end
+        steps += 1
+        for c in range(6):
+            y[c] = ynew[c]
+        if ev == 1 and hit_q < 0:
+            status = EXITED
+            break
+        if ev == 2:
+            status = RECEIVED
+            break
+        if (cfg.lost_rel and not (vn > 1e-12 * n1)) or (not cfg.lost_rel and not (vn > 1e-12)):
+            status = LOST
+            break
+        for c in range(6):  # FSAL: the last stage is rhs(ynew)
+            f[c] = K[12, c]
+        n = n1
+        h_abs = h_next
+    vn = math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5])
+    for c in range(3):
+        out.end_pos[r, c] = y[c]
+        out.end_dir[r, c] = y[3 + c] / vn if vn > 0.0 else np.nan
+    out.status[r] = status
+    out.hit_tri[r] = hit_q
+    out.tau[r, 0] = tau_r
+    out.tau[r, 1] = tau_g
+    out.tau[r, 2] = tau_b
+    out.met[r] = met
+    out.crossings[r] = crossings
+    out.path_len[r] = plen
+    out.length[r] = s
+    out.steps[r] = steps
+    out.rejected[r] = rej
+    out.drift[r] = drift
+
+
+@nb.njit(cache=True, parallel=True)
+def _trace_kernel(fk, tab, cfg, recv, pos, dirs, out):
+    for r in nb.prange(pos.shape[0]):
+        _trace_one(r, fk, tab, cfg, recv, pos[r], dirs[r], out)
+
+
+# --------------------------------------------------------------------- Python API
+def _field_tuple(field, bounds, extinction, analytic):
+    """The :class:`_Field` of a volume (its shape sets the voxels, also for a closed-form field) and its box."""
+    shape = np.shape(field)
+    box = _geometry(bounds, shape)
+    if analytic is None:
+        kind, prm = FIELD_SAMPLED, np.zeros(4)
+        fld = np.ascontiguousarray(field, dtype=np.float32)
+    else:
+        name, centre, radius = analytic
+        if name != "luneburg":
+            raise ValueError(f"analytic field {name!r}; only 'luneburg' is known")
+        kind = FIELD_LUNEBURG
+        prm = np.array([*np.asarray(centre, np.float64).reshape(3), float(radius)])
+        fld = np.zeros((2, 2, 2, 4), np.float32)  # not read
+    if extinction is None:
+        ext, has = np.zeros((1, 1, 1, 3), np.float32), 0
+    else:
+        ext = np.ascontiguousarray(extinction, dtype=np.float32)
+        has = int(np.any(ext != 0))
+    return _Field(kind, fld, prm, ext, has, box.lo, box.hi, box.ih), box
+
+
+def trace_rays(field, bounds, pos, dirs, *, rtol=RTOL, atol=ATOL, max_step=MAX_STEP, s_max=None, extinction=None,
+               receivers=None, n_half=np.inf, side=1.0, lost_relative=True, analytic=None):
+    """Integrate the ray equation from points in the volume box until each ray leaves it (the core).
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        n and its gradient at voxel centres
+        (:func:`~refraction_ref.volumetric.gradient.gradient_field`), read as
+        the method reads it (:func:`~refraction_ref.volumetric.march.sample_field`).
+        Only its shape (the voxels of ``max_step`` and ``s_max``) is read when ``analytic`` is given.
+    bounds : (2, 3) array_like
+        The volume box, world units.
+    pos : (R, 3) array_like
+        Start points, inside the box or on its faces.
+    dirs : (R, 3) array_like
+        Unit start directions; the start state is ``v = n(pos) dirs``.
+    rtol, atol : float
+        DOP853's relative and absolute tolerances (scipy's meaning).
+    max_step : float
+        Longest step, in voxels of the smallest side.
+    s_max : float, optional
+        Path budget in world units (default: ``8 max(shape)`` voxels).
+    extinction : (nx, ny, nz, 3) array_like, optional
+        kappa per voxel (per world unit): the optical depth is integrated.
+    receivers : tuple, optional
+        :func:`~refraction_ref.volumetric.march.receiver_tuple`: a path stops on them (status 5).
+    n_half, side : float
+        The half-contrast level set (:func:`~refraction_ref.volumetric.march.half_contrast`).
+    lost_relative : bool
+        ``|v| <= 1e-12 n`` is lost (photons); False: ``|v| <= 1e-12`` (viewing rays).
+    analytic : tuple, optional
+        ``("luneburg", centre, R)``: integrate the closed-form lens instead of the volume (tests).
+
+    Returns
+    -------
+    dict
+        ``status`` (R,) int8 (1 exited, 2 limit, 4 lost, 5 received), ``end_pos``, ``end_dir`` (R, 3)
+        (where and in which direction the path ended: the exit on the face, the receiver hit, or the last
+        state), ``hit_tri`` (R,) (receiver triangle, an index into ``receivers.tris``; -1 none), ``tau``
+        (R, 3) optical depth, ``met`` (R,) bool (beyond ``n_half`` somewhere), ``crossings`` (R,),
+        ``path_length`` (R,) (length beyond ``n_half``), ``length`` (R,) (parameter s at the end),
+        ``steps``, ``rejected`` (R,) solver steps, ``drift`` (R,) ``max ||v| - n| / n``, ``evals`` (R,)
+        right-hand-side evaluations (12 per step tried and 12 per root-finding iteration not counted:
+        a lower bound).
+
+    References
+    ----------
+    Sun et al. (2008), §3 eqs. 1-3; Hairer, Norsett, Wanner (1993), §II.4-II.10 (DOP853).
+    """
+    fk, box = _field_tuple(field, bounds, extinction, analytic)
+    pos = np.ascontiguousarray(np.asarray(pos, dtype=np.float64).reshape(-1, 3))
+    dirs = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
+    R = len(pos)
+    if s_max is None:
+        s_max = 8.0 * float(max(np.shape(field)[:3])) * box.hmin
+    cfg = _Cfg(float(rtol), float(atol), float(max_step) * box.hmin, float(s_max), float(n_half), float(side),
+               1 if lost_relative else 0)
+    recv = receiver_tuple() if receivers is None else receivers
+    out = _Out(np.zeros(R, np.int8), np.full((R, 3), np.nan), np.full((R, 3), np.nan), np.full(R, -1, np.int32),
+               np.zeros((R, 3)), np.zeros(R, np.bool_), np.zeros(R, np.int32), np.zeros(R), np.zeros(R),
+               np.zeros(R, np.int32), np.zeros(R, np.int32), np.zeros(R))
+    if R:
+        _trace_kernel(fk, _tableau(), cfg, recv, pos, dirs, out)
+    res = {"status": out.status, "end_pos": out.end_pos, "end_dir": out.end_dir, "hit_tri": out.hit_tri,
+           "tau": out.tau, "met": out.met, "crossings": out.crossings, "path_length": out.path_len,
+           "length": out.length, "steps": out.steps, "rejected": out.rejected, "drift": out.drift}
+    res["evals"] = 12 * (out.steps.astype(np.int64) + out.rejected)
+    return res
+
+
+def trace_photons(field, bounds, pos, dirs, *, extinction=None, receivers=None, outside_ior=1.0, entry=None,
+                  rtol=RTOL, atol=ATOL, max_step=MAX_STEP, analytic=None):
+    """Converged photon paths from the method's photon starts: exits, receiver hits, transmittance.
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        The method's packed field (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    bounds : (2, 3) array_like
+    pos, dirs : (P, 3) float64
+        The ``photons`` stage's start points and unit directions
+        (:func:`~refraction_ref.volumetric.photons.generate_photons`).
+    extinction : (nx, ny, nz, 3) array_like, optional
+        kappa per voxel (the march's).
+    receivers : tuple, optional
+        :func:`~refraction_ref.volumetric.march.receiver_tuple` of the scene's receivers.
+    outside_ior : float
+        The index outside the objects (the material level set, :func:`~refraction_ref.volumetric.march.half_contrast`).
+    entry : (P, 3) float64, optional
+        Where each photon's texel ray entered the volume when it starts on a proxy: its transmittance
+        starts with the straight segment skipped (the march's rule, eq. 6).
+    rtol, atol, max_step, analytic
+        As :func:`trace_rays`.
+
+    Returns
+    -------
+    dict
+        The keys of :func:`~refraction_ref.volumetric.march.march_photons`' photon dict that a caustic
+        deposit and a comparison read: ``exit_pos``, ``exit_dir`` (P, 3; NaN unless exited), ``status``
+        (P,) int8 (1 exited, 2 limit, 4 lost, 5 received; the march's codes), ``touched`` (P,) bool,
+        ``hit_pos`` (P, 3), ``hit_tri`` (P,) int64, ``hit_receiver`` (P,) int32, ``hit_trans`` (P, 3)
+        (transmittance at the receiver or at the exit), plus ``steps``, ``rejected``, ``evals``,
+        ``drift`` per photon and ``total_steps``.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (photon starts), §4.4 eqs. 4-6 (the march this converges), §6.2.2 Fig. 9
+    (receivers).
+    """
+    n_half, side = half_contrast(field, float(outside_ior)) if analytic is None else (np.inf, 1.0)
+    pos = np.ascontiguousarray(pos, dtype=np.float64).reshape(-1, 3)
+    dirs = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+    P = len(pos)
+    recv = receiver_tuple() if receivers is None else receivers
+    res = trace_rays(field, bounds, pos, dirs, rtol=rtol, atol=atol, max_step=max_step, extinction=extinction,
+                     receivers=recv, n_half=n_half, side=side, lost_relative=True, analytic=analytic)
+    st = res["status"]
+    trans = np.exp(-res["tau"])
+    if entry is not None and P and extinction is not None:
+        box = _geometry(bounds, field.shape)
+        pre = np.empty((P, 3))
+        _skipped_attenuation(np.ascontiguousarray(extinction, dtype=np.float32), box.lo, box.ih,
+                             np.ascontiguousarray(entry, dtype=np.float64), pos, pre)
+        trans = trans * pre
+    ex = st == EXITED
+    exit_pos = np.where(ex[:, None], res["end_pos"], np.nan)
+    exit_dir = np.where(ex[:, None], res["end_dir"], np.nan)
+    hit_pos = np.full((P, 3), np.nan)
+    hit_tri = res["hit_tri"].astype(np.int32)
+    rc = st == RECEIVED
+    hit_pos[rc] = res["end_pos"][rc]
+    if P and recv.tris.shape[0]:
+        box = _geometry(bounds, field.shape)
+        sel = np.flatnonzero(ex).astype(np.int64)
+        reach = 1e6 * (1.0 + float(np.abs(box.lo).max() + np.abs(box.hi).max()))
+        _exit_receivers(sel, exit_pos, exit_dir, recv, reach, hit_pos, hit_tri)
+    hit_trans = np.where((ex | rc)[:, None], trans, np.nan)
+    tri = hit_tri.astype(np.int64)
+    hit_receiver = np.where(tri >= 0, np.searchsorted(recv.start, tri, side="right") - 1, -1).astype(np.int32)
+    return {"exit_pos": exit_pos, "exit_dir": exit_dir, "status": st, "touched": res["met"], "hit_pos": hit_pos,
+            "hit_tri": tri, "hit_receiver": hit_receiver, "hit_trans": hit_trans, "steps": res["steps"],
+            "rejected": res["rejected"], "evals": res["evals"], "drift": res["drift"],
+            "total_steps": int(res["steps"].sum(dtype=np.int64)),
+            "drift_max": float(res["drift"].max()) if P else 0.0}
+
+
+def trace_view(field, bounds, origins, dirs, *, extinction=None, outside_ior=1.0, n_range=None, rtol=RTOL,
+               atol=ATOL, max_step=MAX_STEP, analytic=None):
+    """Converged viewing rays: each primary ray through the volume box, the viewing pass's per-pixel keys.
+
+    Parameters
+    ----------
+    field : (nx, ny, nz, 4) float32
+        The method's packed field.
+    bounds : (2, 3) array_like
+    origins, dirs : (R, 3) float64
+        Primary rays (:meth:`~refraction_ref.camera.Camera.primary_rays`).
+    extinction : (nx, ny, nz, 3) array_like, optional
+        kappa per voxel: ``transmittance`` along the path.
+    outside_ior : float
+    n_range : (float, float), optional
+        Minimum and maximum of the index, as the viewing pass takes them (default: the field's).
+    rtol, atol, max_step, analytic
+        As :func:`trace_rays`; the path budget is the viewing pass's, ``4 (nx + ny + nz)`` voxels.
+
+    Returns
+    -------
+    dict
+        As :func:`~refraction_ref.volumetric.view.view_volume`: ``exit_pos``, ``exit_dir`` (R, 3; NaN
+        where stopped, ``exit_pos`` NaN and ``exit_dir = dirs`` where status 0), ``last_dir`` (R, 3: the
+        direction at the box exit for every ray that left it, bent or not; the primary direction for a
+        ray that missed the box; NaN where stopped), ``hit``, ``interfaces``, ``path_length``,
+        ``status`` (0 missed, 1 exited, 2 limit, 4 lost), ``transmittance`` (R, 3); and ``steps``,
+        ``evals``, ``drift`` per ray.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (viewing rays), eqs. 2-3 and 6.
+    """
+    org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+    R = len(org)
+    box = _geometry(bounds, field.shape)
+    if analytic is not None:
+        n_half, side = np.inf, 1.0
+    else:
+        if n_range is None:
+            nmin, nmax = float(field[..., 0].min()), float(field[..., 0].max())
+        else:
+            nmin, nmax = float(np.float32(n_range[0])), float(np.float32(n_range[1]))
+        far = nmax if abs(nmax - outside_ior) >= abs(nmin - outside_ior) else nmin
+        side = 1.0 if far >= outside_ior else -1.0
+        n_half = 0.5 * (outside_ior + far) if far != outside_ior else np.inf * side
+    t_in = np.array([box_entry_one(box.lo, box.hi, *org[r], *d[r]) for r in range(R)]) if R else np.zeros(0)
+    inb = np.isfinite(t_in)
+    idx = np.flatnonzero(inb)
+    start = org[idx] + t_in[idx, None] * d[idx]
+    nx, ny, nz = field.shape[:3]
+    res = trace_rays(field, bounds, start, d[idx], rtol=rtol, atol=atol, max_step=max_step,
+                     s_max=4.0 * (nx + ny + nz) * box.hmin, extinction=extinction, n_half=n_half, side=side,
+                     lost_relative=False, analytic=analytic)
+    status = np.full(R, MISSED, np.int8)
+    hit = np.zeros(R, np.bool_)
+    inter = np.zeros(R, np.int16)
+    plen = np.zeros(R)
+    trans = np.ones((R, 3))
+    exit_pos = np.full((R, 3), np.nan)
+    exit_dir = d.copy()
+    last_dir = d.copy()
+    steps = np.zeros(R, np.int32)
+    drift = np.zeros(R)
+    st = res["status"]
+    met = res["met"]
+    status[idx] = np.where((st == EXITED) & ~met, MISSED, st)
+    hit[idx] = met
+    inter[idx] = res["crossings"].astype(np.int16)
+    plen[idx] = res["path_length"]
+    trans[idx] = np.exp(-res["tau"])
+    steps[idx] = res["steps"]
+    drift[idx] = res["drift"]
+    out_ok = st == EXITED
+    ep = np.where(out_ok[:, None], res["end_pos"], np.nan)
+    ed = np.where(out_ok[:, None], res["end_dir"], np.nan)
+    last_dir[idx] = ed
+    exit_pos[idx] = np.where((out_ok & met)[:, None], ep, np.nan)
+    exit_dir[idx] = np.where((out_ok & met)[:, None], ed, np.where(out_ok[:, None], d[idx], np.nan))
+    evals = np.zeros(R, np.int64)
+    evals[idx] = res["evals"]
+    return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir, "hit": hit, "interfaces": inter,
+            "path_length": plen, "status": status, "transmittance": trans, "steps": steps, "evals": evals,
+            "drift": drift}
+
+
+def tolerance_sweep(field, bounds, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12), atol_ratio=1e-2, **kw):
+    """How far the exits move as the tolerance tightens: the convergence table of the reference.
+
+    Parameters
+    ----------
+    field, bounds, pos, dirs
+        As :func:`trace_rays`.
+    rtols : sequence of float
+        Relative tolerances, loosest first; ``atol = atol_ratio * rtol``.
+    atol_ratio : float
+    **kw
+        Passed to :func:`trace_rays` (``max_step``, ``analytic``, ...).
+
+    Returns
+    -------
+    list of dict
+        Per tolerance: ``rtol``, ``atol``, ``steps`` (mean accepted steps per ray), ``seconds``, and against
+        the next tighter one (None for the tightest) ``dpos_max``, ``dpos_p99`` (world units) and
+        ``ddir_max`` (radians) over the rays that exited at both, ``status_changed`` (count).
+
+    References
+    ----------
+    Hairer, Norsett, Wanner (1993), §II.4 (tolerance proportionality).
+    """
+    import time
+
+    runs = []
+    for rt in rtols:
+        t0 = time.perf_counter()
+        r = trace_rays(field, bounds, pos, dirs, rtol=rt, atol=atol_ratio * rt, **kw)
+        runs.append((rt, time.perf_counter() - t0, r))
+    rows = []
+    for i, (rt, sec, r) in enumerate(runs):
+        row = {"rtol": rt, "atol": atol_ratio * rt, "steps": float(np.mean(r["steps"])) if len(r["steps"]) else 0.0,
+               "seconds": sec, "dpos_max": None, "dpos_p99": None, "ddir_max": None, "status_changed": None}
+        if i + 1 < len(runs):
+            q = runs[i + 1][2]
+            both = (r["status"] == EXITED) & (q["status"] == EXITED)
+            dp = np.linalg.norm(r["end_pos"][both] - q["end_pos"][both], axis=1)
+            cosang = np.clip(np.sum(r["end_dir"][both] * q["end_dir"][both], axis=1), -1, 1)
+            dd = np.arccos(cosang)
+            row.update(dpos_max=float(dp.max()) if len(dp) else 0.0,
+                       dpos_p99=float(np.percentile(dp, 99)) if len(dp) else 0.0,
+                       ddir_max=float(dd.max()) if len(dd) else 0.0,
+                       status_changed=int(np.count_nonzero(r["status"] != q["status"])))
+        rows.append(row)
+    return rows
+
+
+def trace_rays_scipy(field, bounds, pos, dirs, *, rtol=RTOL, atol=ATOL, s_max=None, analytic=None):
+    """The same rays by ``scipy.integrate.solve_ivp(method="DOP853")`` itself, for checking (slow: Python per step).
+
+    A terminal event stops each ray where it leaves the box (the dense output's root, scipy's own). No
+    step cap, no receivers, no extinction.
+
+    Parameters
+    ----------
+    field, bounds, pos, dirs, rtol, atol, s_max, analytic
+        As :func:`trace_rays`.
+
+    Returns
+    -------
+    dict
+        ``status`` (1 exited, 2 at ``s_max``, 4 solver failure), ``end_pos``, ``end_dir`` (R, 3), ``steps``
+        (R,) (scipy's ``nfev``, right-hand-side evaluations), ``length`` (R,).
+
+    References
+    ----------
+    scipy.integrate.solve_ivp; Hairer, Norsett, Wanner (1993), §II.10.
+    """
+    from scipy.integrate import solve_ivp
+
+    fk, box = _field_tuple(field, bounds, None, analytic)
+    if s_max is None:
+        s_max = 8.0 * float(max(np.shape(field)[:3])) * box.hmin
+    pos = np.asarray(pos, np.float64).reshape(-1, 3)
+    dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
+    R = len(pos)
+    out = {"status": np.zeros(R, np.int8), "end_pos": np.full((R, 3), np.nan), "end_dir": np.full((R, 3), np.nan),
+           "steps": np.zeros(R, np.int64), "length": np.zeros(R)}
+    lo, hi = box.lo, box.hi
+
+    def fun(s, y):
+        o = np.empty(6)
+        _rhs(fk, y, o)
+        return o
+
+    def leave(s, y):
+        return float(min(np.min(y[:3] - lo), np.min(hi - y[:3])))
+
+    leave.terminal = True
+    leave.direction = -1
+    for r in range(R):
+        n0 = _sample(fk, *pos[r])[0]
+        y0 = np.concatenate([pos[r], n0 * dirs[r]])
+        sol = solve_ivp(fun, (0.0, s_max), y0, method="DOP853", rtol=rtol, atol=atol, events=leave)
+        if sol.status == 1 and len(sol.t_events[0]):
+            y = sol.y_events[0][0]
+            out["status"][r] = EXITED
+            out["length"][r] = sol.t_events[0][0]
+        else:
+            y = sol.y[:, -1]
+            out["status"][r] = LIMIT if sol.status == 0 else LOST
+            out["length"][r] = sol.t[-1]
+        out["end_pos"][r] = y[:3]
+        out["end_dir"][r] = y[3:] / np.linalg.norm(y[3:])
+        out["steps"][r] = sol.nfev
+    return out
