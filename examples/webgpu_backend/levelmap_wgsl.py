@@ -746,11 +746,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let face = textureLoad(vis, vec2<i32>(i32(j), i32(i)), 0).x;
     if (face > 0u) {
         let fv = water_face(face - 1u, u32(cam.sizes.x), cam.flags.x);
-        let h = mt(eye, D, verts[fv.x].xyz, verts[fv.y].xyz, verts[fv.z].xyz);
-        let t = h.x;
+        let va = verts[fv.x].xyz;
+        let vb = verts[fv.y].xyz;
+        let vc = verts[fv.z].xyz;
+        // Moller-Trumbore twice: from the eye, then again from that estimate of the hit (origin
+        // re-based): the barycentrics from a far origin lose |eye - v0| / |edge| ulps in float32
+        let h0 = mt(eye, D, va, vb, vc);
+        let o2 = eye + h0.x * D;
+        let h = mt(o2, D, va, vb, vc);
         let u = h.y;
         let v = h.z;
-        let p = eye + t * D;
+        let p = o2 + h.x * D;
         var n = (1.0 - u - v) * norms[fv.x].xyz + u * norms[fv.y].xyz + v * norms[fv.z].xyz;
         if ((cam.flags.x & FLAG_NEAREST_NORMAL) != 0u) {
             n = norms[fv.x].xyz;
