@@ -102,7 +102,9 @@ def render(scene=None, method="imagespace", overrides=None, progress=False, keep
         ``imagespace``: Chaudhari (2008); ``exact``: multi-interface Snell
         tracing through the actual triangles with Embree (for a scene with a
         ``water`` block: the exact water-caustics reference,
-        :mod:`refraction_ref.exact.water`); ``levelmap``: water
+        :mod:`refraction_ref.exact.water`; for a scene with a ``volume``: the
+        ray equation integrated to convergence by DOP853 on the volumetric
+        method's field, :mod:`refraction_ref.exact.volume`); ``levelmap``: water
         caustics, Tipprasert (2006); ``volumetric``: photon tracing through an
         index volume, Sun et al. (2008).
     overrides : dict, optional

@@ -339,7 +339,7 @@ def ignored_content(data, method):
     """A one-line warning when ``method`` reads none of the scene's content, else None.
 
     ``imagespace`` and ``exact`` on mesh scenes read ``objects``; ``volumetric`` reads ``objects`` or
-    ``volume``; ``levelmap`` reads ``water`` (and refuses a scene without it). A water-only scene rendered by
+    ``volume``, and ``exact`` reads ``volume`` where there is one (the graded-index reference); ``levelmap`` reads ``water`` (and refuses a scene without it). A water-only scene rendered by
     ``imagespace``, or a volume
     scene rendered by a method that cannot read volumes, would otherwise give an empty (or default) picture
     without a word.
@@ -358,8 +358,8 @@ def ignored_content(data, method):
     has_obj = bool(data.get("objects"))
     has_water = data.get("water") is not None
     has_vol = data.get("volume") is not None
-    if has_vol and method != "volumetric":
-        return (f"the scene's 'volume' block is read only by --method volumetric; {method} ignores it"
+    if has_vol and method not in ("volumetric", "exact"):  # exact: the graded-index reference (exact/volume.py)
+        return (f"the scene's 'volume' block is read only by --method volumetric (and exact); {method} ignores it"
                 + (" and renders the scene's objects (the default bunny where the scene gives no 'objects')" if has_obj
                    else " and renders an empty scene"))
     if method == "imagespace" and has_water and not has_obj:

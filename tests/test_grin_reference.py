@@ -151,3 +151,43 @@ def test_uniform_index_goes_straight():
     np.testing.assert_allclose(vw["exit_pos"], _box_exit(target, u), atol=1e-12)
     chord = np.linalg.norm(vw["exit_pos"] - (eye + ((1.0 - eye[:, 2]) / u[:, 2])[:, None] * u), axis=1)
     np.testing.assert_allclose(vw["path_length"], chord, rtol=1e-9)
+
+
+def _lens_scene(N=16, receivers=True):
+    sc = {"camera": {"width": 12, "height": 12, "eye": [0.0, 0.6, 3.0], "target": [0, -0.2, 0], "fov_y": 40},
+          "objects": [], "volume": {"ior": luneburg(N, 0.6), "bounds": BOUNDS.tolist()},
+          "lights": [{"type": "directional", "direction": [0.0, -1.0, 0.0], "radiance": [1, 1, 1]}],
+          "volumetric": {"photons": 16}}
+    if receivers:
+        sc["receivers"] = [{"mesh": "plane", "size": [1.6, 1.6], "transform": {"translate": [0.0, -1.4, 0.0]}}]
+    return sc
+
+
+def test_method_exact_on_a_volume_scene_is_the_reference():
+    """``render(scene, method="exact")`` on a volume scene runs the graded-index graph: the volumetric method's
+    photons (same starts, same count), converged exits on the box, per-pixel keys, caustic maps of the photons
+    that met the lens; the method's paths agree with it on most photons."""
+    import refraction_ref as rr
+
+    sc = _lens_scene()
+    ref = rr.render(sc, method="exact")
+    vol = rr.render(sc, method="volumetric")
+    assert ref.meta["stages"] == ["voxelize", "gradient", "photons", "receivers", "photon_trace", "caustics",
+                                  "trace", "shade"]
+    assert set(vol.arrays) - set(ref.arrays) == {"radiance", "direction", "photon_steps"}
+    assert set(ref.arrays) <= set(vol.arrays)
+    st = ref.arrays["photon_status"]
+    assert len(st) == len(vol.arrays["photon_status"])
+    assert np.all((st == EXITED) | (st == grin.RECEIVED))
+    ex = st == EXITED
+    p = ref.arrays["photon_exit_pos"][ex]
+    assert np.all(np.isclose(np.abs(p), 1.0, atol=1e-12).any(axis=1))  # on a face of the box
+    np.testing.assert_allclose(np.linalg.norm(ref.arrays["photon_exit_dir"][ex], axis=1), 1.0, atol=1e-12)
+    assert np.isnan(ref.arrays["photon_exit_pos"][~ex]).all()
+    assert np.mean(st == vol.arrays["photon_status"]) > 0.9
+    m = ref.arrays["caustic_map_0"]
+    assert m.sum() > 0 and np.isfinite(m).all()
+    s = ref.arrays["status"]
+    assert set(np.unique(s)) <= {0, 1} and (s == 1).any()
+    np.testing.assert_array_equal(np.isnan(ref.arrays["exit_pos"]).any(axis=-1), s != 1)
+    assert ref.arrays["image"].dtype == np.float32 and np.isfinite(ref.arrays["image"]).all()

@@ -275,7 +275,6 @@ def test_docs_sweep_lists_the_metrics_and_readme_points_to_docs():
 @pytest.mark.parametrize("raw,method,words", [
     ({"objects": [], "water": {}}, "imagespace", "ignores the scene's 'water'"),
     (_volume_scene(np.full((4, 4, 4), 1.2).tolist()), "imagespace", "read only by --method volumetric"),
-    (_volume_scene(np.full((4, 4, 4), 1.2).tolist()), "exact", "read only by --method volumetric"),
 ])
 def test_a_method_that_ignores_the_content_says_so(raw, method, words):
     from refraction_ref.scene import ignored_content
@@ -283,6 +282,15 @@ def test_a_method_that_ignores_the_content_says_so(raw, method, words):
     data = rr.load_scene({**raw, "camera": {"width": 8, "height": 8, "eye": [0, 2, 2.6]}}).data
     assert words in _one_line(ignored_content(data, method))
     assert ignored_content(rr.load_scene(TINY).data, "imagespace") is None
+
+
+def test_exact_reads_a_volume():
+    """``--method exact`` on a volume scene is the graded-index reference (exact/volume.py): no warning."""
+    from refraction_ref.scene import ignored_content
+
+    raw = _volume_scene(np.full((4, 4, 4), 1.2).tolist())
+    data = rr.load_scene({**raw, "camera": {"width": 8, "height": 8, "eye": [0, 2, 2.6]}}).data
+    assert ignored_content(data, "exact") is None
 
 
 def test_imagespace_on_water_only_scene_warns_on_the_cli(tmp_path):

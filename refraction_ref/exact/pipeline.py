@@ -12,6 +12,9 @@ stage               pass
 
 With lights and receivers the exact photon reference follows
 (:func:`refraction_ref.exact.caustics.exact_caustic_stages`). A scene with
+``volume`` is rendered by the converged graded-index reference
+(:mod:`refraction_ref.exact.volume`: the ray equation by DOP853 on the
+volumetric method's own field, photons and receivers). A scene with
 ``water`` is rendered by the exact water reference instead: the level map's
 ``water``, ``planes`` and ``level_map`` stages, then ``trace`` (jittered
 samples of the analytic surface, Embree first hits;
@@ -262,18 +265,30 @@ def _stages(scene):
     if scene.data.get("water") is not None:
         check_water_scene(scene)
         return _water_stages(scene)
+    if scene.data.get("volume") is not None:  # the graded-index reference (exact/volume.py)
+        from .volume import volume_stages
+
+        return volume_stages(scene)
     return _mesh_stages() + (exact_caustic_stages(scene) if has_caustics(scene) else ())
 
 
 def _skipped(scene):
     if scene.data.get("water") is not None:
         return []
+    if scene.data.get("volume") is not None:
+        from .volume import volume_skipped
+
+        return volume_skipped(scene)
     return [] if has_caustics(scene) else [{"stage": "caustics", "ran": False, "why": skip_reason(scene)}]
 
 
 def _assemble(scene, bufs, stats):
     if "water" in bufs:
         return water_arrays(bufs, "trace"), {"stats": stats["water_stats"], "triangles": stats["triangles"]}
+    if "photon_trace" in bufs and "grin" in bufs["photon_trace"]:
+        from .volume import volume_assemble
+
+        return volume_assemble(scene, bufs, stats)
     tr = bufs["trace"]
     arrays = {k: tr[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
                                  "path_length", "status")}
@@ -312,19 +327,26 @@ def _tiny(scene):
     over = {"camera.width": 16, "camera.height": 16, "exact.photons": 8, "caustics.map_size": 8}
     if scene.data.get("water") is not None:
         over.update({"water.resolution": 4, "exact.water_samples": 16})
+    if scene.data.get("volume") is not None:
+        over.update({"volumetric.photons": 4})
     return over
 
 
 def _params(scene):
-    """The blocks of ``meta["params"]``: the exact block, and the water's on a water scene."""
-    return ("exact", "water") if scene.data.get("water") is not None else ("exact",)
+    """The blocks of ``meta["params"]``: the exact block, and the water's on a water scene (the volumetric
+    block on a volume scene: its photons)."""
+    if scene.data.get("water") is not None:
+        return ("exact", "water")
+    return ("exact", "volumetric") if scene.data.get("volume") is not None else ("exact",)
 
 
 METHOD = register_method(Method(
     "exact", blocks=("exact",), stages=_stages, assemble=_assemble, skipped=_skipped, check=check_memory,
     warm=warmer("exact"), tiny=_tiny, params=_params, label="Embree reference",
-    results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final"),
-    doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface"))
+    results=("trace", "shade", "level_map.pairs", "image", "receivers.rs", "gather", "caustic_final",
+             "voxelize.ior", "voxelize.bounds", "photon_trace.grin", "caustics.arrays"),
+    doc="the exact reference: Embree mesh tracing; for water scenes exact sampling of the analytic surface; for "
+        "volume scenes the ray equation by DOP853, converged"))
 
 
 def render_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
