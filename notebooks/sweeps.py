@@ -4,7 +4,8 @@ A checkout's ``benchmarks/results/*.csv`` (made by ``refraction-ref sweep
 benchmarks/specs/*.json`` and the older ``benchmarks/sweep_*.py`` scripts) with
 their specs: :func:`committed` returns a sweep's rows, error and time columns and
 families; :func:`plot_families` draws error against time per family;
-:func:`pareto` picks the settings no other beats on both axes. Kept out of the
+:func:`plot_knob` draws error and time against the value of the knob a family
+varies; :func:`pareto` picks the settings no other beats on both axes. Kept out of the
 notebook so that its first plot comes early; nothing here computes an error.
 """
 
@@ -15,6 +16,10 @@ import json
 import os
 
 import numpy as np
+
+#: marker and dash of the n-th line :func:`plot_families` draws (with colour C{n % 10})
+MARKERS = "osD^vP*Xh<>"
+DASHES = ["-", "--", ":"]
 
 #: where :func:`load` and :func:`committed` read; set by the notebook (``RESULTS_DIR``) or :func:`results_dir`
 RESULTS = None
@@ -120,14 +125,80 @@ def plot_families(ax, S, families=None, split=None, annotate=True, logx=True, lo
                               for k, v in zip(others, sk) if len({r.get(k) for r in rr_}) > 1)
             x = [r[S["time"]] for r in pts]
             y = [r[S["err"]] for r in pts]
-            ax.plot(x, y, "o-", ms=3, lw=0.7, color=f"C{n % 10}", label=fam + (f" ({extra})" if extra else ""))
+            # one colour, marker and dash per series, so that overlapping lines stay apart
+            ax.plot(x, y, marker=MARKERS[n % len(MARKERS)], ls=DASHES[(n // 10) % len(DASHES)], ms=5, lw=1.4,
+                    color=f"C{n % 10}", alpha=0.85, label=fam + (f" ({extra})" if extra else ""))
             if annotate:
                 for r in pts:
                     v = r.get(info["label"])
-                    ax.annotate(f"{v:g}" if isinstance(v, float) else str(v), (r[S["time"]], r[S["err"]]), fontsize=6)
+                    ax.annotate(f"{v:g}" if isinstance(v, float) else str(v), (r[S["time"]], r[S["err"]]), fontsize=8,
+                                xytext=(3, 3), textcoords="offset points", color=f"C{n % 10}")
             n += 1
     if logx:
         ax.set_xscale("log")
+        plain_log_ticks(ax.xaxis)
     if logy:
         ax.set_yscale("log")
+        plain_log_ticks(ax.yaxis)
     ax.set_xlabel(S["time"].replace("_", " ")); ax.set_ylabel(S["err"].replace("_", " "))
+
+
+def plain_log_ticks(axis):
+    """Ticks of a log axis at 1, 2, 5 x 10^k (more under a decade) written as plain numbers (0.5, 2, 20)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax = axis.axes
+    lo, hi = sorted(ax.get_ylim() if axis is ax.yaxis else ax.get_xlim())   # (get_ylim settles the autoscaling)
+    span = hi / lo if lo > 0 else np.inf      # under a decade: more ticks, so that at least two are labelled
+    subs = ((1.0, 1.2, 1.4, 1.6, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0) if span < 3 else
+            (1.0, 1.5, 2.0, 3.0, 5.0, 7.0) if span < 10 else (1.0, 2.0, 5.0))
+    axis.set_major_locator(LogLocator(subs=subs))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _order(v):
+    return (0, v, "") if isinstance(v, (int, float)) else (1, 0, str(v))
+
+
+def plot_knob(ax_err, ax_time, S, families, split=None):
+    """Error (``ax_err``) and time (``ax_time``, or None) against the value of the knob the families vary.
+
+    One line per family and value of ``split`` (a column, e.g. ``"integrator"``); the families must vary the same
+    knob. A numeric knob spanning more than a factor 20 gets a log axis ticked at its values; a text knob one tick per
+    value.
+    """
+    labs = {S["families"][f]["label"] for f in families}
+    if len(labs) != 1:
+        raise ValueError(f"families {families} vary different knobs: {sorted(labs)}")
+    lab = labs.pop()
+    rows = [r for r in S["rows"] if r.get("family") in families and S["err"] in r and S["time"] in r and lab in r]
+    vals = sorted({r[lab] for r in rows}, key=_order)
+    numeric = all(isinstance(v, (int, float)) for v in vals)
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["family"], r.get(split) if split else None), []).append(r)
+    for n, ((fam, g), rs) in enumerate(sorted(groups.items(), key=lambda t: (families.index(t[0][0]), str(t[0][1])))):
+        rs = sorted(rs, key=lambda r: _order(r[lab]))
+        x = [r[lab] if numeric else vals.index(r[lab]) for r in rs]
+        name = (fam if len(families) > 1 else "") + (f"{', ' if len(families) > 1 else ''}{g}" if split else "")
+        # lines that coincide (equal errors) stay visible: the first widest, the next dashed and thinner on top
+        kw = dict(marker=MARKERS[n % len(MARKERS)], color=f"C{n % 10}", lw=2.6 - 0.8 * (n % 3), ms=7 - 2 * (n % 3),
+                  ls=DASHES[n % len(DASHES)], label=name or None)
+        ax_err.plot(x, [r[S["err"]] for r in rs], **kw)
+        if ax_time is not None:
+            ax_time.plot(x, [r[S["time"]] for r in rs], **kw)
+    from matplotlib.ticker import FuncFormatter
+
+    for a in (ax_err, ax_time):
+        if a is None:
+            continue
+        if numeric and min(vals) > 0 and max(vals) / min(vals) > 20:
+            a.set_xscale("log")
+            a.set_xticks(vals)
+            a.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            a.minorticks_off()
+        elif not numeric:
+            a.set_xticks(range(len(vals)), [str(v) for v in vals])
+        a.set_xlabel(lab.split(".")[-1])
+    return lab
