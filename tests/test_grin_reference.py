@@ -15,6 +15,9 @@ Numerical truths:
 
 from __future__ import annotations
 
+import os
+import re
+
 import numpy as np
 import pytest
 
@@ -163,6 +166,25 @@ def _lens_scene(N=16, receivers=True):
     return sc
 
 
+def _doc_buffers(text, title):
+    """stage -> buffer names of the oracle's Stage buffers table under the heading starting with ``title``."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(title))
+    out, stage = {}, None
+    for ln in lines[start + 1:]:
+        if ln.startswith("#"):
+            break
+        cells = [c.strip() for c in ln.split("|")[1:-1]]
+        if len(cells) < 2 or (cells[0] and set(cells[0]) <= {"-"}):
+            continue
+        if cells[0]:
+            names = re.findall(r"`([a-z_]+)`", cells[0])
+            stage = names[0] if names else None
+        for name in re.findall(r"`([a-z_]+)`", cells[1]):
+            out.setdefault(stage, set()).add(re.sub(r"(_[rl])+$", "", name))
+    return out
+
+
 def test_method_exact_on_a_volume_scene_is_the_reference():
     """``render(scene, method="exact")`` on a volume scene runs the graded-index graph: the volumetric method's
     photons (same starts, same count), converged exits on the box, per-pixel keys, caustic maps of the photons
@@ -170,12 +192,20 @@ def test_method_exact_on_a_volume_scene_is_the_reference():
     import refraction_ref as rr
 
     sc = _lens_scene()
-    ref = rr.render(sc, method="exact")
+    ref = rr.render(sc, method="exact", keep="stages")
     vol = rr.render(sc, method="volumetric")
     assert ref.meta["stages"] == ["voxelize", "gradient", "photons", "receivers", "photon_trace", "caustics",
                                   "trace", "shade"]
-    assert set(vol.arrays) - set(ref.arrays) == {"radiance", "direction", "photon_steps"}
-    assert set(ref.arrays) <= set(vol.arrays)
+    final = {k for k in ref.arrays if not k.startswith("stage.")}
+    assert set(vol.arrays) - final == {"radiance", "direction", "photon_steps"}
+    assert final <= set(vol.arrays)
+    # every stage buffer is in docs/oracle.md: the volumetric method's stages in its table, ours in ours
+    doc = open(os.path.join(os.path.dirname(__file__), "..", "docs", "oracle.md")).read()
+    ours, theirs = _doc_buffers(doc, "### `exact` (volume scenes)"), _doc_buffers(doc, "### `volumetric` (Sun")
+    for key in (k for k in ref.arrays if k.startswith("stage.")):
+        _, stage, buf = key.split(".", 2)
+        table = ours if stage in ("photon_trace", "caustics", "trace", "shade") else theirs
+        assert re.sub(r"(_\d+)+$", "", buf) in table.get(stage, ()), key
     st = ref.arrays["photon_status"]
     assert len(st) == len(vol.arrays["photon_status"])
     assert np.all((st == EXITED) | (st == grin.RECEIVED))
