@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 __all__ = ["Table", "Claim", "Report", "HELD", "NOT_HELD", "NOT_MEASURED", "NOT_COMPARABLE", "BY_CONSTRUCTION", "SPLIT",
            "VERDICTS", "EVIDENCE", "BUSY", "LoadProbe", "straddles",
            "cpu_jiffies", "other_load", "TABLE_THREADS", "table_threads", "Spread", "spread", "ratio_spread",
-           "time_rounds"]
+           "time_rounds", "readings_table"]
 
 HELD, NOT_HELD, NOT_MEASURED, NOT_COMPARABLE = "held", "not held", "not measured", "not comparable"
 #: a row whose outcome follows from how the code is built (a formula the tables compute, code the two sides
@@ -360,3 +360,27 @@ def time_rounds(fns, repeats, warmup=1, sample=None, timer=time.perf_counter, th
                 t1 = timer()
                 out[k].append(float(sample(r)) if sample is not None else t1 - t0)
     return out
+
+
+def readings_table(key, paper, rows):
+    """A paper's "readings in use": where a knob's default or a tables set-up rests on our reading of the paper.
+
+    Parameters
+    ----------
+    key : str
+        The table's file-safe key (``"<paper>_readings"``).
+    paper : str
+        The paper's name, for the title.
+    rows : list of (str, str, str, str)
+        (knob or set-up and its value, what the paper says, our reading, the rows it decides and what the
+        other reading gives where measured).
+
+    Returns
+    -------
+    Table
+    """
+    return Table(key, f"Readings in use ({paper}): where a default or a set-up is our reading of the paper",
+                 ["knob or set-up (value)", "the paper", "our reading", "rows it decides; the other reading"],
+                 [list(r) for r in rows],
+                 note=("Every reading the claims above rest on, whether or not docs/oracle.md's table 'Where a "
+                       "default is our reading of the paper' lists it; the numbers are this run's."))

@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from .common import BY_CONSTRUCTION, HELD, NOT_HELD, Claim, Report, Table, ratio_spread, straddles
+from .common import BY_CONSTRUCTION, HELD, NOT_HELD, Claim, Report, Table, ratio_spread, spread, straddles
 
 __all__ = ["run", "uv_sphere", "model_scene", "thesis_rows", "SUN_TOP"]
 
@@ -257,6 +257,56 @@ VARIANTS = (("normal", {"levelmap.smart_slicing": False}),
             ("volumetric", {"levelmap.variant": "volumetric"}))
 
 
+def slice_setup(scene):
+    """What the volumetric baseline's slice images read, for one model scene (its one receiver and light).
+
+    Parameters
+    ----------
+    scene : Scene
+        :func:`model_scene`'s scene.
+
+    Returns
+    -------
+    (RasterSetup, Box, str)
+        The receiver's triangles set up in the box's map, the box, ``caustics.placement``.
+    """
+    from ..levelmap.pipeline import prepare
+
+    ctx = prepare(scene)
+    pair = ctx["pairs"][0][0]
+    return pair.setup, pair.box, ctx["placement"]
+
+
+def slice_images_ms(prep, n):
+    """T(I) of eq. 5-3: the baseline's slice images for ``n`` sample planes, timed alone (ms).
+
+    One orthographic rasterization of the receiver per slab (the slab between the water and the box, then
+    one per plane: ``n + 1``), as :func:`~refraction_ref.levelmap.volumetric.volumetric_caustics` draws them
+    before each plane's splat.
+
+    Parameters
+    ----------
+    prep : tuple
+        :func:`slice_setup`'s result.
+    n : int
+        Sample planes.
+
+    Returns
+    -------
+    float
+    """
+    from ..levelmap.planes import plane_lattice
+    from ..raster import rasterize_ortho
+
+    setup, box, placement = prep
+    lat = plane_lattice(box, n, placement)
+    t0 = time.perf_counter()
+    rasterize_ortho(setup, box.size, slab=(lat.zlo, lat.s, -np.inf, -1.0))
+    for i in range(n):
+        rasterize_ortho(setup, box.size, slab=(lat.zlo, lat.s, float(i), float(i)))
+    return (time.perf_counter() - t0) * 1e3
+
+
 def measure(meshes, planes, repeats, size=None, log=print):
     """Rows of every table: per (model, planes) the medians of interleaved repeats of each variant.
 
@@ -281,6 +331,11 @@ def measure(meshes, planes, repeats, size=None, log=print):
                 scenes[(n, k)] = load_scene(base, o)
         for sc in scenes.values():  # untimed: loads the model, touches the buffers
             _timed(sc)
+        sprep = slice_setup(scenes[(planes[0], "normal")])
+        for n in planes:  # untimed: the rasterizer's first call of each slab count
+            slice_images_ms(sprep, n)
+        t_i = {n: [] for n in planes}  # T(I): the baseline's slice images alone
+        t_dp = {n: [] for n in planes}  # T(DP): the level map's position and diffuse maps (its level_map stage)
         times = {key: [] for key in scenes}
         caus = {key: [] for key in scenes}  # the caustics stage alone: where the planes' work is
         prof = {key: [] for key in scenes}  # smart slicing's depth profiling, every repeat (its median is reported)
@@ -293,6 +348,9 @@ def measure(meshes, planes, repeats, size=None, log=print):
                 times[key].append(t)
                 caus[key].append(info["timings_ms"]["caustics"])
                 prof[key].append(info["timings_ms"].get("caustics.smart_slicing", 0.0))
+                if key[1] == "normal":
+                    t_dp[key[0]].append(info["timings_ms"]["level_map"])
+                    t_i[key[0]].append(slice_images_ms(sprep, key[0]))
                 last[key] = (arrays, info)
         for n in planes:
             med = {k: statistics.median(times[(n, k)]) for k, _ in VARIANTS}
@@ -310,6 +368,12 @@ def measure(meshes, planes, repeats, size=None, log=print):
                    "rounds": {k: list(times[(n, k)]) for k, _ in VARIANTS},
                    "caustics_rounds": {k: list(caus[(n, k)]) for k, _ in VARIANTS},
                    "profiling_ms": statistics.median(prof[(n, "smart")]),
+                   # per round: the thesis's smart slicing (respace): depth profiling, and the caustics stage
+                   # less it (the intersection test: the planes' intersection triangles, depth-tested)
+                   "profiling_rounds": list(prof[(n, "respace")]),
+                   "intersection_rounds": [c - q for c, q in zip(caus[(n, "respace")], prof[(n, "respace")])],
+                   "t_i_rounds": list(t_i[n]), "t_dp_rounds": list(t_dp[n]),
+                   "t_i_ms": statistics.median(t_i[n]), "t_dp_ms": statistics.median(t_dp[n]),
                    "caustics_normal_ms": cm["normal"], "caustics_smart_ms": cm["smart"],
                    "caustics_volumetric_ms": cm["volumetric"],
                    "planes_used": ism["planes_used"], "planes_respaced": irs["planes_used"],
@@ -562,6 +626,52 @@ def placement_table(rows, ms, es):
                    _r(r["rel_l1"], 4), _r(r["peak"], 3)] for r in rows], note)
 
 
+def readings(prow, ms):
+    """The readings the Tipprasert rows rest on (:func:`.common.readings_table`), eq. 4-3's with this run's numbers.
+
+    Parameters
+    ----------
+    prow : list of dict
+        :func:`placement_study`'s rows.
+    ms : int
+        Their map side.
+
+    Returns
+    -------
+    Table
+    """
+    from ..scene import load_scene
+    from .common import readings_table
+
+    lm = load_scene({}).data["levelmap"]
+    by = {}
+    for r in prow:
+        by.setdefault((r["scene"].split(" (")[0], r["receiver"]), {})[r["reading"].split(" (")[0]] = r["rel_l1"]
+    eq43 = "; ".join(f"{rec} in {sc}: {v['full norm']:.3f} full norm, {v['component along each axis']:.3f} component"
+                     for (sc, rec), v in by.items())
+    better = sum(v["component along each axis"] < v["full norm"] for v in by.values())
+    return readings_table("tipprasert_readings", PAPER, [
+        ("caustics.placement (component)", "eq. 4-3: w, h, d = 2|P_x|, 2|P_y|, 2|P_z|", "|P_a| as the farthest "
+         "vertex's component along axis a (the box about P_0 enclosing the receiver)",
+         f"every level-map row (the boxes); against the exact water reference at {ms}^2, rel L1 ({better} of "
+         f"{len(by)} receivers closer with the component reading): {eq43}"),
+        ("levelmap.smart_spacing (respace) and eq. 4-22's n_i (planes)", "§4.7.2: each sub-box re-sliced, n_i from "
+         "eq. 4-22, planes or slices not said", "the thesis's re-slicing, n_i planes per sub-box",
+         "Tables 5-3, 5-4, 5-5, smart slicing and profiling rows"),
+        (f"levelmap.depth_levels ({lm['depth_levels']})", "§4.7.2: 'The number of divided depth level is "
+         "specified by user' (no number)", f"{lm['depth_levels']} levels", "Tables 5-3 to 5-5, smart slicing, "
+         "profiling, Fig. 5-12"),
+        ("eq. 2-9's image difference", "§2.7: a Luv difference of two images", "averaged over the receiver's "
+         "pixels (object_mask), not the whole image", "Table 5-5"),
+        ("the light of the tables", "not stated for Experiments 1 and 2", "a directional light from straight above "
+         "(0, -1, 0)", "every Table 5-1 to 5-5 row"),
+        ("levelmap.culling (none)", "Figs. 4-15, 5-7: every intersection triangle drawn on every plane",
+         "none in the tables (the thesis's per-plane work); bounds is §6.1's proposal", "every timing row; §6.1"),
+        ("eq. 4-1's N", "chosen at random", "the world z axis (x when z is nearly parallel to V)", "every level-map "
+         "row (reproducible boxes)"),
+    ])
+
+
 QUOTE_5_1 = ("From graphs and table, the result from experimental program supports our assumption; the level map "
              "algorithm outperforms volumetric algorithm in all cases.")
 QUOTE_LINEAR = ("It is obvious that the processing time for illumination map creation has a direct variation with "
@@ -600,6 +710,11 @@ def claims(rows):
     list of Claim
     """
     out = []
+    counts = sorted({r["planes"] for r in rows})
+    pdiff = (f"{len(counts)} plane counts ({', '.join(map(str, counts))}) where the thesis's tables have every count "
+             "from 3 to 101; " + ("the bunny stands for the dolphin; " if any(r["thesis_mesh"] == "dolphin" for r in rows)
+                                  else "no dolphin; ")
+             + "times on one CPU thread, the thesis's on a GeForce 6800")
     # per cell the median of the per-round ratios (both variants timed within moments of each other) and its spread
     vr = [ratio_spread(r["rounds"]["volumetric"], r["rounds"]["normal"]) for r in rows]
     ratio = [x.median for x in vr]
@@ -618,35 +733,58 @@ def claims(rows):
                      construction=("our baseline renders the level map's position and diffuse maps too (its slices "
                                    "take their triangles' set-up from that pass), then draws the same intersection "
                                    "triangles over the same maps, plus one slice image per plane: it does strictly "
-                                   "more work than the level map, so it is slower in every cell")))
-    r2s, why, rounds_r2 = [], [], []
+                                   "more work than the level map, so it is slower in every cell"),
+                     differs=pdiff))
+    # the falsifiable part of the thesis's argument (eqs. 5-3 to 5-7): T(DP) <= T(I), per cell
+    ir = [ratio_spread(r["t_i_rounds"], r["t_dp_rounds"]) for r in rows]
+    k = min(range(len(rows)), key=lambda i: ir[i].median)
+    ok = all(x.median > 1.0 for x in ir)
+    out.append(Claim(PAPER, "§5.2.4, Experiment 1, Table 5-1", QUOTE_5_1, HELD if ok else NOT_HELD,
+                     f"T(I) / T(DP) >= {ir[k].text('x')} ({rows[k]['mesh']}, {rows[k]['planes']} planes: slice images "
+                     f"{rows[k]['t_i_ms']:.1f} ms against the position and diffuse maps {rows[k]['t_dp_ms']:.1f} ms); "
+                     f"median over the cells {statistics.median(x.median for x in ir):.2f}x",
+                     "Even at the fewest planes the baseline's slice images cost more than the level map's one pass "
+                     "of position and diffuse maps (eq. 5-6), the only term in which the two differ (eqs. 5-1, 5-2)."
+                     if ok else
+                     "At the fewest planes the baseline's few slice images cost less than the level map's position "
+                     "and diffuse maps here, so eq. 5-6 (T(DP) <= T(I)) fails there: the level map is not faster "
+                     "in all cases on the terms in which the two algorithms differ.",
+                     rule="The terms in which the two algorithms differ (eqs. 5-1 to 5-6): held if, in every (model, "
+                          "planes) cell, the baseline's slice images T(I) (n + 1 orthographic rasterizations of the "
+                          "receiver, timed alone) take longer than the level map's position and diffuse maps T(DP) "
+                          "(its level_map stage): the median over interleaved repeats of each round's T(I) / T(DP) "
+                          "above 1, one thread.", timing=True,
+                     straddles=any(straddles(x.low, x.high, 1.0) for x in ir), differs=pdiff))
+    r2s, why, rounds_r2, slopes = [], [], [], []
     for mesh in dict.fromkeys(r["mesh"] for r in rows):
         rs = [r for r in rows if r["mesh"] == mesh]
         x = [r["planes"] for r in rs]
-        r2v, slope = _linear_r2(x, [r["caustics_volumetric_ms"] for r in rs])
-        r2l, slope_l = _linear_r2(x, [r["caustics_normal_ms"] for r in rs])
-        r2t, _ = _linear_r2(x, [r["levelmap_s"] for r in rs])
-        r2s.append(min(r2v, r2l))
+        r2i, slope_i = _linear_r2(x, [r["t_i_ms"] for r in rs])
+        r2d, slope_d = _linear_r2(x, [r["t_dp_ms"] for r in rs])
+        r2v, _ = _linear_r2(x, [r["caustics_volumetric_ms"] for r in rs])
+        r2s.append(r2i)
+        slopes.append(slope_i)
         # the same fit on each round alone: how far one round's verdict could stray from the medians'
-        per = [min(_linear_r2(x, [r["caustics_rounds"][k][i] for r in rs])[0] for k in ("volumetric", "normal"))
-               for i in range(len(rs[0]["caustics_rounds"]["normal"]))]
+        per = [_linear_r2(x, [r["t_i_rounds"][i] for r in rs])[0] for i in range(len(rs[0]["t_i_rounds"]))]
         rounds_r2 += per
-        why.append(f"{mesh}: caustics stage R^2 {r2v:.3f} volumetric, {r2l:.3f} level map ({slope:.1f}, "
-                   f"{slope_l:.1f} ms per plane; single rounds R^2 >= {min(per):.3f}, n = {len(per)}); whole render "
-                   f"R^2 {r2t:.2f}")
-    ok = all(x > 0.9 for x in r2s if x == x)
+        intercept = float(np.polyfit(x, [r["t_i_ms"] for r in rs], 1)[1])
+        why.append(f"{mesh}: T(I) R^2 {r2i:.3f}, {slope_i:.2f} ms per plane, intercept {intercept:.1f} ms "
+                   f"(single rounds R^2 >= {min(per):.3f}, n = {len(per)}); T(DP) {min(r['t_dp_ms'] for r in rs):.1f}-"
+                   f"{max(r['t_dp_ms'] for r in rs):.1f} ms ({slope_d:+.2f} ms per plane); the baseline's whole "
+                   f"caustics stage R^2 {r2v:.3f}")
+    ok = all(x > 0.9 for x in r2s if x == x) and all(sl > 0 for sl in slopes)
     out.append(Claim(PAPER, "§5.2.4, Experiment 1 (eqs. 5-3 to 5-6)", QUOTE_LINEAR, HELD if ok else NOT_HELD,
                      "; ".join(why),
-                     "Every plane costs a slice image and a full-map pass of the intersection triangles "
-                     "(levelmap.culling = none, the thesis's per-plane work), so the caustics stage grows linearly "
-                     "with the plane count; the whole render less so, its fixed passes (maps, the 512^2 view through "
-                     "the water) weighing more on a CPU than on the thesis's GPU." if ok else
-                     "The caustics stage does not grow linearly with the planes on every model here (a loaded "
-                     "machine's noise, or fixed costs larger than the per-plane work).",
-                     rule="Held if a straight line in the plane count explains the caustics stage's time (the median "
-                          "of interleaved repeats after an untimed render, one thread) with R^2 > 0.9 for both "
-                          "algorithms on every model.", timing=True,
-                     straddles=straddles(min(rounds_r2), max(rounds_r2), 0.9)))
+                     "One slice image per plane: the illumination map's creation grows in step with the sample "
+                     "planes, while the level map's two maps do not change with them." if ok else
+                     "The slice images' time does not grow linearly with the planes on every model here (a loaded "
+                     "machine's noise, or a fixed cost per frame larger than the per-plane work).",
+                     rule="T(I) as the thesis means it (eq. 5-3): the volumetric baseline's slice-image creation, n + 1 "
+                          "orthographic rasterizations of the receiver timed alone, per plane count (the median of "
+                          "interleaved repeats after an untimed pass, one thread). Held if a straight line in the "
+                          "plane count explains it with R^2 > 0.9 and a positive slope on every model; the level "
+                          "map's position and diffuse maps T(DP) are shown beside it.", timing=True,
+                     straddles=straddles(min(rounds_r2), max(rounds_r2), 0.9), differs=pdiff))
     sr = [ratio_spread(r["rounds"]["normal"], r["rounds"]["respace"]) for r in rows]
     cells = [(r["mesh"], r["planes"], x.median, ratio_spread(r["rounds"]["normal"], r["rounds"]["smart"]).median)
              for r, x in zip(rows, sr)]
@@ -732,16 +870,25 @@ def claims(rows):
                                    "kernel (levelmap/volumetric.py calls splat_plane with the same planes): the images "
                                    "are identical by design, so the row tests our code, not the thesis's two "
                                    "algorithms")))
-    frac = [r["profiling_ms"] / (1e3 * r["smart_s"]) for r in rows]  # medians of the repeats, both
-    ok = max(frac) < 0.05
+    # per cell the median over the rounds of each round's depth profiling / intersection test (thesis's smart slicing)
+    frac = [spread([q / max(c, 1e-9) for q, c in zip(r["profiling_rounds"], r["intersection_rounds"])]) for r in rows]
+    whole = [r["profiling_ms"] / (1e3 * r["smart_s"]) for r in rows]
+    k = max(range(len(rows)), key=lambda i: frac[i].median)
+    ok = frac[k].median < 0.05
     out.append(Claim(PAPER, "§5.2.4, Experiment 2 (depth profiling cost)", QUOTE_PROFILE, HELD if ok else NOT_HELD,
-                     f"depth profiling {100 * max(frac):.1f} % of the smart-slicing render at most "
-                     f"(median {100 * statistics.median(frac):.1f} %)",
+                     f"depth profiling / intersection test at most {100 * frac[k].median:.1f} % ({rows[k]['mesh']}, "
+                     f"{rows[k]['planes']} planes; rounds {100 * frac[k].low:.1f}-{100 * frac[k].high:.1f} %), median "
+                     f"over the cells {100 * statistics.median(f.median for f in frac):.1f} %; against the whole "
+                     f"render at most {100 * max(whole):.1f} %",
                      "One pass over the position map (parallel over rows) against a full-map pass of the intersection "
-                     "triangles per plane.",
-                     rule="Held if depth profiling takes less than 5% of the smart-slicing render in every cell (the "
-                          "median of each over interleaved repeats after an untimed render, one thread).",
-                     timing=True))
+                     "triangles per plane." if ok else
+                     "Where smart slicing leaves few planes the intersection test is short, and the profiling pass "
+                     "over the whole position map is a visible part of it.",
+                     rule="Against the intersection test, as the sentence compares: held if depth profiling (with the "
+                          "thesis's re-slicing, smart_spacing = respace) takes less than 5% of the intersection test "
+                          "(the caustics stage less the profiling) in every cell: per cell the median over "
+                          "interleaved repeats of each round's ratio, one thread.", timing=True,
+                     straddles=any(straddles(f.low, f.high, 0.05) for f in frac), differs=pdiff))
     return out
 
 
@@ -867,7 +1014,7 @@ def run(quick=False, out=".", log=print):
     log("Tipprasert 2006: eq. 4-3 read two ways, against the exact water reference ...")
     prow, ms, es = placement_study(quick, log)
     plots = plot(rows, out)
-    rep = Report(PAPER, tables(rows, note, plots) + [placement_table(prow, ms, es)], claims(rows))
+    rep = Report(PAPER, tables(rows, note, plots) + [placement_table(prow, ms, es), readings(prow, ms)], claims(rows))
     rep.seconds = time.perf_counter() - t0
     rep.rows = rows  # the raw measurements (benchmarks/levelmap_tables.py writes them to CSV)
     return rep
