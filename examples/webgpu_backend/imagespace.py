@@ -998,7 +998,7 @@ def render_case(scene_path, bugs=(), timer=None):
     res["image_refraction" if caustics else "image"] = st["shade"]["image"]
     if caustics and os.path.exists(os.path.join(HERE, "imagespace_caustics.py")):
         cmod = caustics_module()
-        res.update(cmod.run_caustics(sys.modules[__name__], data, view, k, mat, V, F, out, st, bugs, timer))
+        res.update(cmod.run_caustics(SimpleNamespace(**globals()), data, view, k, mat, V, F, out, st, bugs, timer))
     return res
 
 
