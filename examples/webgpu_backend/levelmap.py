@@ -509,11 +509,14 @@ def slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags):
     respace = bool(lm["smart_slicing"])
     hist = gpu.storage(nbytes=4 * L)
     pidx = gpu.storage(nbytes=4 * Hc * Wc)
+    nb = max(n_planes, L * max(n_planes, 1)) if respace else n_planes   # more than any plane count
+    bounds = gpu.storage(np.tile(np.array([0xFFFFFFFF, 0xFFFFFFFF, 0, 0], np.uint32), nb))
     u = gpu.uniform((h, L, Hc, Wc), (1.0 if respace else 0.0, n_planes, pl["zlo"], pl["s"]), ("u", flags))
     posv, difv = gpu.layer(tex["pos"], l), gpu.layer(tex["dif"], l)
     if respace:
         dummy_lb, dummy_b = gpu.storage(np.zeros(L, np.int32)), gpu.storage(np.zeros(4, np.float32))
-        gpu.dispatch(gpu.compute(src, "profile"), [u, posv, difv, hist, dummy_lb, dummy_b, pidx], Hc * Wc)
+        gpu.dispatch(gpu.compute(src, "profile"), [u, posv, difv, hist, dummy_lb, dummy_b, pidx, bounds],
+                     Hc * Wc)
         counts = gpu.read(hist, np.uint32, (L,))
         # the sub-boxes: runs of non-empty levels, each re-sliced by eq. 4-22 and §4.2.1
         level_box = np.full(L, -1, np.int32)
@@ -543,21 +546,31 @@ def slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags):
         used = np.arange(len(zeta), dtype=np.int64)
         gpu.dispatch(gpu.compute(src, "accept"),
                      [u, posv, difv, hist, gpu.storage(level_box), gpu.storage(np.asarray(boxes or [[0] * 4], np.float32)),
-                      pidx], Hc * Wc)
+                      pidx, bounds], Hc * Wc)
     else:
         zeta = pl["zeta"]
         used = np.arange(n_planes, dtype=np.int64)
         gpu.dispatch(gpu.compute(src, "accept"),
                      [u, posv, difv, hist, gpu.storage(np.zeros(L, np.int32)), gpu.storage(np.zeros(4, np.float32)),
-                      pidx], Hc * Wc)
+                      pidx, bounds], Hc * Wc)
     eps = pl["s"] / 2.0
     if respace and len(zeta) > 1:
         eps = float(np.min(np.diff(zeta))) / 2.0
-    return zeta, used, pidx, eps
+    scissor = None
+    if lm["culling"] == "bounds":                 # each plane's accepted texels: (x, y, w, h), None if none
+        b = gpu.read(bounds, np.uint32, (nb, 4))[:len(zeta)]
+        scissor = [None if r_[2] < r_[0] else (int(r_[0]), int(r_[1]), int(r_[2] - r_[0] + 1), int(r_[3] - r_[1] + 1))
+                   for r_ in b]
+    return zeta, used, pidx, eps, scissor
 
 
-def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags, bugs):
-    """Every beam's intersection triangle on every used plane, splatted additively (render pipeline)."""
+def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags, bugs, scissor=None):
+    """Every beam's intersection triangle on every used plane, splatted additively (render pipeline).
+
+    ``scissor`` (``culling = bounds``, §6.1): per plane the rectangle of the texels it accepts, or
+    None where it accepts none (nothing drawn); without it every plane is drawn over the whole map
+    (``culling = none``, the thesis's cost). The maps are the same either way.
+    """
     c, U, V, W, ext = _box_rows(box, Hc, Wc)
     texel_area = (ext[0] / Wc) * (ext[2] / Hc)
     u = gpu.uniform(tuple(c) + (Hc,), tuple(U) + (Wc,), tuple(V) + (K,), tuple(W) + (texel_area,),
@@ -582,6 +595,11 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
             {"view": gpu.layer(tex["cmap"], l), "load_op": "clear" if q == 0 else "load", "store_op": "store",
              "clear_value": (0, 0, 0, 0)},
             {"view": gpu.layer(pm, q), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)}])
+        if scissor is not None and "threshold_test" not in bugs:
+            if scissor[used[q]] is None:
+                rp.end()
+                continue
+            rp.set_scissor_rect(*scissor[used[q]])
         rp.set_pipeline(p)
         rp.set_bind_group(0, bg)
         rp.draw(3 * wat["nf"], 1, 0, q)           # instance index = the plane
@@ -785,9 +803,10 @@ def render(scene, bugs=(), timer=None):
             with timer("level_map"):
                 level_map_pass(gpu, mine, albedo, box, r, R_depth, Hc, Wc, tex, l, flags, bugs)
             with timer("smart_slicing"):
-                zeta, used, pidx, eps = slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags)
+                zeta, used, pidx, eps, scissor = slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags)
             with timer("caustics"):
-                pm, k = caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags, bugs)
+                pm, k = caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags, bugs,
+                                      scissor)
             out[f"stage.planes.box_{tag}"] = box
             out[f"stage.caustics.planes_{tag}"] = np.asarray(zeta, np.float64)
             out[f"stage.caustics.planes_used_{tag}"] = used

@@ -259,6 +259,7 @@ struct Slice {
 @group(0) @binding(4) var<storage, read> level_box: array<i32>;       // per depth level: its sub-box, -1 empty
 @group(0) @binding(5) var<storage, read> boxes: array<vec4<f32>>;     // per sub-box: z0, s_b, k_b, first_b
 @group(0) @binding(6) var<storage, read_write> pidx: array<i32>;      // per texel: the plane that accepts it
+@group(0) @binding(7) var<storage, read_write> bounds: array<atomic<u32>>;  // per plane: min j, min i, max j, max i
 
 fn texel(gid: vec3<u32>) -> vec4<f32> {
     // (zeta, own and finite, i, j); own < 0.5 outside the map
@@ -285,6 +286,7 @@ fn profile(@builtin(global_invocation_id) gid: vec3<u32>) {
     _ = level_box[0];                               // one bind group layout for both entry points
     _ = boxes[0];
     _ = pidx[0];
+    _ = atomicLoad(&bounds[0]);
     let t = texel(gid);
     if (t.y < 0.5) { return; }
     let lv = level_of(t.x);
@@ -316,6 +318,13 @@ fn accept(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     pidx[k] = p;
+    if (p >= 0) {                                 // the texels each plane accepts: its scissor (§6.1)
+        let b = 4u * u32(p);
+        atomicMin(&bounds[b], u32(t.w));
+        atomicMin(&bounds[b + 1u], u32(t.z));
+        atomicMax(&bounds[b + 2u], u32(t.w));
+        atomicMax(&bounds[b + 3u], u32(t.z));
+    }
 }
 """
 
