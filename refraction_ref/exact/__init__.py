@@ -9,6 +9,9 @@ module              what it holds
 :mod:`.pipeline`    ``--method exact``: its stages, assembly and :func:`render_exact`
 :mod:`.caustics`    the exact photon reference's caustic stages (mesh scenes)
 :mod:`.water`       the exact water-caustics reference (water scenes)
+:mod:`.grin`        the graded-index reference: the ray equation by DOP853 on
+                    the volumetric method's field (pure functions)
+:mod:`.volume`      its stage graph (``--method exact`` on volume scenes)
 ==================  ==============================================================
 
 >>> from refraction_ref.exact import trace_exact        # doctest: +SKIP
