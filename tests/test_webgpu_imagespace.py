@@ -51,7 +51,7 @@ CAUSTIC_CASES = {"is_caustics_slanted", "is_caustics_sphere"}
 F32_REJECTED = re.compile(r"^(exit_pos|path_length|stage\.trace\.(exit_pos|path_pos|path_length)"
                           r"|stage\.photon_trace\.(exit_pos|ldi)_\d+|stage\.receiver_hit\.hit_pos_\d+)$")
 
-_IOR_ONE = {"is_bubble_0_75", "is_ior_1"}
+_IOR_ONE = {"is_ior_1"}                              # the bubble is air in water: it refracts
 _ALL = set(CASES)
 _NO_CAUSTICS = _ALL - CAUSTIC_CASES
 #: bug -> (the stage check must name, cases whose physics cannot expose it); README's bug table says why
@@ -61,9 +61,13 @@ EXPOSED = {
     "depth16": ("minmax", set()),
     "depth24": ("trace", _ALL),                      # within minmax's tolerance: 2e-6 at d = 2.6
     "nonatomic_bits": ("voxelize", _ALL),            # lavapipe shades one tile's fragments in order
-    "bits_replace": ("peel", {"is_bubble_0_75", "is_caustics_slanted", "is_caustics_sphere", "is_close_camera",
-                              "is_diamond_2_4", "is_ior_1_01", "is_sphere_1_5", "is_tir_followed",
-                              "is_two_objects"}),
+    # lost fragments: bit words whose pixel lost a set bit lie in check's silhouette mask wherever they are,
+    # so the bitmask fails only where moved bits pile up; else the LDI's layer count (peel) or the normals
+    # of the layers peeled from the thinner bitmask; the convex cases put their two fragments in two words
+    "bits_replace": ({"is_bunny_1_2": "peel", "is_ior_1": "peel", "is_grazing": "voxelize",
+                      "is_open_mesh": "voxelize", "is_layer_limit": "normals"},
+                     {"is_bubble_0_75", "is_caustics_slanted", "is_caustics_sphere", "is_close_camera",
+                      "is_diamond_2_4", "is_ior_1_01", "is_sphere_1_5", "is_tir_followed", "is_two_objects"}),
     "mip_drop_odd": ("reduce", _ALL),                # 128 x 128 at mip_size 256: no MIP level is built
     "texture_y_flip": ("trace", set()),
     "nearest_sampling": ("trace", _IOR_ONE),         # straight rays probe texel centres
@@ -181,10 +185,11 @@ def _assert_bug(golden, out, bug, cases):
         first, keys = beyond_f32(rep.cases[case], _stages(golden, case))
         if bug == "nonatomic_bits" and not adapter_cpu:
             continue                                # a GPU may race: either verdict is the hardware's
+        want = stage.get(case) if isinstance(stage, dict) else stage
         if case in hidden:
             assert first is None, f"{bug} on {case}: expected no effect, got {first} ({keys})"
         else:
-            assert first == stage, f"{bug} on {case}: expected {stage}, got {first} ({keys})"
+            assert first == want, f"{bug} on {case}: expected {want}, got {first} ({keys})"
 
 
 @pytest.mark.parametrize("bug", sorted(QUICK_BUGS))
@@ -207,9 +212,9 @@ def test_planted_bug_full_matrix(golden_all, tmp_path, bug):
 @pytest.mark.slow
 def test_mip_drop_odd_fails_reduce_where_a_mip_level_is_odd(adapter, tmp_path):
     """No catalogue case builds a MIP level (128 x 128 at mip_size 256): on a 127 x 127 view at mip_size 32
-    (4 x 4 blocks, the last row and column partial), with the sphere's far side reaching the bottom edge,
-    the floor-sized level drops the blocks that hold the back layer's maximum, and `reduce`'s bound fails
-    against the oracle's own render (check's judge and tolerance)."""
+    (4 x 4 blocks, the last row and column partial), with the sphere cut by the bottom edge, the
+    floor-sized level drops the blocks that hold the front layer's nearest depth, and `reduce`'s bound
+    fails against the oracle's own render (check's judge and tolerance)."""
     from refraction_ref.golden.tolerances import judge, tolerance_for
 
     scene = {"objects": [{"mesh": "sphere", "fit": 1.0, "material": {"ior": 1.5},
@@ -222,8 +227,9 @@ def test_mip_drop_odd_fails_reduce_where_a_mip_level_is_odd(adapter, tmp_path):
     g = scene_geometry(rr.load_scene(str(d / "scene.json")))
     np.savez(d / "geometry.npz", vertices=g.vertices, faces=g.faces, face_object=g.face_object)
     ref = rr.render(rr.load_scene(str(d / "scene.json")), method="imagespace", keep="reduce").arrays
-    key = "stage.reduce.bounds_hi"
     for bugs, ok in (((), True), (("mip_drop_odd",), False)):
         mine = backend.render_case(str(d / "scene.json"), bugs=bugs)
-        r = judge(mine[key], ref[key], tolerance_for(key, dtype=ref[key].dtype))
-        assert r["ok"] == ok, f"{bugs}: {r['detail']}"
+        verdicts = {key: judge(mine[key], ref[key], tolerance_for(key, dtype=ref[key].dtype))
+                    for key in ("stage.reduce.bounds_hi", "stage.reduce.bounds_lo")}
+        # the front layer's nearest point lies on the bottom rows: bounds_lo is the one that moves
+        assert all(r["ok"] for r in verdicts.values()) == ok, f"{bugs}: {verdicts}"
