@@ -573,37 +573,49 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
     """
     c, U, V, W, ext = _box_rows(box, Hc, Wc)
     texel_area = (ext[0] / Wc) * (ext[2] / Hc)
-    u = gpu.uniform(tuple(c) + (Hc,), tuple(U) + (Wc,), tuple(V) + (K,), tuple(W) + (texel_area,),
-                    tuple(ext) + (wat["n"],), (eps, 0, 0, 0), ("u", flags, l * wat["nv"], l * wat["nf"], 0))
+    nv = wat["nv"]
+    k = len(used)
+    batch = max(1, min(k, (64 << 20) // (16 * nv)))      # planes whose edge-ray hits fit one 64 MiB buffer
+
+    def params(first, count):
+        return gpu.uniform(tuple(c) + (Hc,), tuple(U) + (Wc,), tuple(V) + (K,), tuple(W) + (texel_area,),
+                           tuple(ext) + (wat["n"],), (eps, count, 0, 0),
+                           ("u", flags, l * nv, l * wat["nf"], first))
     blend = None if "no_blend" in bugs else {"color": {"operation": "add", "src_factor": "one", "dst_factor": "one"},
                                               "alpha": {"operation": "add", "src_factor": "one", "dst_factor": "one"}}
     cull = "back" if "cull_back" in bugs else "none"
-    p = gpu.render(S.source(S.CAUSTICS), [("r32float", blend), ("r32float", blend)], cull=cull)
-    planes = gpu.storage(np.asarray(zeta[used] if len(used) else [0.0], np.float32))
-    k = len(used)
+    pi = gpu.compute(S.source(S.BEAMS, S.INTERSECT), "main")
+    p = gpu.render(S.source(S.BEAMS, S.CAUSTICS), [("r32float", blend), ("r32float", blend)], cull=cull)
+    planes = gpu.storage(np.asarray(zeta[used] if k else [0.0], np.float32))
     pm = gpu.texture(Wc, Hc, max(k, 1), "r32float")
-    bg = gpu.bind(p, [u, wat["verts"], wat["trans"], wat["beams"], planes, pidx,
-                      gpu.layer(tex["pos"], l), gpu.layer(tex["nrm"], l)])
+    hits = gpu.storage(nbytes=16 * nv * batch)
     enc = gpu.device.create_command_encoder()
     if k == 0:                                    # nothing to draw: the map cleared
         rp = enc.begin_render_pass(color_attachments=[
             {"view": gpu.layer(tex["cmap"], l), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)},
             {"view": gpu.layer(pm, 0), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)}])
         rp.end()
-    for q in range(k):
-        rp = enc.begin_render_pass(color_attachments=[
-            {"view": gpu.layer(tex["cmap"], l), "load_op": "clear" if q == 0 else "load", "store_op": "store",
-             "clear_value": (0, 0, 0, 0)},
-            {"view": gpu.layer(pm, q), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)}])
-        if scissor is not None and "threshold_test" not in bugs:
-            if scissor[used[q]] is None:
-                rp.end()
-                continue
-            rp.set_scissor_rect(*scissor[used[q]])
-        rp.set_pipeline(p)
-        rp.set_bind_group(0, bg)
-        rp.draw(3 * wat["nf"], 1, 0, q)           # instance index = the plane
-        rp.end()
+    for first in range(0, k, batch):
+        count = min(batch, k - first)
+        u = params(first, count)
+        # the beams' intersections: each edge ray with each plane of the batch (compute)
+        gpu.dispatch(pi, [u, wat["verts"], wat["trans"], planes, hits], nv * count, enc=enc)
+        bg = gpu.bind(p, [u, hits, wat["beams"], planes, pidx, gpu.layer(tex["pos"], l), gpu.layer(tex["nrm"], l)])
+        for q in range(first, first + count):
+            # their splats: the intersection triangles drawn, depth-tested, added (render)
+            rp = enc.begin_render_pass(color_attachments=[
+                {"view": gpu.layer(tex["cmap"], l), "load_op": "clear" if q == 0 else "load", "store_op": "store",
+                 "clear_value": (0, 0, 0, 0)},
+                {"view": gpu.layer(pm, q), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)}])
+            if scissor is not None and "threshold_test" not in bugs:
+                if scissor[used[q]] is None:
+                    rp.end()
+                    continue
+                rp.set_scissor_rect(*scissor[used[q]])
+            rp.set_pipeline(p)
+            rp.set_bind_group(0, bg)
+            rp.draw(3 * wat["nf"], 1, 0, q)       # instance index = the plane
+            rp.end()
     gpu.device.queue.submit([enc.finish()])
     return pm, k
 

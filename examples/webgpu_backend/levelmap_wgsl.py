@@ -329,24 +329,64 @@ fn accept(@builtin(global_invocation_id) gid: vec3<u32>) {
 """
 
 # --------------------------------------------------------------------------- caustics (eqs. 4-15, 4-18)
-CAUSTICS = r"""
+BEAMS = r"""
 struct Beams {
     c: vec4<f32>,        // box centre, Hc
     U: vec4<f32>,        // U, Wc
     V: vec4<f32>,        // V, K (water.absorption)
     W: vec4<f32>,        // W, the texel's area (w / Wc) (d / Hc)
     ext: vec4<f32>,      // w, h, d, n (water resolution)
-    acc: vec4<f32>,      // eps = s / 2 (the thesis's threshold, planted test only), 0, 0, 0
-    flags: vec4<u32>,    // bugs, this light's first vertex in trans, its first face in beams, 0
+    acc: vec4<f32>,      // eps = s / 2 (the thesis's threshold, planted test only), planes in this batch, 0, 0
+    flags: vec4<u32>,    // bugs, this light's first vertex in trans, its first face in beams, the batch's first plane
 };
+"""
+
+# each edge ray (water vertex) meets each plane of a batch once: (col, row, lambda, reaches)
+INTERSECT = r"""
 @group(0) @binding(0) var<uniform> C: Beams;
 @group(0) @binding(1) var<storage, read> verts: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> trans: array<vec4<f32>>;    // (T, ok) per light and vertex
-@group(0) @binding(3) var<storage, read> beams: array<vec4<f32>>;    // (axis, flux) per light and face
-@group(0) @binding(4) var<storage, read> planes: array<f32>;         // zeta of each plane drawn
-@group(0) @binding(5) var<storage, read> pidx: array<i32>;
-@group(0) @binding(6) var posmap: texture_2d<f32>;
-@group(0) @binding(7) var nrmmap: texture_2d<f32>;
+@group(0) @binding(3) var<storage, read> planes: array<f32>;         // zeta of each plane drawn
+@group(0) @binding(4) var<storage, read_write> hits: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = u32(C.ext.w);
+    let nv = (n + 1u) * (n + 1u);
+    let k = gid.x + gid.y * 65535u * 64u;
+    if (k >= nv * u32(C.acc.y)) { return; }
+    let q = k / nv;
+    let id = k % nv;
+    let zp = planes[C.flags.w + q];
+    let Hc = C.c.w;
+    let Wc = C.U.w;
+    let p = verts[id].xyz - C.c.xyz;
+    let T = trans[C.flags.y + id].xyz;
+    // the edge ray in map space: origin (col, row, zeta), rates per unit length
+    let oc = (dot3(p, C.U.xyz) / C.ext.x + 0.5) * Wc;
+    let orow = (dot3(p, C.W.xyz) / C.ext.z + 0.5) * Hc;
+    let oz = -dot3(p, C.V.xyz);
+    let dc = dot3(T, C.U.xyz) * Wc / C.ext.x;
+    let dr = dot3(T, C.W.xyz) * Hc / C.ext.z;
+    let dz = -dot3(T, C.V.xyz);
+    let lam = (zp - oz) / dz;
+    let cc = oc + lam * dc;
+    let rr = orow + lam * dr;
+    var ok = 1.0;
+    if (!(dz > 0.0) || !(lam >= 0.0) || !(abs(cc) < 4194304.0) || !(abs(rr) < 4194304.0)) { ok = 0.0; }
+    hits[k] = vec4<f32>(cc, rr, lam, ok);
+}
+"""
+
+# the intersection triangles drawn and splatted (eq. 4-15 depth test, eq. 4-18)
+CAUSTICS = r"""
+@group(0) @binding(0) var<uniform> C: Beams;
+@group(0) @binding(1) var<storage, read> hits: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> beams: array<vec4<f32>>;    // (axis, flux) per light and face
+@group(0) @binding(3) var<storage, read> planes: array<f32>;         // zeta of each plane drawn
+@group(0) @binding(4) var<storage, read> pidx: array<i32>;
+@group(0) @binding(5) var posmap: texture_2d<f32>;
+@group(0) @binding(6) var nrmmap: texture_2d<f32>;
 
 struct VOut {
     @builtin(position) pos: vec4<f32>,
@@ -360,57 +400,41 @@ fn vs(@builtin(vertex_index) vi: u32, @builtin(instance_index) plane: u32) -> VO
     let f = vi / 3u;
     let corner = vi % 3u;
     let n = u32(C.ext.w);
+    let nv = (n + 1u) * (n + 1u);
     let fv = water_face(f, n, C.flags.x);
-    let zp = planes[plane];
     let Hc = C.c.w;
     let Wc = C.U.w;
     let bm = beams[C.flags.z + f];
-    var cc = array<f32, 3>(0.0, 0.0, 0.0);
-    var rr = array<f32, 3>(0.0, 0.0, 0.0);
-    var ll = array<f32, 3>(0.0, 0.0, 0.0);
-    var skip = !(bm.w > 0.0);
-    for (var k = 0u; k < 3u; k = k + 1u) {
-        let id = fv[k];
-        let q = verts[id].xyz - C.c.xyz;
-        let T = trans[C.flags.y + id].xyz;
-        // the edge ray in map space: origin (col, row, zeta), rates per unit length
-        let oc = (dot3(q, C.U.xyz) / C.ext.x + 0.5) * Wc;
-        let orow = (dot3(q, C.W.xyz) / C.ext.z + 0.5) * Hc;
-        let oz = -dot3(q, C.V.xyz);
-        let dc = dot3(T, C.U.xyz) * Wc / C.ext.x;
-        let dr = dot3(T, C.W.xyz) * Hc / C.ext.z;
-        let dz = -dot3(T, C.V.xyz);
-        if (!(dz > 0.0)) { skip = true; }
-        let lam = (zp - oz) / dz;
-        if (!(lam >= 0.0)) { skip = true; }
-        cc[k] = oc + lam * dc;
-        rr[k] = orow + lam * dr;
-        ll[k] = lam;
-        if (abs(cc[k]) >= 4194304.0 || abs(rr[k]) >= 4194304.0) { skip = true; }
-    }
+    let base = (plane - C.flags.w) * nv;
+    let h0 = hits[base + fv.x];
+    let h1 = hits[base + fv.y];
+    let h2 = hits[base + fv.z];
     var o: VOut;
-    if (skip) {                                      // beams that do not reach this plane: no area
-        o.pos = vec4<f32>(-2.0, -2.0, 0.5, 1.0);
+    if (!(bm.w > 0.0) || h0.w < 0.5 || h1.w < 0.5 || h2.w < 0.5) {
+        o.pos = vec4<f32>(-2.0, -2.0, 0.5, 1.0);        // beams that do not reach this plane: no area
         o.lam = 0.0;
         o.axis = vec4<f32>(0.0);
         o.bp = vec2<f32>(0.0, f32(plane));
         return o;
     }
+    var hc = h0;
+    if (corner == 1u) { hc = h1; }
+    if (corner == 2u) { hc = h2; }
     let t = bm.xyz;
     let tdz = -dot3(t, C.V.xyz);
     var inv_tv = 0.0;
     if (tdz > 1e-12) { inv_tv = 1.0 / tdz; }
-    let af = (cc[1] - cc[0]) * (rr[2] - rr[0]) - (rr[1] - rr[0]) * (cc[2] - cc[0]);
+    let af = (h1.x - h0.x) * (h2.y - h0.y) - (h1.y - h0.y) * (h2.x - h0.x);   // unsnapped, texels
     var ad = max(0.5 * abs(af), 1.0);
     if ((C.flags.x & FLAG_NO_AD_FLOOR) != 0u) { ad = 0.5 * abs(af); }
     let Bv = bm.w * inv_tv / (ad * C.W.w);
-    var col = cc[corner];
-    var row = rr[corner];
+    var col = hc.x;
+    var row = hc.y;
     if ((C.flags.x & FLAG_HALF_TEXEL_SPLAT) != 0u) { col = col + 0.5; row = row + 0.5; }
     var ny = 1.0 - row * (2.0 / Hc);
     if ((C.flags.x & FLAG_Y_FLIP) != 0u) { ny = row * (2.0 / Hc) - 1.0; }
     o.pos = vec4<f32>(col * (2.0 / Wc) - 1.0, ny, 0.5, 1.0);
-    o.lam = ll[corner];
+    o.lam = hc.z;
     o.axis = vec4<f32>(t, tdz);
     o.bp = vec2<f32>(Bv, f32(plane));
     return o;
