@@ -308,22 +308,31 @@ def _box_excess(lo, hi, y):
     return e
 
 
+class _Work(NamedTuple):
+    """One ray's scratch: the stages of the root-finding steps, two states, the receiver plane."""
+
+    K: np.ndarray  # (13, 6)
+    tmp: np.ndarray  # (6,)
+    yt: np.ndarray  # (6,)
+    pl: np.ndarray  # (8,): the triangle's normal (0:3), the sign making the start side negative (4), a vertex (5:8)
+
+
 @nb.njit(cache=True)
-def _event_value(mode, fk, tab, y, f, h, K, tmp, yt, pl):
+def _event_value(mode, fk, tab, y, f, h, w):
     """The event function after a step h from y: box excess (mode 1) or signed plane distance (mode 2)."""
-    _rk_step(fk, tab, y, f, h, K, tmp, yt)
+    yt, pl = w.yt, w.pl
+    _rk_step(fk, tab, y, f, h, w.K, w.tmp, yt)
     if mode == 1:
         return _box_excess(fk.lo, fk.hi, yt)
-    # pl: the triangle's normal (0:3), the sign that makes the start side negative (4), a vertex (5:8)
     return pl[4] * ((yt[0] - pl[5]) * pl[0] + (yt[1] - pl[6]) * pl[1] + (yt[2] - pl[7]) * pl[2])
 
 
 @nb.njit(cache=True)
-def _root(mode, fk, tab, y, f, ha, ga, hb, gb, K, tmp, yt, pl):
-    """The step in [ha, hb] where the event function crosses 0 (ga <= 0 < gb): Illinois regula falsi.
-
-    Returns a step whose end has event value >= 0 (at or just past the crossing), within a few ulp of it.
-    """
+def _root(mode, fk, tab, y, f, bracket, w):
+    """The step in ``bracket = (ha, ga, hb, gb)`` where the event function crosses 0 (ga <= 0 < gb): Illinois
+    regula falsi. Returns a step whose end has event value >= 0 (at or just past the crossing), within a few
+    ulp of it."""
+    ha, ga, hb, gb = bracket
     side = 0
     for _ in range(200):
         if hb - ha <= 4e-16 * hb or gb == 0.0:
@@ -333,7 +342,7 @@ def _root(mode, fk, tab, y, f, ha, ga, hb, gb, K, tmp, yt, pl):
             hc = 0.5 * (ha + hb)
             if not (hc > ha and hc < hb):
                 break
-        gc = _event_value(mode, fk, tab, y, f, hc, K, tmp, yt, pl)
+        gc = _event_value(mode, fk, tab, y, f, hc, w)
         if gc >= 0.0:
             hb, gb = hc, gc
             if side == 1:
@@ -399,20 +408,101 @@ def _optical_depth(ext, lo, ih, a, b):
 
 # --------------------------------------------------------------------- one ray
 @nb.njit(cache=True)
+def _accepted_step(fk, tab, cfg, y, f, s, h_abs, K, tmp, ynew):
+    """One accepted DOP853 step from (s, y) by scipy's controller (``RungeKutta._step_impl``), into ``ynew``.
+
+    Returns ``(ok, h, h_next, n(ynew), rejected steps)``; ``ok`` False when the step fell below scipy's
+    minimum (``10 ulp(s)``).
+    """
+    rtol, atol = cfg.rtol, cfg.atol
+    min_step = 10.0 * abs(np.nextafter(s, np.inf) - s)
+    if h_abs > cfg.max_step:
+        h_abs = cfg.max_step
+    elif h_abs < min_step:
+        h_abs = min_step
+    rejected = False
+    rej = 0
+    while True:
+        if h_abs < min_step:
+            return False, 0.0, 0.0, 0.0, rej
+        s_new = s + h_abs
+        if s_new > cfg.s_max:
+            s_new = cfg.s_max
+        h = s_new - s
+        h_abs = abs(h)
+        n1 = _rk_step(fk, tab, y, f, h, K, tmp, ynew)
+        en = _error_norm(tab, K, h, y, ynew, rtol, atol)
+        if en < 1.0:
+            factor = 10.0 if en == 0.0 else min(10.0, 0.9 * en ** (-1.0 / 8.0))
+            if rejected:
+                factor = min(1.0, factor)
+            return True, h, h_abs * factor, n1, rej
+        h_abs *= max(0.2, 0.9 * en ** (-1.0 / 8.0))
+        rejected = True
+        rej += 1
+
+
+@nb.njit(cache=True)
+def _events(fk, tab, recv, y, f, h, ynew, n1, w):
+    """The box face, then a receiver, on the accepted step y -> ynew (step h): the step cut at the first one.
+
+    ``ynew`` is replaced by the state at the event. Returns ``(event, h_end, n(ynew), receiver triangle)``:
+    event 0 none, 1 the box face (``ynew`` put on the face), 2 a receiver triangle (the curved path's
+    crossing of its plane).
+    """
+    lo, hi, pl = fk.lo, fk.hi, w.pl
+    ev = 0
+    h_end = h
+    hit_q = -1
+    ex = _box_excess(lo, hi, ynew)
+    if ex > 0.0:
+        g0 = min(_box_excess(lo, hi, y), 0.0)
+        h_end = _root(1, fk, tab, y, f, (0.0, g0, h, ex), w)
+        n1 = _rk_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
+        # put the point on the face it crossed (the root leaves it within a few ulp past it)
+        best = -1
+        bex = -np.inf
+        for a in range(3):
+            e = max(ynew[a] - hi[a], lo[a] - ynew[a])
+            if e > bex:
+                bex = e
+                best = a
+        ynew[best] = hi[best] if ynew[best] - hi[best] >= lo[best] - ynew[best] else lo[best]
+        for a in range(3):
+            ynew[a] = min(max(ynew[a], lo[a]), hi[a])
+        ev = 1
+    if recv.tris.shape[0] > 0:
+        th, q = _segment_receiver(recv, y[0], y[1], y[2], ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2], 1.0)
+        if q >= 0:
+            t = recv.tris
+            e1x, e1y, e1z = t[q, 1, 0] - t[q, 0, 0], t[q, 1, 1] - t[q, 0, 1], t[q, 1, 2] - t[q, 0, 2]
+            e2x, e2y, e2z = t[q, 2, 0] - t[q, 0, 0], t[q, 2, 1] - t[q, 0, 1], t[q, 2, 2] - t[q, 0, 2]
+            pl[0] = e1y * e2z - e1z * e2y
+            pl[1] = e1z * e2x - e1x * e2z
+            pl[2] = e1x * e2y - e1y * e2x
+            pl[5], pl[6], pl[7] = t[q, 0, 0], t[q, 0, 1], t[q, 0, 2]
+            da = (y[0] - pl[5]) * pl[0] + (y[1] - pl[6]) * pl[1] + (y[2] - pl[7]) * pl[2]
+            db = (ynew[0] - pl[5]) * pl[0] + (ynew[1] - pl[6]) * pl[1] + (ynew[2] - pl[7]) * pl[2]
+            pl[4] = -1.0 if da > 0.0 or (da == 0.0 and db < 0.0) else 1.0
+            ga, gb = pl[4] * da, pl[4] * db
+            if gb > 0.0 and ga <= 0.0:
+                h_end = _root(2, fk, tab, y, f, (0.0, ga, h_end, gb), w)
+                n1 = _rk_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
+            ev = 2
+            hit_q = q
+    return ev, h_end, n1, hit_q
+
+
+@nb.njit(cache=True)
 def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     """Integrate ray r from x0 along d0 (unit) to its end; fills row r of ``out``."""
     y = np.empty(6)
     f = np.empty(6)
     ynew = np.empty(6)
     tmp = np.empty(6)
-    yt = np.empty(6)
     K = np.empty((13, 6))
-    Kt = np.empty((13, 6))
-    pl = np.zeros(8)
-    lo, hi = fk.lo, fk.hi
-    rtol, atol = cfg.rtol, cfg.atol
+    w = _Work(np.empty((13, 6)), np.empty(6), np.empty(6), np.zeros(8))
     n_half, side = cfg.n_half, cfg.side
-    nrecv = recv.tris.shape[0]
     n0 = _sample(fk, x0[0], x0[1], x0[2])[0]
     for c in range(3):
         y[c] = x0[c]
@@ -430,98 +520,26 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     rej = 0
     status = LIMIT
     hit_q = -1
-    s_max = cfg.s_max
-    h_abs = _initial_step(fk, y, f, s_max, cfg.max_step, rtol, atol, tmp, ynew)
-    err_exp = -1.0 / 8.0
+    h_abs = _initial_step(fk, y, f, cfg.s_max, cfg.max_step, cfg.rtol, cfg.atol, tmp, ynew)
     while True:
-        if not (s < s_max):
+        if not (s < cfg.s_max):
             status = LIMIT
             break
-        # ---- one accepted step, scipy's controller (RungeKutta._step_impl)
-        min_step = 10.0 * abs(np.nextafter(s, np.inf) - s)
-        if h_abs > cfg.max_step:
-            h_abs = cfg.max_step
-        elif h_abs < min_step:
-            h_abs = min_step
-        rejected = False
-        accepted = False
-        h = 0.0
-        h_next = 0.0
-        n1 = n
-        while True:
-            if h_abs < min_step:
-                break
-            s_new = s + h_abs
-            if s_new > s_max:
-                s_new = s_max
-            h = s_new - s
-            h_abs = abs(h)
-            n1 = _rk_step(fk, tab, y, f, h, K, tmp, ynew)
-            en = _error_norm(tab, K, h, y, ynew, rtol, atol)
-            if en < 1.0:
-                if en == 0.0:
-                    factor = 10.0
-                else:
-                    factor = min(10.0, 0.9 * en ** err_exp)
-                if rejected:
-                    factor = min(1.0, factor)
-                h_next = h_abs * factor
-                accepted = True
-                break
-            h_abs *= max(0.2, 0.9 * en ** err_exp)
-            rejected = True
-            rej += 1
+        ok, h, h_next, n1, nrej = _accepted_step(fk, tab, cfg, y, f, s, h_abs, K, tmp, ynew)
+        rej += nrej
         finite = True
         for c in range(6):
             if not math.isfinite(ynew[c]):
                 finite = False
-        if not accepted or not finite or not (n1 > 0.0):
+        if not ok or not finite or not (n1 > 0.0):
             status = LOST
             break
-        # ---- events on this step: the box face, then a receiver on the (shortened) step
-        ev = 0
-        h_end = h
-        ex = _box_excess(lo, hi, ynew)
-        if ex > 0.0:
-            g0 = min(_box_excess(lo, hi, y), 0.0)
-            h_end = _root(1, fk, tab, y, f, 0.0, g0, h, ex, Kt, tmp, yt, pl)
-            n1 = _rk_step(fk, tab, y, f, h_end, Kt, tmp, ynew)
-            # put the point on the face it crossed (the root leaves it within a few ulp past it)
-            best = -1
-            bex = -np.inf
-            for a in range(3):
-                e = max(ynew[a] - hi[a], lo[a] - ynew[a])
-                if e > bex:
-                    bex = e
-                    best = a
-            ynew[best] = hi[best] if ynew[best] - hi[best] >= lo[best] - ynew[best] else lo[best]
-            for a in range(3):
-                ynew[a] = min(max(ynew[a], lo[a]), hi[a])
-            ev = 1
-        if nrecv > 0:
-            th, q = _segment_receiver(recv, y[0], y[1], y[2], ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2], 1.0)
-            if q >= 0:
-                v0x, v0y, v0z = recv.tris[q, 0, 0], recv.tris[q, 0, 1], recv.tris[q, 0, 2]
-                e1x, e1y, e1z = recv.tris[q, 1, 0] - v0x, recv.tris[q, 1, 1] - v0y, recv.tris[q, 1, 2] - v0z
-                e2x, e2y, e2z = recv.tris[q, 2, 0] - v0x, recv.tris[q, 2, 1] - v0y, recv.tris[q, 2, 2] - v0z
-                pl[0] = e1y * e2z - e1z * e2y
-                pl[1] = e1z * e2x - e1x * e2z
-                pl[2] = e1x * e2y - e1y * e2x
-                pl[5], pl[6], pl[7] = v0x, v0y, v0z
-                da = (y[0] - v0x) * pl[0] + (y[1] - v0y) * pl[1] + (y[2] - v0z) * pl[2]
-                db = (ynew[0] - v0x) * pl[0] + (ynew[1] - v0y) * pl[1] + (ynew[2] - v0z) * pl[2]
-                pl[4] = -1.0 if da > 0.0 or (da == 0.0 and db < 0.0) else 1.0
-                ga, gb = pl[4] * da, pl[4] * db
-                if gb > 0.0 and ga <= 0.0:
-                    h_end = _root(2, fk, tab, y, f, 0.0, ga, h_end, gb, Kt, tmp, yt, pl)
-                    n1 = _rk_step(fk, tab, y, f, h_end, Kt, tmp, ynew)
-                ev = 2
-                hit_q = q
-        # ---- along the chord y -> ynew: extinction, the material level set, drift
+        ev, h_end, n1, hit_q = _events(fk, tab, recv, y, f, h, ynew, n1, w)
+        # along the chord y -> ynew: extinction, the material level set, drift
         cx, cy, cz = ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2]
         chord = math.sqrt(cx * cx + cy * cy + cz * cz)
         if fk.has_ext:
-            dr, dg, db_ = _optical_depth(fk.ext, lo, fk.ih, y, ynew)
+            dr, dg, db_ = _optical_depth(fk.ext, fk.lo, fk.ih, y, ynew)
             tau_r += dr
             tau_g += dg
             tau_b += db_
@@ -546,7 +564,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
         steps += 1
         for c in range(6):
             y[c] = ynew[c]
-        if ev == 1 and hit_q < 0:
+        if ev == 1:
             status = EXITED
             break
         if ev == 2:

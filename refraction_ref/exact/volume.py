@@ -139,6 +139,10 @@ def volume_stages(scene):
     Returns
     -------
     tuple of Stage
+
+    References
+    ----------
+    Sun et al. (2008), §3 eqs. 1-3, §4.3-§4.5, Fig. 9.
     """
     rc = vp._has_receivers(scene)
     nr = len(scene.data["receivers"] or []) if rc else 0
@@ -185,6 +189,10 @@ def volume_skipped(scene):
     Returns
     -------
     list of dict
+
+    References
+    ----------
+    Sun et al. (2008), Fig. 9 (receivers).
     """
     return vp._skipped(scene)
 
@@ -202,6 +210,10 @@ def volume_assemble(scene, bufs, stats):
     Returns
     -------
     arrays, info : dict, dict
+
+    References
+    ----------
+    docs/oracle.md, "Exact reference on volume scenes"; Sun et al. (2008), §4.4-§4.5.
     """
     vox = bufs["voxelize"]
     g = bufs["photon_trace"]["grin"]
