@@ -377,8 +377,8 @@ def place(rec):
 
 
 def refract64(I, N, eta):
-    """Eq. 2-8 in float64 (the host's set-up): T or None under total internal reflection."""
-    c = -float(np.dot(I, N))
+    """Eq. 2-8 on the host (float64 set-up; float32 when given float32): T or None under total reflection."""
+    c = -(I[0] * N[0] + I[1] * N[1] + I[2] * N[2])
     if c < 0:
         N, c = -N, -c
     k = 1.0 - eta * eta * (1.0 - c * c)
@@ -417,16 +417,21 @@ def water_pass(gpu, water, lights, eta, flags):
     return {"n": n, "nv": nv, "nf": nf, "verts": verts, "norms": norms, "trans": trans, "beams": beams}
 
 
-def planes_pass(rverts, p0, light, eta, n_planes, placement):
-    """The reference box and its lattice of planes (eqs. 4-1 to 4-9), float64 on the host."""
+def planes_pass(rverts, p0, light, eta, n_planes, placement, dt=np.float64):
+    """The reference box and its lattice of planes (eqs. 4-1 to 4-9) on the host, in float64.
+
+    ``dt = np.float32`` does the same arithmetic in float32 (the ``setup = "float32"`` experiment:
+    what a port computing its view volumes in shader precision gets).
+    """
+    rverts, p0, eta = np.asarray(rverts, dt), np.asarray(p0, dt), dt(eta)
     if light["type"] == "point":
-        Ld = _unit(p0 - np.asarray(light["position"], np.float64))
+        Ld = _unit(p0 - np.asarray(light["position"], dt))
     else:
-        Ld = _unit(light["direction"])
-    T0 = refract64(Ld, np.array([0.0, 1.0, 0.0]), eta)
+        Ld = _unit(np.asarray(light["direction"], dt))
+    T0 = refract64(Ld, np.array([0.0, 1.0, 0.0], dt), eta)
     T0 = _unit(T0)
     V = -T0
-    N = np.array([0.0, 0.0, 1.0]) if abs(V[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    N = np.array([0.0, 0.0, 1.0], dt) if abs(V[2]) < 0.9 else np.array([1.0, 0.0, 0.0], dt)
     U = _unit(np.cross(V, N))
     W = _unit(np.cross(U, V))
     q = rverts - p0
@@ -444,24 +449,24 @@ def planes_pass(rverts, p0, light, eta, n_planes, placement):
         ext = hi - lo
     else:
         raise ValueError(f"placement {placement!r}")
-    ext = np.maximum(ext, 1e-6 * ext.max())
+    ext = np.maximum(ext, dt(1e-6) * ext.max())
     w, h, d = ext
     if placement == "tight":
-        s = h / n_planes
-        zeta = -h / 2 + s * (np.arange(n_planes) + 0.5)
+        s = h / dt(n_planes)
+        zeta = -h / 2 + s * (np.arange(n_planes, dtype=dt) + dt(0.5))
         zlo = -h / 2
     elif n_planes == 1:
-        s, zeta, zlo = h, np.zeros(1), -h / 2
+        s, zeta, zlo = h, np.zeros(1, dt), -h / 2
     else:
-        s = h / (n_planes - 1)
-        zeta = -h / 2 + s * np.arange(n_planes)
-        zlo = -h / 2.0 - s / 2.0
-    box = np.stack([centre, U, V, W, np.array([w, h, d])])
+        s = h / dt(n_planes - 1)
+        zeta = -h / 2 + s * np.arange(n_planes, dtype=dt)
+        zlo = -h / dt(2.0) - s / dt(2.0)
+    box = np.stack([centre, U, V, W, np.array([w, h, d], dt)])
     return {"box": box, "zeta": zeta, "s": s, "zlo": zlo, "n": n_planes, "tight": placement == "tight"}
 
 
 def frame(box):
-    """caustic_frame_r: (origin, u, v, normal) of a box (oracle: Map frame and texel centres)."""
+    """caustic_frame_r: (origin, u, v, normal) of a box (oracle: Map frame and texel centres), in its dtype."""
     c, U, V, W, (w, h, d) = box
     u, v = w * U, d * W
     return np.stack([c - u / 2 - v / 2 + (h / 2) * V, u, v, V])
@@ -497,13 +502,13 @@ def level_map_pass(gpu, corners, albedo, box, r, R_depth, Hc, Wc, tex, l, flags,
     gpu.device.queue.submit([enc.finish()])
 
 
-def slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags):
+def slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags, dt=np.float64):
     """Smart slicing (§4.7.2): the depth profile on the device, the planes laid on the host, the acceptance map.
 
     Returns the planes (zeta, float64), the planes used, and the per-texel accepting plane (device buffer).
     """
     src = S.source(S.SLICING)
-    h = float(pl["box"][4][1])
+    h = dt(pl["box"][4][1])
     L = int(lm["depth_levels"])
     n_planes = int(pl["n"])
     respace = bool(lm["smart_slicing"])
@@ -529,20 +534,20 @@ def slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags):
             e = a
             while e < L and counts[e] > 0:
                 e += 1
-            z0, z1, hr = -h / 2 + h * a / L, -h / 2 + h * e / L, (e - a) / L
+            z0, z1, hr = -h / 2 + h * dt(a) / dt(L), -h / 2 + h * dt(e) / dt(L), (e - a) / L
             lattice = n_planes if pl["tight"] else max(n_planes - 1, 1)
             k = max(int(round(hr * lattice)), 1)
             first = len(zeta)
             if k == 1:
                 zeta.append((z0 + z1) / 2)
-                sb = 1.0
+                sb = dt(1.0)
             else:
-                sb = (z1 - z0) / (k - 1)
-                zeta += [z0 + sb * q for q in range(k)]
+                sb = (z1 - z0) / dt(k - 1)
+                zeta += [z0 + sb * dt(q) for q in range(k)]
             level_box[a:e] = len(boxes)
             boxes.append([z0, sb, k, first])
             a = e
-        zeta = np.asarray(zeta, np.float64)
+        zeta = np.asarray(zeta, dt)
         used = np.arange(len(zeta), dtype=np.int64)
         gpu.dispatch(gpu.compute(src, "accept"),
                      [u, posv, difv, hist, gpu.storage(level_box), gpu.storage(np.asarray(boxes or [[0] * 4], np.float32)),
@@ -757,11 +762,13 @@ def image_pass(gpu, cam, wat, corners, corners_host, owner_ranges, rboxes, cast,
 
 
 # =============================================================================== the whole method
-def render(scene, bugs=(), timer=None):
+def render(scene, bugs=(), timer=None, setup="float64"):
     """Every pass of the level map for one scene (a dict as in ``scene.json``); returns the arrays.
 
-    ``timer`` (a ``Timer``) collects per-pass milliseconds.
+    ``timer`` (a ``Timer``) collects per-pass milliseconds. ``setup = "float32"`` computes the boxes,
+    planes and frames in float32 too (an experiment: check's set-up tolerance of 1e-7 rejects it).
     """
+    dt = {"float64": np.float64, "float32": np.float32}[setup]
     unknown = set(bugs) - set(BUGS)
     if unknown:
         raise ValueError(f"unknown bugs {sorted(unknown)}; known: {sorted(BUGS)}")
@@ -805,7 +812,7 @@ def render(scene, bugs=(), timer=None):
         for l, light in enumerate(lights):
             tag = f"{r}_{l}"
             with timer("planes"):
-                pl = planes_pass(rv, p0, light, eta_planes, n_planes, ca["placement"])
+                pl = planes_pass(rv, p0, light, eta_planes, n_planes, ca["placement"], dt)
             box = pl["box"]
             boxes.append(box)
             # the depth range of the map's depth buffer: every receiver's zeta inside (0, 1)
@@ -815,11 +822,11 @@ def render(scene, bugs=(), timer=None):
             with timer("level_map"):
                 level_map_pass(gpu, mine, albedo, box, r, R_depth, Hc, Wc, tex, l, flags, bugs)
             with timer("smart_slicing"):
-                zeta, used, pidx, eps, scissor = slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags)
+                zeta, used, pidx, eps, scissor = slicing_pass(gpu, pl, lm, Hc, Wc, tex, l, flags, dt)
             with timer("caustics"):
                 pm, k = caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags, bugs,
                                       scissor)
-            out[f"stage.planes.box_{tag}"] = box
+            out[f"stage.planes.box_{tag}"] = box.astype(np.float64)
             out[f"stage.caustics.planes_{tag}"] = np.asarray(zeta, np.float64)
             out[f"stage.caustics.planes_used_{tag}"] = used
             pos = gpu.read_texture(tex["pos"], l, np.float32)
@@ -834,7 +841,7 @@ def render(scene, bugs=(), timer=None):
         with timer("casting"):
             casting_pass(gpu, r, boxes, len(recs), Hc, Wc, tex, cast, flags)
         rboxes.append((boxes[0], alb))
-        fr = frame(boxes[0])
+        fr = frame(boxes[0]).astype(np.float64)
         out[f"stage.casting.caustic_frame_{r}"] = out[f"caustic_frame_{r}"] = fr
     casts = gpu.read(cast, np.float32, (max(len(recs), 1), Hc, Wc))
     for r in range(len(recs)):
@@ -848,7 +855,7 @@ def render(scene, bugs=(), timer=None):
     return out
 
 
-def run(golden_dir, out_dir, cases=None, bugs=(), timings=None):
+def run(golden_dir, out_dir, cases=None, bugs=(), timings=None, setup="float64"):
     """Write ``out_dir/<case>/result.npz`` for the level-map cases of a golden suite; returns the cases.
 
     ``timings`` (a dict) receives per case the per-pass milliseconds.
@@ -861,7 +868,7 @@ def run(golden_dir, out_dir, cases=None, bugs=(), timings=None):
         with open(os.path.join(golden_dir, case, "scene.json")) as fh:
             scene = json.load(fh)
         t = Timer(Gpu.get())
-        arrays = render(scene, bugs, t)
+        arrays = render(scene, bugs, t, setup)
         if timings is not None:
             timings[case] = t.times
         os.makedirs(os.path.join(out_dir, case), exist_ok=True)
@@ -876,9 +883,11 @@ if __name__ == "__main__":
     ap.add_argument("out")
     ap.add_argument("--cases", default=None, help="NAME,... (default: every levelmap case of the suite)")
     ap.add_argument("--bug", action="append", default=[], choices=sorted(BUGS))
+    ap.add_argument("--setup", default="float64", choices=("float64", "float32"),
+                    help="the boxes, planes and frames on the host in float64 (default) or float32 (experiment)")
     a = ap.parse_args()
     ok, why = available()
     if not ok:
         sys.exit(why)
-    done = run(a.golden, a.out, a.cases.split(",") if a.cases else None, a.bug)
+    done = run(a.golden, a.out, a.cases.split(",") if a.cases else None, a.bug, setup=a.setup)
     print(f"wrote {len(done)} cases to {a.out} ({why}); now: refraction-ref check {a.out} --golden {a.golden}")
