@@ -48,7 +48,8 @@ def deviation(c, g, tol):
     info = both & (g != 0) if over == "nonzero" else both
     if not info.any():
         return {"max": 0.0, "p99": 0.0, "beyond": 0.0, "n": 0, "mism": mism, "unit": "abs"}
-    err = np.abs(c - g)[info]
+    with np.errstate(invalid="ignore"):
+        err = np.abs(c - g)[info]
     atol = tol.get("atol", 0.0)
     if tol.get("scale") == "max":
         atol = atol * float(np.max(np.abs(g[both])))
@@ -84,16 +85,56 @@ def _fmt(x):
     return str(x)
 
 
+def family(key):
+    """The key with its receiver and light indices replaced (``position_0_1`` -> ``position_r_l``)."""
+    import re
+    k = re.sub(r"_\d+_\d+$", "_r_l", key)
+    return re.sub(r"_\d+$", "_r", k)
+
+
+def summary(rows):
+    """Per key family over cases and receivers: the worst max, p99 and share beyond, and where."""
+    out = {}
+    for case, k, kind, d in rows:
+        if "max" not in d:
+            continue
+        f = family(k)
+        if f.startswith("stage.") and f.split(".")[-1] in ("image", "object_mask", "image_direct",
+                                                           "object_mask_direct"):
+            continue                                            # copies of the final keys
+        e = out.setdefault(f, {"kind": kind, "max": 0.0, "p99": 0.0, "beyond": 0.0, "where": "", "mism": 0,
+                               "total_rel": 0.0})
+        if d["max"] >= e["max"]:
+            e["max"] = d["max"]
+        if d.get("p99") is not None:
+            e["p99"] = max(e["p99"], d["p99"])
+        if d["beyond"] > e["beyond"]:
+            e["beyond"], e["where"] = d["beyond"], case
+        e["mism"] += d.get("mism", 0) or 0
+        e["total_rel"] = max(e["total_rel"], d.get("total_rel", 0.0) or 0.0)
+    return out
+
+
 if __name__ == "__main__":
     import argparse
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("golden")
     ap.add_argument("cand")
     ap.add_argument("--cases", default=None)
+    ap.add_argument("--summary", action="store_true", help="one row per key family, worst over cases")
     a = ap.parse_args()
     man = json.load(open(os.path.join(a.golden, "manifest.json")))
     cases = a.cases.split(",") if a.cases else sorted(c for c, m in man["cases"].items()
                                                       if m.get("method") == "levelmap")
+    if a.summary:
+        print("| key | kind | max | p99 | beyond f64 tol (worst case) | NaN/inf mismatches | total rel |")
+        print("|---|---|---|---|---|---|---|")
+        for f, e in summary(table(a.golden, a.cand, cases)).items():
+            unit = " deg" if e["kind"] == "angle" else (" elements" if e["kind"] == "exact" else "")
+            print(f"| `{f}` | {e['kind']} | {_fmt(e['max'])}{unit} | {_fmt(e['p99']) if e['kind'] != 'exact' else ''} | "
+                  f"{e['beyond'] * 100:.3g} % {('(' + e['where'] + ')') if e['where'] else ''} | {e['mism']} | "
+                  f"{_fmt(e['total_rel']) if e['total_rel'] else ''} |")
+        sys.exit(0)
     print("| case | key | kind | max | p99 | beyond f64 tol | n | NaN/inf mismatches | total rel |")
     print("|---|---|---|---|---|---|---|---|---|")
     for case, k, kind, d in table(a.golden, a.cand, cases):
