@@ -205,14 +205,16 @@ def test_every_notebook_is_listed_with_a_parameters_cell_and_exercises():
     assert total < 8e6, f"notebooks/ holds {total / 1e6:.1f} MB (limit 8 MB)"
 
 
-#: notebooks whose exercises have answers (issue 31); the others join as they are reworked
-ANSWERED = ["volumetric_walkthrough", "levelmap_walkthrough", "error_vs_time"]
+#: notebooks whose exercises have answers (issue 31): all of them
+ANSWERED = ["imagespace_walkthrough", "caustics_walkthrough", "volumetric_walkthrough", "levelmap_walkthrough",
+            "error_vs_time", "check_a_backend"]
 
 
 @pytest.mark.parametrize("name", ANSWERED)
 def test_exercises_have_a_starter_and_a_collapsed_checked_answer_and_no_reprs(name):
     """Every exercise cell pair: a starter code cell, then a collapsed answer (tag `answer`, source hidden) that
-    asserts; stored outputs print no object reprs (`<... at 0x...>`, matplotlib return values)."""
+    asserts; stored outputs print no object reprs (`<... at 0x...>`, matplotlib return values, a widget's
+    `interactive(...)` or an IPython display object)."""
     import re
 
     import nbformat
@@ -229,11 +231,30 @@ def test_exercises_have_a_starter_and_a_collapsed_checked_answer_and_no_reprs(na
         assert starter.cell_type == "code" and "answer" not in starter.metadata.get("tags", []), (name, i)
     reprs = [(i, o.data["text/plain"][:60]) for i, c in enumerate(nb.cells) if c.cell_type == "code"
              for o in c.get("outputs", []) if "text/plain" in o.get("data", {}) and "image/png" not in o.get("data", {})
-             and re.search(r"<[\w.]+ (object )?at 0x|^(Text|<matplotlib)", o.data["text/plain"])]
+             and re.search(r"<[\w.]+ (object )?at 0x|^(Text|<matplotlib|interactive\(|<IPython)", o.data["text/plain"])]
     reprs += [(i, "figure repr") for i, c in enumerate(nb.cells) if c.cell_type == "code"
               for o in c.get("outputs", []) if re.match(r"<Figure size", o.get("data", {}).get("text/plain", ""))
               and "image/png" not in o.get("data", {})]
     assert not reprs, f"{name}: object reprs in the stored outputs: {reprs}"
+
+
+def test_notebooks_call_no_private_names_and_say_what_they_need():
+    """What a student sees: no private name of the package imported or called (``_x``), sliders only through
+    ``teach.sliders`` (no ipywidgets call whose return value prints), and a notebook that reads the checkout's
+    ``benchmarks/`` says so in its first cell."""
+    import re
+
+    import nbformat
+
+    for name in build.NOTEBOOKS:
+        nb = nbformat.read(os.path.join(NB, name + ".ipynb"), as_version=4)
+        code = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
+        private = re.findall(r"from refraction_ref[\w.]* import [^\n]*\b_(?!_)\w+|\brr\._(?!_)\w+|"
+                             r"refraction_ref\.\w+\._(?!_)\w+", code)
+        assert not private, f"{name}: private names in the cells: {private}"
+        assert "widgets.interact" not in code and "import ipywidgets" not in code, f"{name}: sliders go through teach.py"
+        if re.search(r"benchmarks|results_dir\(", code):
+            assert "Needs a checkout" in nb.cells[0].source, f"{name}: reads benchmarks/ but its first cell does not say so"
 
 
 def test_stored_outputs_come_from_the_packages_contract_version():
