@@ -219,6 +219,37 @@ def dispatch(pipeline, resources, groups, encoder=None):
         device().queue.submit([enc.finish()])
 
 
+def dispatch_indirect(pipeline, resources, args, offset=0):
+    """Run ``pipeline`` with its workgroup counts read from ``args`` (three u32 at ``offset`` bytes),
+    written there by an earlier pass: the GPU sizes the dispatch without a read-back."""
+    enc = device().create_command_encoder()
+    cp = enc.begin_compute_pass()
+    cp.set_pipeline(pipeline)
+    cp.set_bind_group(0, bind_group(pipeline, resources))
+    cp.dispatch_workgroups_indirect(args, int(offset))
+    cp.end()
+    device().queue.submit([enc.finish()])
+
+
+def clear(buf):
+    """Zero a whole buffer on the GPU (``clear_buffer``)."""
+    enc = device().create_command_encoder()
+    enc.clear_buffer(buf)
+    device().queue.submit([enc.finish()])
+
+
+_CACHE: dict = {}
+
+
+def cached(key, make):
+    """A resource kept across frames under ``key`` (made by ``make()`` the first time): a renderer allocates
+    its buffers and textures once, not per frame. Callers re-initialise what must start cleared."""
+    r = _CACHE.get(key)
+    if r is None:
+        r = _CACHE[key] = make()
+    return r
+
+
 def groups_for(n, size=64):
     """Workgroups of ``size`` covering ``n`` invocations in x (more than 65535 fold into y)."""
     g = max(1, -(-int(n) // size))

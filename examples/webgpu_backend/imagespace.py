@@ -12,7 +12,9 @@ float32 arithmetic throughout as shaders do:
 ``voxelize``   render pipeline again: each fragment adds (``blend = add``) or ors its slice bit into
                the pixel's 32-bit words of a storage buffer with ``atomicAdd`` / ``atomicOr`` (§3.3)
 ``peel``       compute: per pixel, the n-th set bit of the bitmask (``firstTrailingBit``) to the
-               layer's depth, written into an ``r32float`` texture array (§3.4.2's separate pass)
+               layer's depth, every layer written (§3.4.2's separate pass; the LDI is a storage
+               buffer, (layers, H, W) float32: on lavapipe a texture store or load costs twice a
+               buffer's)
 ``reduce``     compute: the MIP level (a box filter over the present texels), then a parallel
                max/min reduction in workgroup memory (§3.7)
 ``normals``    compute: perspective-corrected central differences per layer (§3.5, eq. 3.2)
@@ -78,7 +80,8 @@ BUGS = {
                                  "pixel's (a colour target without additive or logical-or blending)"),
     "mip_drop_odd": ("reduce", "the MIP level sized floor(H / f) x floor(W / f): the last odd row and column "
                                "of blocks dropped"),
-    "texture_y_flip": ("trace", "the layer textures read with a bottom-left origin: row i reads row H - 1 - i"),
+    "texture_y_flip": ("trace", "the layers (and their normals) read with a bottom-left origin, as an OpenGL "
+                                "texture coordinate: row i reads row H - 1 - i"),
     "nearest_sampling": ("trace", "the layers sampled at the nearest texel where the contract samples "
                                   "bilinearly (filter = bilinear)"),
     "hw_interp": ("trace", "not a bug: the vertex shader outputs clip positions (w = d) and the rasterizer "
@@ -93,7 +96,8 @@ _VEC = ("r", "u", "b", "c0", "c1", "c2", "t", "eye", "absorption", "col0", "col1
 _F32 = ("sx", "sy", "Wf", "Hf", "near", "far", "Sf", "inv_sm1", "ior", "oior", "bound_margin", "exit_thr",
         "tiles", "pinf", "ninf", "nan", "fwd_eps")
 _U32 = ("W", "H", "K", "NL", "ortho", "iters", "max_int", "tir", "bilinear", "delta", "record", "blend_or",
-        "global_slicing", "mipf", "hb", "wb", "margin_on", "env_const", "absorb", "forward_normals", "first_ortho")
+        "global_slicing", "mipf", "hb", "wb", "margin_on", "env_const", "absorb", "forward_normals", "first_ortho",
+        "peel_all")
 
 
 def params_decl():
@@ -135,7 +139,7 @@ fn unproject(col: f32, row: f32, d: f32) -> vec3f {
 RAYS = """
 @group(0) @binding(1) var<storage, read_write> rdir: array<vec4f>;
 @group(0) @binding(2) var<storage, read_write> vdir: array<vec4f>;
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(64, 1)
 fn main(@builtin(global_invocation_id) g: vec3u) {
   if (g.x >= p.W || g.y >= p.H) { return; }
   let o = select(0.5, 0.0, BUG_HALF_PIXEL);
@@ -286,14 +290,13 @@ PEEL = """
 @group(0) @binding(1) var<storage, read> zlo: array<f32>;
 @group(0) @binding(2) var<storage, read> zhi: array<f32>;
 @group(0) @binding(3) var<storage, read> bits: array<u32>;
-@group(0) @binding(4) var ldi: texture_storage_2d_array<r32float, write>;
+@group(0) @binding(4) var<storage, read_write> ldi: array<f32>;   // (layers, H, W)
 @group(0) @binding(5) var<storage, read_write> dc: array<i32>;
 @group(0) @binding(6) var<storage, read_write> maxdc: array<atomic<u32>>;
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(64, 1)
 fn main(@builtin(global_invocation_id) g: vec3u) {
   if (g.x >= p.W || g.y >= p.H) { return; }
   let pix = g.y * p.W + g.x;
-  let c = vec2i(i32(g.x), i32(g.y));
   let lo = zlo[pix];
   let rng = zhi[pix] - lo;
   var layer = 0u;
@@ -304,14 +307,14 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
     loop {
       if (w == 0u || layer >= p.NL) { break; }
       let b = 32u * k + firstTrailingBit(w);       // the next set slice, front to back
-      textureStore(ldi, c, i32(layer), vec4f(lo + f32(b) * p.inv_sm1 * rng, 0.0, 0.0, 0.0));
+      ldi[layer * p.W * p.H + pix] = lo + f32(b) * p.inv_sm1 * rng;
       layer += 1u;
       w = w & (w - 1u);
     }
   }
   loop {
     if (layer >= p.NL) { break; }
-    textureStore(ldi, c, i32(layer), vec4f(p.pinf, 0.0, 0.0, 0.0));
+    ldi[layer * p.W * p.H + pix] = p.pinf;
     layer += 1u;
   }
   dc[pix] = i32(total);
@@ -321,7 +324,7 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
 
 # reduce, step 1: the MIP level, f x f blocks averaged over their present texels
 MIP = """
-@group(0) @binding(1) var ldi: texture_2d_array<f32>;
+@group(0) @binding(1) var<storage, read> ldi: array<f32>;
 @group(0) @binding(2) var<storage, read_write> mhi: array<f32>;
 @group(0) @binding(3) var<storage, read_write> mlo: array<f32>;
 @compute @workgroup_size(8, 8)
@@ -335,7 +338,7 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
       let i = g.y * p.mipf + yy;
       let j = g.x * p.mipf + xx;
       if (i < p.H && j < p.W) {
-        let d = textureLoad(ldi, vec2i(i32(j), i32(i)), layer, 0).x;
+        let d = ldi[(u32(layer) * p.H + i) * p.W + j];
         if (isfin(d)) { sum += d; n += 1u; }
       }
     }
@@ -396,13 +399,13 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
 """
 
 NORMALS = """
-@group(0) @binding(1) var ldi: texture_2d_array<f32>;
-@group(0) @binding(2) var nrm: texture_storage_2d_array<rgba32float, write>;
+@group(0) @binding(1) var<storage, read> ldi: array<f32>;
+@group(0) @binding(2) var<storage, read_write> nrm: array<vec4f>;
 fn ld(l: i32, i: i32, j: i32) -> f32 {
   if (i < 0 || j < 0 || i >= i32(p.H) || j >= i32(p.W)) { return p.pinf; }
-  return textureLoad(ldi, vec2i(j, i), l, 0).x;
+  return ldi[(u32(l) * p.H + u32(i)) * p.W + u32(j)];
 }
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(64, 1)
 fn main(@builtin(global_invocation_id) g: vec3u) {
   if (g.x >= p.W || g.y >= p.H) { return; }
   let l = i32(g.z);
@@ -410,7 +413,7 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
   let j = i32(g.x);
   let d = ld(l, i, j);
   if (!isfin(d)) {
-    textureStore(nrm, vec2i(j, i), l, vec4f(p.nan, p.nan, p.nan, 0.0));
+    nrm[(u32(l) * p.H + u32(i)) * p.W + u32(j)] = vec4f(p.nan, p.nan, p.nan, 0.0);
     return;
   }
   var n: vec3f;
@@ -448,15 +451,15 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
     let s = 1.0 / sqrt(gx * gx + gy * gy + 1.0);
     n = vec3f(gx * s, gy * s, s);
   }
-  textureStore(nrm, vec2i(j, i), l, vec4f(n, 0.0));
+  nrm[(u32(l) * p.H + u32(i)) * p.W + u32(j)] = vec4f(n, 0.0);
 }
 """
 
 TRACE = """
 @group(0) @binding(1) var<storage, read> vdir: array<vec4f>;
 @group(0) @binding(2) var<storage, read> rdir: array<vec4f>;
-@group(0) @binding(3) var ldi: texture_2d_array<f32>;
-@group(0) @binding(4) var nrm: texture_2d_array<f32>;
+@group(0) @binding(3) var<storage, read> ldi: array<f32>;
+@group(0) @binding(4) var<storage, read> nrm: array<vec4f>;
 @group(0) @binding(5) var<storage, read> dc: array<i32>;
 @group(0) @binding(6) var<storage, read> zmax: array<f32>;
 @group(0) @binding(7) var<storage, read> zlo: array<f32>;
@@ -470,12 +473,12 @@ struct TraceOut { exit_pos: vec4f, exit_dir: vec4f, last_dir: vec4f, plen: f32, 
 fn texel(t: u32, i: i32, j: i32) -> f32 {
   var ii = i;
   if (BUG_TEX_YFLIP) { ii = i32(p.H) - 1 - i; }
-  return textureLoad(ldi, vec2i(j, ii), i32(t), 0).x;
+  return ldi[(t * p.H + u32(ii)) * p.W + u32(j)];
 }
 fn ntexel(t: u32, i: i32, j: i32) -> vec3f {
   var ii = i;
   if (BUG_TEX_YFLIP) { ii = i32(p.H) - 1 - i; }
-  return textureLoad(nrm, vec2i(j, ii), i32(t), 0).xyz;
+  return nrm[(t * p.H + u32(ii)) * p.W + u32(j)].xyz;
 }
 fn inimg(i: i32, j: i32) -> bool { return i >= 0 && j >= 0 && i < i32(p.H) && j < i32(p.W); }
 fn bilinear() -> bool { return p.bilinear != 0u && !BUG_NEAREST; }
@@ -704,6 +707,21 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
 }
 """
 
+# the layers present, L = min(layers, depth complexity) (all of them with peel_all), as indirect dispatch
+# arguments: the MIP (x, y, L), the reduction (L, 1, 1), the normals (x, y, L)
+ARGS = """
+@group(0) @binding(1) var<storage, read> maxdc: array<u32>;
+@group(0) @binding(2) var<storage, read_write> args: array<u32>;
+@compute @workgroup_size(1)
+fn main() {
+  var L = min(maxdc[0], p.NL);
+  if (p.peel_all != 0u) { L = p.NL; }
+  args[0] = (p.wb + 7u) / 8u; args[1] = (p.hb + 7u) / 8u; args[2] = L;
+  args[3] = L; args[4] = 1u; args[5] = 1u;
+  args[6] = (p.W + 63u) / 64u; args[7] = p.H; args[8] = L;
+}
+"""
+
 SHADE = """
 struct TraceOut { exit_pos: vec4f, exit_dir: vec4f, last_dir: vec4f, plen: f32, nint: i32, status: i32, pad: i32 }
 @group(0) @binding(1) var<storage, read> tr: array<TraceOut>;
@@ -796,7 +814,7 @@ def view_params(view, k, mat, env=None, first_ortho=None, record=None):
         max_int=int(k.max_interfaces), tir=int(bool(k.tir)), bilinear=int(k.filter == "bilinear"),
         delta=int(k.delta), record=int(k.record if record is None else record), blend_or=int(k.blend == "or"),
         global_slicing=int(k.slicing == "global"), mipf=f, hb=-(-H // f), wb=-(-W // f),
-        margin_on=int(k.bounds == "mip"), forward_normals=int(k.normals == "forward"),
+        margin_on=int(k.bounds == "mip"), forward_normals=int(k.normals == "forward"), peel_all=int(bool(k.peel_all)),
         first_ortho=int(view.ortho if first_ortho is None else first_ortho),
         absorption=mat["absorption"], absorb=int(np.any(np.asarray(mat["absorption"]) > 0)),
     )
@@ -815,11 +833,13 @@ def view_params(view, k, mat, env=None, first_ortho=None, record=None):
 
 
 def run_view(view, k, mat, verts, faces, bugs=(), timer=None, env=None, first_ortho=None, record=None,
-             stop_after=None):
+             stop_after=None, tag="eye"):
     """Every eye pass (``rays`` .. ``shade``) of one view on the GPU; returns GPU buffers and read-backs.
 
     ``verts`` (V, 3) float32 world, ``faces`` (F, 3) uint32. ``stop_after = "minmax"`` stops there (a
-    light's shadow map); ``env`` None skips ``shade``.
+    light's shadow map); ``env`` None skips ``shade``. Buffers are allocated once per
+    ``tag`` (the eye, each light) and size, and reused by later frames, as a renderer does; what must
+    start cleared is cleared by each frame.
     """
     bugs = tuple(bugs)
     timer = timer or gpu.Timer(enabled=False)
@@ -831,10 +851,13 @@ def run_view(view, k, mat, verts, faces, bugs=(), timer=None, env=None, first_or
     P = gpu.uniform(params_bytes(vals))
     out = SimpleNamespace(view=view, vals=vals, P=P)
 
+    def buf(name, nbytes, extra=0):
+        return gpu.cached((tag, name, int(nbytes), extra), lambda: gpu.storage(nbytes=nbytes, extra=extra))
+
     with timer("rays"):
-        out.rdir = gpu.storage(nbytes=16 * n)
-        out.vdir = gpu.storage(nbytes=16 * n)
-        gpu.dispatch(gpu.compute(shader(RAYS, bugs)), [P, out.rdir, out.vdir], (-(-W // 8), -(-H // 8)))
+        out.rdir = buf("rdir", 16 * n)
+        out.vdir = buf("vdir", 16 * n)
+        gpu.dispatch(gpu.compute(shader(RAYS, bugs)), [P, out.rdir, out.vdir], (-(-W // 64), H))
 
     vb = gpu.vertex(np.ascontiguousarray(verts, np.float32))
     ib = gpu.vertex(np.ascontiguousarray(faces, np.uint32).ravel(), index=True)
@@ -842,67 +865,76 @@ def run_view(view, k, mat, verts, faces, bugs=(), timer=None, env=None, first_or
     layout = [(12, [("float32x3", 0, 0)])]
     raster = shader(RASTER, bugs)
     with timer("minmax"):
-        zmin_b = gpu.storage(np.full(n, 0x7F800000, np.uint32))
-        zmax_b = gpu.storage(nbytes=4 * n)
+        zmin_b = buf("zmin_b", 4 * n)
+        gpu.write(zmin_b, np.full(n, 0x7F800000, np.uint32))          # +inf's bits
+        zmax_b = buf("zmax_b", 4 * n)
+        gpu.clear(zmax_b)
         gpu.draw(gpu.render(raster, layout, "vs", "fs_minmax", cull_mode=cull),
                  [P, zmin_b, zmax_b], [vb], faces.size, (W, H), index_buffer=ib)
-        out.zmin = gpu.storage(nbytes=4 * n)
-        out.zmax = gpu.storage(nbytes=4 * n)
-        out.glob = gpu.storage(np.array([0x7F800000, 0], np.uint32))
+        out.zmin = buf("zmin", 4 * n)
+        out.zmax = buf("zmax", 4 * n)
+        out.glob = buf("glob", 8)
+        gpu.write(out.glob, np.array([0x7F800000, 0], np.uint32))
         gpu.dispatch(gpu.compute(shader(MINMAX_RESOLVE, bugs)),
                      [P, zmin_b, zmax_b, out.zmin, out.zmax, out.glob], gpu.groups_for(n))
     if stop_after == "minmax":
         return out
 
     with timer("voxelize"):
-        out.zlo = gpu.storage(nbytes=4 * n)
-        out.zhi = gpu.storage(nbytes=4 * n)
+        out.zlo = buf("zlo", 4 * n)
+        out.zhi = buf("zhi", 4 * n)
         gpu.dispatch(gpu.compute(shader(SLICE_RANGE, bugs)),
                      [P, out.zmin, out.zmax, out.glob, out.zlo, out.zhi], gpu.groups_for(n))
-        out.bits = gpu.storage(nbytes=4 * n * K)
+        out.bits = buf("bits", 4 * n * K)
+        gpu.clear(out.bits)
         gpu.draw(gpu.render(raster, layout, "vs", "fs_voxelize", cull_mode=cull),
                  [P, None, None, out.zlo, out.zhi, out.bits], [vb], faces.size, (W, H), index_buffer=ib)
 
     with timer("peel"):
-        out.ldi = gpu.empty_texture(W, H, max(NL, 2), "r32float")
-        out.dc = gpu.storage(nbytes=4 * n)
-        out.maxdc = gpu.storage(nbytes=4)
+        out.ldi = buf("ldi", 4 * NL * n)
+        out.dc = buf("dc", 4 * n)
+        out.maxdc = buf("maxdc", 4)
+        gpu.clear(out.maxdc)
         gpu.dispatch(gpu.compute(shader(PEEL, bugs)),
-                     [P, out.zlo, out.zhi, out.bits, gpu.array_view(out.ldi), out.dc, out.maxdc],
-                     (-(-W // 8), -(-H // 8)))
+                     [P, out.zlo, out.zhi, out.bits, out.ldi, out.dc, out.maxdc],
+                     (-(-W // 64), H))
 
     with timer("reduce"):
         f, hb, wb = vals["mipf"], vals["hb"], vals["wb"]
         if "mip_drop_odd" in bugs:
             hb, wb = max(H // f, 1), max(W // f, 1)
-            vals = dict(vals, hb=hb, wb=wb)
-            P2 = gpu.uniform(params_bytes(vals))
+            P2 = gpu.uniform(params_bytes(dict(vals, hb=hb, wb=wb)))
         else:
             P2 = P
-        mhi = gpu.storage(nbytes=4 * NL * hb * wb)
-        mlo = gpu.storage(nbytes=4 * NL * hb * wb)
-        gpu.dispatch(gpu.compute(shader(MIP, bugs)), [P2, gpu.array_view(out.ldi), mhi, mlo],
-                     (-(-wb // 8), -(-hb // 8), NL))
-        out.bhi = gpu.storage(nbytes=4 * NL)
-        out.blo = gpu.storage(nbytes=4 * NL)
-        gpu.dispatch(gpu.compute(shader(REDUCE, bugs)), [P2, mhi, mlo, out.glob, out.bhi, out.blo], (NL, 1, 1))
+        # the layers present (min(layers, depth complexity)) size the next dispatches on the GPU itself
+        out.args = buf("args", 36, extra=gpu._flags().INDIRECT)
+        gpu.dispatch(gpu.compute(shader(ARGS, bugs)), [P2, out.maxdc, out.args], (1, 1, 1))
+        mhi = buf("mhi", 4 * NL * hb * wb)
+        mlo = buf("mlo", 4 * NL * hb * wb)
+        gpu.dispatch_indirect(gpu.compute(shader(MIP, bugs)), [P2, out.ldi, mhi, mlo], out.args, 0)
+        out.bhi = buf("bhi", 4 * NL)
+        out.blo = buf("blo", 4 * NL)
+        gpu.write(out.bhi, np.full(NL, -np.inf, np.float32))          # layers present nowhere
+        gpu.write(out.blo, np.full(NL, np.inf, np.float32))
+        gpu.dispatch_indirect(gpu.compute(shader(REDUCE, bugs)), [P2, mhi, mlo, out.glob, out.bhi, out.blo],
+                              out.args, 12)
 
     with timer("normals"):
-        out.nrm = gpu.empty_texture(W, H, max(NL, 2), "rgba32float")
-        gpu.dispatch(gpu.compute(shader(NORMALS, bugs)), [P, gpu.array_view(out.ldi), gpu.array_view(out.nrm)],
-                     (-(-W // 8), -(-H // 8), NL))
+        out.nrm = buf("nrm", 16 * NL * n)
+        gpu.dispatch_indirect(gpu.compute(shader(NORMALS, bugs)),
+                              [P, out.ldi, out.nrm], out.args, 24)
 
     with timer("trace"):
         R = max(int(vals["record"]), 1)
-        out.trace = gpu.storage(nbytes=64 * n)
-        out.rec = gpu.storage(nbytes=32 * n * R)
+        out.trace = buf("trace", 64 * n)
+        out.rec = buf("rec", 32 * n * R)
         gpu.dispatch(gpu.compute(shader(TRACE, bugs)),
-                     [P, out.vdir, out.rdir, gpu.array_view(out.ldi), gpu.array_view(out.nrm), out.dc, out.zmax,
+                     [P, out.vdir, out.rdir, out.ldi, out.nrm, out.dc, out.zmax,
                       out.zlo, out.zhi, out.bhi, out.blo, out.trace, out.rec], gpu.groups_for(n))
 
     if env is not None:
         with timer("shade"):
-            out.img = gpu.storage(nbytes=16 * n)
+            out.img = buf("img", 16 * n)
             gpu.dispatch(gpu.compute(shader(SHADE, bugs)), [P, out.trace, out.img], gpu.groups_for(n))
     gpu.finish()
     return out
@@ -934,11 +966,11 @@ def read_view(out, k, peel_all=False):
                       "zhi": f64(gpu.read(out.zhi, np.float32, (H, W)))}
     maxdc = int(gpu.read(out.maxdc, np.uint32)[0])
     L = NL if peel_all else min(NL, maxdc)
-    ldi = gpu.read_texture(out.ldi, np.float32)[:L]
+    ldi = gpu.read(out.ldi, np.float32, (NL, H, W))[:L]
     st["peel"] = {"ldi": ldi, "depth_complexity": gpu.read(out.dc, np.int32, (H, W)).astype(np.int16)}
     st["reduce"] = {"bounds_hi": f64(gpu.read(out.bhi, np.float32, (NL,))[:L]),
                     "bounds_lo": f64(gpu.read(out.blo, np.float32, (NL,))[:L])}
-    st["normals"] = {"normals": f64(gpu.read_texture(out.nrm, np.float32, 4)[:L, ..., :3])}
+    st["normals"] = {"normals": f64(gpu.read(out.nrm, np.float32, (NL, H, W, 4))[:L, ..., :3])}
     tr = read_trace(out)
     trace = {
         "exit_pos": f64(tr["exit_pos"][:, :3]).reshape(H, W, 3),

@@ -410,7 +410,7 @@ struct TraceOut { exit_pos: vec4f, exit_dir: vec4f, last_dir: vec4f, plen: f32, 
 @group(0) @binding(10) var<storage, read> rdir: array<vec4f>;
 @group(0) @binding(11) var<storage, read> vdir: array<vec4f>;
 @group(0) @binding(12) var<storage, read> tr: array<TraceOut>;
-@group(0) @binding(13) var nfront: texture_2d_array<f32>;
+@group(0) @binding(13) var<storage, read> nfront: array<vec4f>;
 @group(0) @binding(14) var<storage, read_write> img_full: array<vec4f>;
 @group(0) @binding(15) var<storage, read_write> img_single: array<vec4f>;
 @group(0) @binding(16) var<storage, read_write> shadow: array<u32>;   // per light, H x W
@@ -556,7 +556,7 @@ fn main(@builtin(global_invocation_id) g: vec3u) {
     }
     full = full * exp(-p.absorption.xyz * (t.plen * p.ior));
     // the thesis's final pass: one refraction at the front surface (normal of zfront by the normals rule)
-    let n0 = textureLoad(nfront, vec2i(i32(j), i32(i)), 0, 0).xyz;
+    let n0 = nfront[idx].xyz;
     let v = vdir[idx].xyz;
     let eta = p.oior / p.ior;
     var n = n0;
@@ -658,7 +658,7 @@ def run_caustics(isp, data, view, k, mat, V, F, eye_out, st, bugs=(), timer=None
                         [lc.near, lc.far, N]])
         stage("photon_trace", f"camera_{li}", cam)
         with timer("photon_trace"):
-            lo = isp.run_view(lc, lk, mat, Vf, Ff, bugs, None, env=None, record=0)
+            lo = isp.run_view(lc, lk, mat, Vf, Ff, bugs, None, env=None, record=0, tag=f"light{li}")
             lst = isp.read_view(lo, lk, bool(k.peel_all))
             stage("photon_trace", f"ldi_{li}", lst["peel"]["ldi"])
             lzmins.append(lst["minmax"]["zmin"].astype(np.float32))
@@ -760,15 +760,9 @@ def run_caustics(isp, data, view, k, mat, V, F, eye_out, st, bugs=(), timer=None
             crgb_all.append(rgb)
 
     with timer("caustic_final"):
-        # the single-surface pass's normals: the normals pass run on zfront (the eye's minmax zmin)
-        zf_tex = gpu.empty_texture(W, H, 2, "r32float")
-        zf = gpu.read(eye_out.zmin, np.float32, (H, W))
-        gpu.device().queue.write_texture({"texture": zf_tex, "origin": (0, 0, 0)},
-                                         np.stack([zf, np.full_like(zf, np.inf)]),
-                                         {"offset": 0, "bytes_per_row": W * 4, "rows_per_image": H}, (W, H, 2))
-        nf_tex = gpu.empty_texture(W, H, 2, "rgba32float")
-        gpu.dispatch(gpu.compute(isp.shader(isp.NORMALS, bugs)),
-                     [eye_out.P, gpu.array_view(zf_tex), gpu.array_view(nf_tex)], (-(-W // 8), -(-H // 8), 1))
+        # the single-surface pass's normals: the normals pass run on zfront (the eye's minmax zmin, one layer)
+        nf = gpu.storage(nbytes=16 * n)
+        gpu.dispatch(gpu.compute(isp.shader(isp.NORMALS, bugs)), [eye_out.P, eye_out.zmin, nf], (-(-W // 64), H, 1))
         nl = len(lights)
         cvals = dict(Hcf=Hc, Wcf=Wc, Hc=Hc, Wc=Wc, ior=mat["ior"], pinf=np.inf, nan=np.nan, tie=5e-3, nl=nl,
                      nr=len(receivers))
@@ -779,7 +773,7 @@ def run_caustics(isp, data, view, k, mat, V, F, eye_out, st, bugs=(), timer=None
         gpu.dispatch(gpu.compute(cshader(isp, MARCH + FINAL, bugs)),
                      [eye_out.P, gpu.uniform(c_bytes(cvals)), dmin, rtri_b, rcv_b, tn_b, gpu.storage(np.stack(lts)),
                       gpu.storage(np.stack(lzmins)), gpu.storage(np.stack(crgb_all)), eye_out.zmin, eye_out.rdir,
-                      eye_out.vdir, eye_out.trace, gpu.array_view(nf_tex), imf, ims, shb, smb], gpu.groups_for(n))
+                      eye_out.vdir, eye_out.trace, nf, imf, ims, shb, smb], gpu.groups_for(n))
         full = gpu.read(imf, np.float32, (H, W, 4))[..., :3].copy()
         single = gpu.read(ims, np.float32, (H, W, 4))[..., :3].copy()
         stage("caustic_final", "image_caustics", full)
