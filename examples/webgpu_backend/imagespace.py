@@ -13,7 +13,7 @@ float32 arithmetic throughout as shaders do:
                the pixel's 32-bit words of a storage buffer with ``atomicAdd`` / ``atomicOr`` (§3.3)
 ``peel``       compute: per pixel, the n-th set bit of the bitmask (``firstTrailingBit``) to the
                layer's depth, every layer written (§3.4.2's separate pass; the LDI is a storage
-               buffer, (layers, H, W) float32: on lavapipe a texture store or load costs twice a
+               buffer, (layers, H, W) float32: on lavapipe texture stores and loads cost 1.4-3x a
                buffer's)
 ``reduce``     compute: the MIP level (a box filter over the present texels), then a parallel
                max/min reduction in workgroup memory (§3.7)
