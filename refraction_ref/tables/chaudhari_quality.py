@@ -41,6 +41,9 @@ import numpy as np
 __all__ = ["SCENES", "NORMAL_OPTIONS", "front_normal_error", "roughness", "normals_study", "layered",
            "bounds_study"]
 
+#: pixels from the silhouette (the reference's hit mask's edge) that count as "at the silhouettes" (Fig. 3.4)
+SILHOUETTE = 2
+
 #: scene name -> (scene dict without the camera size, IOR)
 SCENES = {
     "bunny": ({"receivers": [], "objects": [{"mesh": "bunny", "fit": 1.0, "material": {"ior": 1.2}}]}, 1.2),
@@ -137,8 +140,12 @@ def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
         ``scene``, ``option``, ``normal_median``, ``normal_p90`` (degrees,
         front surface), ``roughness`` (:func:`roughness` of the normal-error
         map), ``exit_median``, ``exit_p90`` (degrees, pixels where both
-        exit), ``exit`` (fraction of hit pixels exiting), ``pixels``.
+        exit), ``exit`` (fraction of hit pixels exiting), ``pixels``,
+        ``sil_median`` and ``int_median`` (the front-normal median within
+        :data:`SILHOUETTE` pixels of the silhouette and inside).
     """
+    from scipy.ndimage import binary_erosion
+
     from ..render import render
     from .chaudhari import exit_error
 
@@ -147,6 +154,7 @@ def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
         d, ior = _scene(name, res)
         ex = render(d, method="exact", overrides={"exact.record": 1}, keep="trace")
         hit = np.asarray(ex["hit"], bool)
+        band = hit & ~binary_erosion(hit, iterations=SILHOUETTE, border_value=0)  # Fig. 3.4's silhouettes
         for label, ov in NORMAL_OPTIONS:
             r = render(d, overrides={"imagespace.record": 1, **{f"imagespace.{k}": v for k, v in ov.items()}},
                        keep="trace")
@@ -156,7 +164,9 @@ def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
             m, p = _stats(err)
             rows.append({"scene": name, "option": label, "normal_median": m, "normal_p90": p,
                          "roughness": roughness(err), "exit_median": e["median"], "exit_p90": e["p90"],
-                         "exit": e["exit"], "pixels": int(np.count_nonzero(np.isfinite(err)))})
+                         "exit": e["exit"], "pixels": int(np.count_nonzero(np.isfinite(err))),
+                         "sil_median": _stats(np.where(band, err, np.nan))[0],
+                         "int_median": _stats(np.where(hit & ~band, err, np.nan))[0]})
             if log:
                 log(f"  {name} {label}: normal median {m:.2f} p90 {p:.2f} deg, roughness {rows[-1]['roughness']:.2f}, "
                     f"exit median {e['median']:.2f} p90 {e['p90']:.2f} deg")
