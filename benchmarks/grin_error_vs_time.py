@@ -32,11 +32,10 @@ error in degrees (median, p99) and the share of photons whose status
 differs; the floor's caustic map as the relative L1 error with both blurred
 one texel (``refraction-ref compare``'s); the viewing pass's exit
 directions (status 1 in both, median and p99 degrees) and status agreement.
-Run time: the method's ``timings_ms`` (best of ``--repeats``, after a
-warm-up render): the photon pass is ``octree + photons + march +
-caustics``, the viewing pass ``view``; and the CPU time of the whole render
-on every thread (less sensitive to other jobs on a shared machine); the
-reference's own time beside.
+Run time: the method's ``timings_ms`` on one Numba thread (``--threads``;
+best of ``--repeats``, after a warm-up render): the photon pass is ``octree
++ photons + march + caustics``, the viewing pass ``view``; and the CPU time
+of the whole render; the reference's own time beside (every thread).
 
 Usage: ``python benchmarks/grin_error_vs_time.py [--quick] [--repeats R]``.
 Writes ``benchmarks/results/grin_error_vs_time{,_quick}.{csv,md,png}``.
@@ -47,6 +46,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import tempfile
 import time
 
 import numpy as np
@@ -95,9 +95,8 @@ def _photon_time(meta):
     return sum(t.get(k, 0.0) for k in ("octree", "photons", "march", "caustics"))
 
 
-def _lens_closed_form(N, M, exit_dir):
+def _lens_closed_form(pos, dirs, exit_dir):
     """Exit-direction error (deg; median, p99) against the continuous lens, photons with b < 0.9 R."""
-    pos, dirs, _, _, _ = generate_photons([LIGHT], B, (N, N, N), M)
     L = luneburg_lens(pos, dirs, (0.0, 0.0, 0.0), R_LENS)
     b = np.linalg.norm(np.cross(pos, dirs), axis=1) / R_LENS
     sel = (b < 0.9) & np.all(np.isfinite(exit_dir), axis=1)
@@ -127,42 +126,69 @@ def errors(res, ref, N, truth_map=None):
     return out
 
 
-class References:
-    """Converged references per (scene, N), a Session each (a photon change reuses the viewing rays)."""
+class _Arrays:
+    """A result's arrays read back from the references' cache (``.arrays``, as a Result)."""
 
-    def __init__(self):
+    def __init__(self, arrays):
+        self.arrays = arrays
+
+
+class References:
+    """Converged references per (scene, N, M), kept on disk in ``folder`` (a rerun reuses them), rendered with a
+    Session per (scene, N) (a photon change reuses the viewing rays); with the photons' starts kept."""
+
+    def __init__(self, folder):
+        self.folder = folder
+        os.makedirs(folder, exist_ok=True)
         self.sessions = {}
         self.cache = {}
         self.seconds = {}
 
     def get(self, name, N, M):
         key = (name, N, M)
-        if key not in self.cache:
-            s = self.sessions.get((name, N))
-            if s is None:
-                s = self.sessions[(name, N)] = rr.Session(scene(name, N, M))
-            else:
-                s.update({"volumetric.photons": int(M)})
-            t0 = time.perf_counter()
-            r = s.render("exact")
-            self.seconds[key] = time.perf_counter() - t0
-            self.cache[key] = r
+        if key in self.cache:
+            return self.cache[key]
+        path = os.path.join(self.folder, f"{name}_{N}_{M}_rtol{grin.RTOL:g}.npz")
+        if os.path.exists(path):
+            with np.load(path) as z:
+                arrays = {k: z[k] for k in z.files}
+            self.seconds[key] = float(arrays.pop("seconds"))
+            self.cache[key] = _Arrays(arrays)
+            return self.cache[key]
+        s = self.sessions.get((name, N))
+        if s is None:
+            s = self.sessions[(name, N)] = rr.Session(scene(name, N, M))
+        else:
+            s.update({"volumetric.photons": int(M)})
+        t0 = time.perf_counter()
+        r = s.render("exact", keep="photons")
+        self.seconds[key] = time.perf_counter() - t0
+        with atomic_open(path, "wb") as f:
+            np.savez(f, seconds=self.seconds[key], **r.arrays)
+        self.cache[key] = _Arrays(dict(r.arrays))
         return self.cache[key]
 
 
-def run_method(name, N, M, knobs, repeats):
-    """The method's render of one setting, best of ``repeats`` by the two passes' wall time; and its times:
-    (photon pass ms, viewing pass ms, graph ms, CPU ms of the whole render on every thread)."""
+def run_method(name, N, M, knobs, repeats, threads):
+    """The method's render of one setting on ``threads`` Numba threads, best of ``repeats`` by the two passes'
+    wall time; and its times: (photon pass ms, viewing pass ms, graph ms, CPU ms of the whole render)."""
+    import numba
+
     best, res = None, None
     sc = rr.load_scene(scene(name, N, M, knobs))
-    rr.render(sc, method="volumetric")  # compiles (or loads) this setting's kernels outside the timings
-    for _ in range(repeats):
-        c0 = time.process_time()
-        r = rr.render(sc, method="volumetric")
-        cpu = (time.process_time() - c0) * 1e3
-        t = (_photon_time(r.meta), r.meta["timings_ms"]["view"], r.meta["total_ms"], cpu)
-        if best is None or t[0] + t[1] < best[0] + best[1]:
-            best, res = t, r
+    was = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    try:
+        rr.render(sc, method="volumetric")  # compiles (or loads) this setting's kernels outside the timings
+        for _ in range(repeats):
+            c0 = time.process_time()
+            r = rr.render(sc, method="volumetric")
+            cpu = (time.process_time() - c0) * 1e3
+            t = (_photon_time(r.meta), r.meta["timings_ms"]["view"], r.meta["total_ms"], cpu)
+            if best is None or t[0] + t[1] < best[0] + best[1]:
+                best, res = t, r
+    finally:
+        numba.set_num_threads(was)
     return res, best
 
 
@@ -239,12 +265,17 @@ def plot(rows, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small grids and photon counts (a smoke run)")
-    ap.add_argument("--repeats", type=int, default=2, help="method runs per setting; the fastest is kept")
+    ap.add_argument("--repeats", type=int, default=3, help="method runs per setting; the fastest is kept")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="Numba threads of the method's timed renders (1: its work, without the waits of a shared "
+                         "machine's threads; the references use every thread)")
     ap.add_argument("--scenes", default="luneburg,blob")
+    ap.add_argument("--refs", default=os.path.join(tempfile.gettempdir(), "grin_error_vs_time_refs"),
+                    help="folder keeping the references between runs (default: in the temporary folder)")
     a = ap.parse_args(argv)
     tag = "_quick" if a.quick else ""
     N0, M0 = (32, 32) if a.quick else (64, 128)
-    refs = References()
+    refs = References(a.refs)
     rows, conv = [], {}
     t_start = time.perf_counter()
     for name in a.scenes.split(","):
@@ -256,14 +287,16 @@ def main(argv=None):
             N = N or N0
             M = M or M0
             ref = refs.get(name, N, M)
-            res, (tp, tv, tt, tc) = run_method(name, N, M, knobs, a.repeats)
+            res, (tp, tv, tt, tc) = run_method(name, N, M, knobs, a.repeats, a.threads)
             row = {"scene": name, "family": fam, "setting": label, "N": N, "M": M, "t_photons_ms": tp,
                    "t_view_ms": tv, "t_total_ms": tt, "cpu_ms": tc, "ref_s": refs.seconds[(name, N, M)]}
             row.update(errors(res, ref, N, truth if N == N0 else None))
             if name == "luneburg":
-                row["lens_cf_p50_deg"], row["lens_cf_p99_deg"] = _lens_closed_form(N, M, res.arrays["photon_exit_dir"])
+                start = ref.arrays["stage.photons.start_pos"], ref.arrays["stage.photons.start_dir"]
+                row["lens_cf_p50_deg"], row["lens_cf_p99_deg"] = _lens_closed_form(*start,
+                                                                                  res.arrays["photon_exit_dir"])
                 row["ref_lens_cf_p50_deg"], row["ref_lens_cf_p99_deg"] = _lens_closed_form(
-                    N, M, ref.arrays["photon_exit_dir"])
+                    *start, ref.arrays["photon_exit_dir"])
             rows.append(row)
             print(f"{name:9s} {label:18s} photons {tp:8.1f} ms view {tv:7.1f} ms  dir p50 {row['dir_p50_deg']:.3g} "
                   f"p99 {row['dir_p99_deg']:.3g} deg  pos p50 {row['pos_p50_vox']:.3g} vox  caustic L1 "
@@ -286,8 +319,9 @@ def report(rows, conv, refs, N0, M0, seconds, a):
     L = [f"# The volumetric method's error against run time, against the converged graded-index reference"
          f"{' (quick)' if a.quick else ''}", "",
          "`benchmarks/grin_error_vs_time.py" + (" --quick" if a.quick else "") + "` (module docstring: scenes, knobs, "
-         f"metrics). {numba.get_num_threads()} Numba threads on a machine shared with other jobs (times: best of "
-         f"{a.repeats} after a warm-up render; wall times are noisy there, the CPU column less so); the whole run "
+         f"metrics). The method's renders on {a.threads} Numba thread(s) of a 2-vCPU machine shared with other jobs "
+         f"(times: best of {a.repeats} after a warm-up render; still noisy, by tens of per cent), the references on "
+         f"{numba.get_num_threads()}; the whole run "
          f"took {seconds / 60:.1f} min. Defaults: stepping paper, Euler, eps 0.005, "
          f"eps2 0.02, ds_min 1 voxel, N = {N0}, M = {M0} (photons^2 texels), 96x96 pixels.", "",
          "The reference is `--method exact` on the same scene: the ray equation by DOP853 (rtol "
@@ -307,7 +341,7 @@ def report(rows, conv, refs, N0, M0, seconds, a):
                      f"{_fmt(r['status_changed'])} |")
     L += ["", "## Reference cost", "", "| scene | N | M | photons | seconds (photons and, first time per N, the "
           "96x96 viewing rays) |", "|---|---|---|---|---|"]
-    for (name, N, M), s in sorted(refs.seconds.items()):
+    for (name, N, M), s in sorted(refs.seconds.items()):  # (a reference read back keeps its first run's time)
         L.append(f"| {name} | {N} | {M} | {len(refs.cache[(name, N, M)].arrays['photon_status'])} | {s:.1f} |")
     L += ["", "## Error against run time", "",
           "Photon exits: position (voxels) and direction (degrees) of the photons that exited in both; "
