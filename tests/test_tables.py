@@ -168,7 +168,9 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     bunny = next(r for r in rows if r["model"] == "Bunny I")
     assert int(bunny["our triangles"]) == 69451
     claims = list(csv.DictReader(open(tmp_path / "claims.csv")))
-    assert len(claims) == 13 and all(c["verdict"] in VERDICTS for c in claims)
+    assert len(claims) == 25 and all(c["verdict"] in VERDICTS for c in claims)
+    # a by-construction row always carries its reason
+    assert all(c["construction"] for c in claims if c["verdict"] == BY_CONSTRUCTION)
     assert all(c["rule"] for c in claims)                    # every verdict has its rule
     # a GPU's frame rate is not judged on a CPU; the quick run has one grid, so the trend is not measured
     assert [c["verdict"] for c in claims if c["section"] == "§4.1"] == [NOT_COMPARABLE, NOT_MEASURED]
@@ -182,8 +184,8 @@ def test_cli_tables_quick_chaudhari(tmp_path):
     assert (tmp_path / "chaudhari_tables.png").stat().st_size > 5000
     # nothing but the report: the decimated bunny stays in memory
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "chaudhari_3_5.csv", "chaudhari_3_7.csv", "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv", "chaudhari_tables.png", "claims.csv",
-        "tables.md"]
+        "chaudhari_3_5.csv", "chaudhari_3_7.csv", "chaudhari_4_1.csv", "chaudhari_4_2.csv", "chaudhari_depth.csv",
+        "chaudhari_more.csv", "chaudhari_readings.csv", "chaudhari_tables.png", "claims.csv", "tables.md"]
 
 
 def test_component_box_reads_eq_4_3_along_each_axis():
@@ -273,3 +275,41 @@ def test_chaudhari_fps_trend_is_a_median_of_per_round_ratios():
     assert (s.n, s.low, s.high) == (3, 36.0 / 11.0, 49.0 / 13.0) and s.median == 45.0 / 12.0
     # cells not timed in the same rounds: one sample, the ratio of the medians
     assert _fps_ratio(dict(lo, samples=[10.0]), hi).n == 1 and _fps_ratio(dict(lo, samples=[10.0]), hi).median == 3.75
+
+
+def test_no_gain_is_evidence_only_where_fewer_iterations_reach_similar_output():
+    """§4.2: a loose run of 5 or more iterations skips only the reduction, so its ratio is by construction; only
+    a run with fewer iterations that reaches similar output can show a gain (numbers, not times)."""
+    from refraction_ref.tables.chaudhari_report import NO_GAIN, claim_no_gain
+
+    five = {"bunny": {"n_loose": 5, "ratio": (0.99, 0.97, 1.02), "reduce_share": 0.012},
+            "sphere": {"n_loose": None}}
+    c = claim_no_gain(five, "a set-up")
+    assert c.verdict == BY_CONSTRUCTION and "bunny 1.2%" in c.construction and "cannot be run" in c.measured
+    assert claim_no_gain({"sphere": {"n_loose": None}}, "x").verdict == BY_CONSTRUCTION
+    gain = dict(five, bunny={"n_loose": 4, "ratio": (0.90, 0.85, 0.97), "reduce_share": 0.012})
+    assert claim_no_gain(gain, "x").verdict == NOT_HELD
+    near = dict(five, bunny={"n_loose": 3, "ratio": (0.97, 0.93, 1.02), "reduce_share": 0.012})
+    c = claim_no_gain(near, "x")
+    assert c.verdict == HELD and c.straddles and 0.93 < NO_GAIN < 1.02
+    # the by-construction outcome never counts for the sentence; the exercised one does
+    assert summary([Report("C", [], [claim_no_gain(five, "x")])])["evidence_rows"] == 0
+    assert summary([Report("C", [], [claim_no_gain(gain, "x")])])["sentence_counts"][NOT_HELD] == 1
+
+
+def test_table_1_photon_half_is_by_construction_and_the_voxel_half_is_judged():
+    from refraction_ref.tables.sun import _claim_scaling
+
+    M = 64
+
+    def row(tris, fit, ph, steps, occ):
+        return {"tris": tris, "fit": fit, "ph": ph, "a": {"photon_steps": steps, "occupied_voxels": occ}}
+
+    for small_steps, verdict in ((100, HELD), (6000, NOT_HELD)):
+        t1 = [row(20480, 0.8, M, 8000, 27000), row(20480, 0.8, M // 4, 500, 27000), row(20480, 0.5, M, small_steps,
+                                                                                        8000)]
+        photons, voxels = _claim_scaling(t1, M)
+        assert photons.verdict == BY_CONSTRUCTION and "x16.0" in photons.measured
+        assert voxels.verdict == verdict and photons.quote == voxels.quote
+        s = sentences([Report("Sun", [], [photons, voxels])])
+        assert len(s) == 1 and s[0]["verdict"] == verdict
