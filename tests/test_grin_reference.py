@@ -120,7 +120,7 @@ def test_sampled_luneburg_lens_meets_the_closed_form():
 
 def test_tightening_the_tolerance_converges():
     """rtol 1e-6 -> 1e-8 -> 1e-10 -> 1e-12 (atol 1e-2 rtol): each step moves the exits less, and the
-    default (1e-10) is within 1e-5 world units (3e-4 voxel) and 1e-5 rad of 1e-12 on every photon."""
+    default (1e-10) is within 1e-5 world units (2e-4 voxel) and 1e-5 rad of 1e-12 on every photon."""
     N = 32
     field = gradient_field(luneburg(N), BOUNDS)
     pos, dirs, _, _, _ = generate_photons(OBLIQUE, BOUNDS, (N, N, N), 24)
