@@ -92,7 +92,8 @@ BUGS = {
     "nearest_normal": "the water's normal at the eye ray's hit taken from the nearest vertex, not "
                       "interpolated (nearest sampling where the contract blends)",
     "linear_lookup": "the caustics map read with a bilinear fetch where eq. 4-19 takes the texel that holds the point",
-    "depth16": "the position map stored in a 16-bit target (r16float)",
+    "depth16": "the position map rebuilt from a 16-bit unorm depth buffer (depth16unorm)",
+    "depth24": "the position map rebuilt from a 24-bit unorm depth buffer (depth24plus) over the scene's depth range",
     "half_texel_splat": "the caustics map half a texel off: intersection triangles drawn at col + 0.5, row + 0.5",
     "no_blend": "the splat without additive blending (blend replace: the last fragment wins)",
     "threshold_test": "the thesis's literal depth test |p' - z'| <= eps (eq. 4-15) on both sides, not one floor",
@@ -102,7 +103,7 @@ BUGS = {
     "receiver_cos_axis": "eq. 4-18's receiver cosine taken against the plane normal V, not the texel's normal",
     "unnormalised_water_normal": "the view's Phong normal not renormalised",
 }
-_FLAG = {"depth16": S.F_DEPTH16, "pixel_corner": S.F_PIXEL_CORNER, "y_flip": S.F_Y_FLIP, "half_texel_splat": S.F_HALF_TEXEL_SPLAT,
+_FLAG = {"depth16": S.F_DEPTH16, "depth24": S.F_DEPTH24, "pixel_corner": S.F_PIXEL_CORNER, "y_flip": S.F_Y_FLIP, "half_texel_splat": S.F_HALF_TEXEL_SPLAT,
          "nearest_normal": S.F_NEAREST_NORMAL, "linear_lookup": S.F_LINEAR_LOOKUP,
          "threshold_test": S.F_THRESHOLD_TEST, "no_ad_floor": S.F_NO_AD_FLOOR,
          "unnormalised_water_normal": S.F_UNNORM_WATER_NORMAL, "other_diagonal": S.F_OTHER_DIAGONAL,

@@ -26,7 +26,8 @@ F_UNNORM_WATER_NORMAL = 1 << 7   # the view's Phong normal not renormalised
 F_OTHER_DIAGONAL = 1 << 9     # the water quads split along the other diagonal
 F_RECEIVER_COS_AXIS = 1 << 10  # eq. 4-18's receiver cosine against V (the plane) instead of the texel's normal
 F_NO_CAST_DEPTH_TEST = 1 << 11  # casting without the depth test
-F_DEPTH16 = 1 << 12           # the position map stored at 16-bit precision (as an r16float target holds it)
+F_DEPTH16 = 1 << 12           # the position map read back from a 16-bit unorm depth buffer
+F_DEPTH24 = 1 << 13           # the position map read back from a 24-bit unorm depth buffer
 
 
 COMMON = r"""
@@ -237,7 +238,9 @@ struct FOut {
 fn fs(in: VOut) -> FOut {
     var o: FOut;
     o.position = in.zeta;
-    if ((B.flags.x & FLAG_DEPTH16) != 0u) { o.position = unpack2x16float(pack2x16float(vec2<f32>(in.zeta, 0.0))).x; }
+    // a port that rebuilds zeta from its depth buffer (clip z = 0.5 + zeta / R) gets the buffer's steps
+    if ((B.flags.x & FLAG_DEPTH16) != 0u) { o.position = (round(in.pos.z * 65535.0) / 65535.0 - 0.5) * B.V.w; }
+    if ((B.flags.x & FLAG_DEPTH24) != 0u) { o.position = (round(in.pos.z * 16777215.0) / 16777215.0 - 0.5) * B.V.w; }
     o.normal = vec4<f32>(in.n, 0.0);
     o.diffuse = vec4<f32>(0.0);
     if (in.owner == u32(B.W.w)) { o.diffuse = vec4<f32>(albedo[in.owner].xyz, 1.0); }
