@@ -574,8 +574,10 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
     """Every beam's intersection triangle on every used plane, splatted additively (render pipeline).
 
     ``scissor`` (``culling = bounds``, §6.1): per plane the rectangle of the texels it accepts, or
-    None where it accepts none (nothing drawn); without it every plane is drawn over the whole map
-    (``culling = none``, the thesis's cost). The maps are the same either way.
+    None where it accepts none (nothing drawn); a compute pass then lists per plane the beams that
+    reach it and can touch that rectangle, and the plane's draw is indirect over its list. Without
+    it every beam is drawn on every plane over the whole map (``culling = none``, the thesis's
+    cost). The maps are the same either way.
     """
     c, U, V, W, ext = _box_rows(box, Hc, Wc)
     texel_area = (ext[0] / Wc) * (ext[2] / Hc)
@@ -583,10 +585,13 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
     k = len(used)
     batch = max(1, min(k, (64 << 20) // (16 * nv)))      # planes whose edge-ray hits fit one 64 MiB buffer
 
+    nf = wat["nf"]
+    compact = scissor is not None and "threshold_test" not in bugs
+
     def params(first, count):
         return gpu.uniform(tuple(c) + (Hc,), tuple(U) + (Wc,), tuple(V) + (K,), tuple(W) + (texel_area,),
-                           tuple(ext) + (wat["n"],), (eps, count, 0, 0),
-                           ("u", flags, l * nv, l * wat["nf"], first))
+                           tuple(ext) + (wat["n"],), (eps, count, 1.0 if compact else 0.0, 0),
+                           ("u", flags, l * nv, l * nf, first))
     blend = None if "no_blend" in bugs else {"color": {"operation": "add", "src_factor": "one", "dst_factor": "one"},
                                               "alpha": {"operation": "add", "src_factor": "one", "dst_factor": "one"}}
     cull = "back" if "cull_back" in bugs else "none"
@@ -595,6 +600,22 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
     planes = gpu.storage(np.asarray(zeta[used] if k else [0.0], np.float32))
     pm = gpu.texture(Wc, Hc, max(k, 1), "r32float")
     hits = gpu.storage(nbytes=16 * nv * batch)
+    if compact:
+        # per plane: its accepted texels' rectangle, and indirect arguments (count, 1, 3 nf q_batch, 0)
+        rects = np.array([[1, 1, 0, 0] if scissor[used[q]] is None else
+                          [scissor[used[q]][0], scissor[used[q]][1], scissor[used[q]][0] + scissor[used[q]][2] - 1,
+                           scissor[used[q]][1] + scissor[used[q]][3] - 1] for q in range(k)] or [[1, 1, 0, 0]],
+                         np.float32)
+        args = np.zeros((max(k, 1), 4), np.uint32)
+        args[:, 1] = 1
+        args[:k, 2] = 3 * nf * (np.arange(k) % batch)
+        U_ = gpu.wgpu.BufferUsage
+        argbuf = gpu.device.create_buffer_with_data(data=args, usage=U_.STORAGE | U_.INDIRECT | U_.COPY_DST)
+        rectbuf = gpu.storage(rects)
+        lists = gpu.storage(nbytes=4 * nf * batch)
+        pc = gpu.compute(S.source(S.BEAMS, S.CULL), "main")
+    else:
+        lists = gpu.storage(nbytes=16)
     enc = gpu.device.create_command_encoder()
     if k == 0:                                    # nothing to draw: the map cleared
         rp = enc.begin_render_pass(color_attachments=[
@@ -606,21 +627,27 @@ def caustics_pass(gpu, wat, l, box, zeta, used, pidx, eps, K, Hc, Wc, tex, flags
         u = params(first, count)
         # the beams' intersections: each edge ray with each plane of the batch (compute)
         gpu.dispatch(pi, [u, wat["verts"], wat["trans"], planes, hits], nv * count, enc=enc)
-        bg = gpu.bind(p, [u, hits, wat["beams"], planes, pidx, gpu.layer(tex["pos"], l), gpu.layer(tex["nrm"], l)])
+        if compact:                               # §6.1: each plane's beams that can touch its texels
+            gpu.dispatch(pc, [u, hits, wat["beams"], rectbuf, lists, argbuf], nf * count, enc=enc)
+        bg = gpu.bind(p, [u, hits, wat["beams"], planes, pidx, gpu.layer(tex["pos"], l), gpu.layer(tex["nrm"], l),
+                          lists])
         for q in range(first, first + count):
             # their splats: the intersection triangles drawn, depth-tested, added (render)
             rp = enc.begin_render_pass(color_attachments=[
                 {"view": gpu.layer(tex["cmap"], l), "load_op": "clear" if q == 0 else "load", "store_op": "store",
                  "clear_value": (0, 0, 0, 0)},
                 {"view": gpu.layer(pm, q), "load_op": "clear", "store_op": "store", "clear_value": (0, 0, 0, 0)}])
-            if scissor is not None and "threshold_test" not in bugs:
+            if compact:
                 if scissor[used[q]] is None:
                     rp.end()
                     continue
                 rp.set_scissor_rect(*scissor[used[q]])
             rp.set_pipeline(p)
             rp.set_bind_group(0, bg)
-            rp.draw(3 * wat["nf"], 1, 0, q)       # instance index = the plane
+            if compact:
+                rp.draw_indirect(argbuf, 16 * q)  # the plane's culled list
+            else:
+                rp.draw(3 * nf, 1, 0, q)          # every beam; instance index = the plane
             rp.end()
     gpu.device.queue.submit([enc.finish()])
     return pm, k

@@ -339,7 +339,8 @@ struct Beams {
     V: vec4<f32>,        // V, K (water.absorption)
     W: vec4<f32>,        // W, the texel's area (w / Wc) (d / Hc)
     ext: vec4<f32>,      // w, h, d, n (water resolution)
-    acc: vec4<f32>,      // eps = s / 2 (the thesis's threshold, planted test only), planes in this batch, 0, 0
+    acc: vec4<f32>,      // eps = s / 2 (the thesis's threshold, planted test only), planes in this batch,
+                         // 1 when the beams come compacted per plane (culling = bounds), 0
     flags: vec4<u32>,    // bugs, this light's first vertex in trans, its first face in beams, the batch's first plane
 };
 """
@@ -381,6 +382,43 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 """
 
+# culling = bounds (§6.1): per plane of a batch, the beams that reach it and can touch the texels it
+# accepts, appended to the plane's list; the plane's indirect draw counts them
+CULL = r"""
+@group(0) @binding(0) var<uniform> C: Beams;
+@group(0) @binding(1) var<storage, read> hits: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> beams: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> rects: array<vec4<f32>>;        // per plane: first and last texel (j, i)
+@group(0) @binding(4) var<storage, read_write> lists: array<u32>;        // per plane of the batch: its beams
+@group(0) @binding(5) var<storage, read_write> args: array<atomic<u32>>; // per plane: indirect draw arguments
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = u32(C.ext.w);
+    let nv = (n + 1u) * (n + 1u);
+    let nf = 2u * n * n;
+    let k = gid.x + gid.y * 65535u * 64u;
+    if (k >= nf * u32(C.acc.y)) { return; }
+    let q = k / nf;
+    let f = k % nf;
+    let bm = beams[C.flags.z + f];
+    if (!(bm.w > 0.0)) { return; }
+    let fv = water_face(f, n, C.flags.x);
+    let h0 = hits[q * nv + fv.x];
+    let h1 = hits[q * nv + fv.y];
+    let h2 = hits[q * nv + fv.z];
+    if (h0.w < 0.5 || h1.w < 0.5 || h2.w < 0.5) { return; }
+    let p = C.flags.w + q;
+    let rc = rects[p];
+    if (rc.x > rc.z) { return; }
+    // texel centres (j + 0.5, i + 0.5) of the rectangle, one texel of margin for the snap
+    if (max(max(h0.x, h1.x), h2.x) < rc.x - 0.5 || min(min(h0.x, h1.x), h2.x) > rc.z + 1.5) { return; }
+    if (max(max(h0.y, h1.y), h2.y) < rc.y - 0.5 || min(min(h0.y, h1.y), h2.y) > rc.w + 1.5) { return; }
+    let slot = atomicAdd(&args[4u * p], 3u) / 3u;
+    lists[q * nf + slot] = f;
+}
+"""
+
 # the intersection triangles drawn and splatted (eq. 4-15 depth test, eq. 4-18)
 CAUSTICS = r"""
 @group(0) @binding(0) var<uniform> C: Beams;
@@ -390,6 +428,7 @@ CAUSTICS = r"""
 @group(0) @binding(4) var<storage, read> pidx: array<i32>;
 @group(0) @binding(5) var posmap: texture_2d<f32>;
 @group(0) @binding(6) var nrmmap: texture_2d<f32>;
+@group(0) @binding(7) var<storage, read> lists: array<u32>;          // culling = bounds: each plane's beams
 
 struct VOut {
     @builtin(position) pos: vec4<f32>,
@@ -399,11 +438,18 @@ struct VOut {
 };
 
 @vertex
-fn vs(@builtin(vertex_index) vi: u32, @builtin(instance_index) plane: u32) -> VOut {
-    let f = vi / 3u;
+fn vs(@builtin(vertex_index) vi: u32, @builtin(instance_index) inst: u32) -> VOut {
     let corner = vi % 3u;
     let n = u32(C.ext.w);
     let nv = (n + 1u) * (n + 1u);
+    var f = vi / 3u;                                  // every beam, the plane the instance
+    var plane = inst;
+    if (C.acc.z > 0.5) {                              // compacted: first vertex 3 nf q, the list of plane q
+        let nf = 2u * n * n;
+        let q = vi / (3u * nf);
+        f = lists[q * nf + (vi % (3u * nf)) / 3u];
+        plane = C.flags.w + q;
+    }
     let fv = water_face(f, n, C.flags.x);
     let Hc = C.c.w;
     let Wc = C.U.w;
