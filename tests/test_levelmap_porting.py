@@ -98,7 +98,9 @@ def fragments(Vw, F, cam):
 def first_hit(O, D, tris, chunk=256):
     """Nearest float64 Moller-Trumbore hit of each ray on triangles (T, 3, 3): t (inf on a miss), u, v, face.
 
-    Edges inclusive (barycentrics within 1e-12), t >= 0; u weighs vertex 1, v vertex 2.
+    Edges inclusive (barycentrics within 1e-12), t >= 0; u weighs vertex 1, v vertex 2; of equal t, the
+    lower face. Only pairs whose ray passes within a triangle's bounding sphere are tested (a receiver
+    sphere has 20k triangles): the test itself is the same per pair, so the hits are those of all pairs.
     """
     n = len(O)
     t_best = np.full(n, np.inf)
@@ -108,26 +110,37 @@ def first_hit(O, D, tris, chunk=256):
     a = tris[:, 0]
     e1 = tris[:, 1] - a
     e2 = tris[:, 2] - a
+    ctr = tris.mean(1)
+    rad = np.sqrt(((tris - ctr[:, None]) ** 2).sum(-1).max(1))
+    cc = np.sum(ctr * ctr, -1)
     for s in range(0, n, chunk):
-        o = O[s:s + chunk, None, :]
-        d = D[s:s + chunk, None, :]
-        p = np.cross(d, e2[None])
-        det = np.sum(e1[None] * p, -1)
+        o, d = O[s:s + chunk], D[s:s + chunk]
+        # ray-to-centre distances by matrix products; the margin covers their rounding (a cull only)
+        dd = np.sum(d * d, -1)[:, None]
+        tc = d @ ctr.T - np.sum(o * d, -1)[:, None]                      # (C - o) . d
+        oc2 = cc[None] - 2.0 * (o @ ctr.T) + np.sum(o * o, -1)[:, None]  # |C - o|^2
+        r = rad[None] + 1e-6 * (1.0 + np.sqrt(cc)[None] + np.sqrt(np.sum(o * o, -1))[:, None])
+        near = (oc2 * dd - tc * tc <= r * r * dd) & (tc >= -r * np.sqrt(dd))
+        ri, fi = np.nonzero(near)
+        if not len(ri):
+            continue
+        dp, op = d[ri], o[ri]
+        p = np.cross(dp, e2[fi])
+        det = np.sum(e1[fi] * p, -1)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / det
-            tv = o - a[None]
+            tv = op - a[fi]
             u = np.sum(tv * p, -1) * inv
-            q = np.cross(tv, e1[None])
-            v = np.sum(d * q, -1) * inv
-            t = np.sum(e2[None] * q, -1) * inv
+            q = np.cross(tv, e1[fi])
+            v = np.sum(dp * q, -1) * inv
+            t = np.sum(e2[fi] * q, -1) * inv
         ok = (det != 0.0) & (u >= -1e-12) & (v >= -1e-12) & (u + v <= 1.0 + 1e-12) & (t >= 0.0)
-        t = np.where(ok, t, np.inf)
-        k = np.argmin(t, axis=1)
-        rows = np.arange(len(k))
-        t_best[s:s + chunk] = t[rows, k]
-        u_best[s:s + chunk] = u[rows, k]
-        v_best[s:s + chunk] = v[rows, k]
-        f_best[s:s + chunk] = np.where(np.isfinite(t[rows, k]), k, -1)
+        ri, fi, t, u, v = ri[ok], fi[ok], t[ok], u[ok], v[ok]
+        order = np.lexsort((fi, t, ri))                               # per ray: nearest, then lowest face
+        ri, fi, t, u, v = ri[order], fi[order], t[order], u[order], v[order]
+        first = np.r_[True, ri[1:] != ri[:-1]]
+        k = s + ri[first]
+        t_best[k], u_best[k], v_best[k], f_best[k] = t[first], u[first], v[first], fi[first]
     return t_best, u_best, v_best, f_best
 
 
