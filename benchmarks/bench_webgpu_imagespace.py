@@ -74,6 +74,7 @@ def main(argv=None):
     import refraction_ref as rr
     from refraction_ref.meshes import scene_geometry
 
+    load = os.getloadavg()
     scene = rr.load_scene()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "scene.json")
@@ -90,8 +91,8 @@ def main(argv=None):
         f"Default scene (bunny, {len(g.faces):,} triangles, {cam['width']}x{cam['height']}, "
         f"{scene.data['imagespace']['layers']} layers, {scene.data['imagespace']['slices']} slices), medians of "
         f"{a.repeats} frames after a warm-up frame. WebGPU: `{adapter}` (wgpu-py); oracle: Numba, "
-        f"{threads} threads; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs "
-        "(`python benchmarks/bench_webgpu_imagespace.py`).",
+        f"{threads} threads; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load average "
+        f"{load[0]:.1f} before and {os.getloadavg()[0]:.1f} after (`python benchmarks/bench_webgpu_imagespace.py`).",
         "",
         "| pass | WebGPU (lavapipe) ms | oracle ms |",
         "|---|---|---|",
