@@ -33,8 +33,9 @@ _DEVICE = None
 _ADAPTER = None
 _PIPELINES: dict = {}
 
-#: features requested when the adapter offers them (none is required by the backends)
-WANTED_FEATURES = ("timestamp-query", "shader-float32-atomic")
+#: features requested when the adapter offers them (the image-space backend requires none; float32-blendable
+#: lets a render pass add into an r32float target, as the level map's additive splats do)
+WANTED_FEATURES = ("timestamp-query", "shader-float32-atomic", "float32-blendable", "float32-filterable")
 
 
 def available():
@@ -258,22 +259,32 @@ def groups_for(n, size=64):
     return (65535, -(-g // 65535), 1)
 
 
-def draw(pipeline, resources, vertex_buffers, count, size, index_buffer=None, instances=1):
-    """Draw ``count`` vertices (or indices) into a dummy ``size`` = (width, height) target.
+def draw(pipeline, resources, vertex_buffers, count, size, index_buffer=None, instances=1, target=None,
+         fmt="r8unorm", load="clear", clear_value=(0, 0, 0, 0)):
+    """Draw ``count`` vertices (or indices) into a ``size`` = (width, height) colour target.
 
-    The pass's colour target is an ``r8unorm`` texture (the pipeline's format) cleared to 0; the
-    fragment shader's real output is what it writes to the storage buffers of ``resources``.
+    Without ``target`` the pass draws into a dummy texture of format ``fmt`` (the pipeline's target
+    format, written with mask 0 by the backends here: the fragment shader's real output is what it
+    writes to the storage buffers of ``resources``). With ``target`` (a texture, or a texture view) the
+    colour goes there, cleared to ``clear_value`` first (``load="clear"``) or kept (``load="load"``),
+    e.g. for additive blending across draws; read it back with ``read_texture``.
     """
     import wgpu
     dev = device()
     w, h = int(size[0]), int(size[1])
-    tex = _target(w, h)
+    if target is None:
+        view = _target(w, h, fmt).create_view()
+        store = wgpu.StoreOp.discard
+    else:
+        view = target.create_view() if isinstance(target, wgpu.GPUTexture) else target
+        store = wgpu.StoreOp.store
     enc = dev.create_command_encoder()
     rp = enc.begin_render_pass(color_attachments=[{
-        "view": tex.create_view(), "load_op": wgpu.LoadOp.clear, "store_op": wgpu.StoreOp.discard,
-        "clear_value": (0, 0, 0, 0)}])
+        "view": view, "load_op": wgpu.LoadOp.clear if load == "clear" else wgpu.LoadOp.load,
+        "store_op": store, "clear_value": clear_value}])
     rp.set_pipeline(pipeline)
-    rp.set_bind_group(0, bind_group(pipeline, resources))
+    if any(r is not None for r in resources):
+        rp.set_bind_group(0, bind_group(pipeline, resources))
     for slot, vb in enumerate(vertex_buffers):
         rp.set_vertex_buffer(slot, vb)
     if index_buffer is not None:
@@ -283,6 +294,14 @@ def draw(pipeline, resources, vertex_buffers, count, size, index_buffer=None, in
         rp.draw(int(count), int(instances))
     rp.end()
     dev.queue.submit([enc.finish()])
+
+
+def render_target(width, height, fmt="r32float"):
+    """A colour target a render pass draws into and ``read_texture`` reads back."""
+    import wgpu
+    U = wgpu.TextureUsage
+    return device().create_texture(size=(int(width), int(height), 1), format=fmt,
+                                   usage=U.RENDER_ATTACHMENT | U.COPY_SRC | U.COPY_DST | U.TEXTURE_BINDING)
 
 
 def _target(w, h, fmt="r8unorm"):
