@@ -313,6 +313,68 @@ def main(argv=None):
     print(f"wrote {OUT}/grin_error_vs_time{tag}.{{csv,md,png}}")
 
 
+def summary(rows, conv, refs, N0, M0):
+    """The findings in numbers, one bullet per scene and knob family (computed from the rows)."""
+    out = []
+
+    def row(sc, setting):
+        return next((r for r in rows if r["scene"] == sc and r["setting"] == setting), None)
+
+    for sc in sorted({r["scene"] for r in rows}, key=lambda x: x != "luneburg"):
+        d = row(sc, "paper/euler")
+        if d is None:
+            continue
+        t0 = d["t_photons_ms"]
+        line = (f"**{sc}**, defaults (paper, Euler): photon exits {d['dir_p50_deg']:.3g} deg median "
+                f"({d['dir_p99_deg']:.3g} p99), {d['pos_p50_vox']:.3g} voxel; floor map L1 {d['caustic_l1']:.3g}; "
+                f"viewing exits {d['view_p50_deg']:.3g} deg median.")
+        k = row(sc, "paper/rk4")
+        if k:
+            line += (f" RK4: {d['dir_p50_deg'] / max(k['dir_p50_deg'], 1e-12):.0f}x smaller photon direction error, "
+                     f"{d['caustic_l1'] / max(k['caustic_l1'], 1e-12):.0f}x smaller map error, "
+                     f"{d['view_p50_deg'] / max(k['view_p50_deg'], 1e-12):.0f}x smaller viewing error, for "
+                     f"{k['t_photons_ms'] / t0:.1f}x the photon pass and {k['t_view_ms'] / d['t_view_ms']:.1f}x the "
+                     "viewing pass.")
+        rb = row(sc, "robust/euler")
+        if rb:
+            line += (f" Robust stepping with Euler: {rb['dir_p50_deg']:.3g} deg, map L1 {rb['caustic_l1']:.3g} "
+                     f"({rb['t_photons_ms'] / t0:.1f}x the time).")
+        eps = [r for r in rows if r["scene"] == sc and r["family"] == "eps"]
+        if eps:
+            worst = max(eps, key=lambda r: r["dir_p50_deg"])
+            best = min(eps, key=lambda r: r["dir_p50_deg"])
+            line += (f" eps: from {best['setting']} ({best['dir_p50_deg']:.3g} deg, map {best['caustic_l1']:.3g}, "
+                     f"{best['t_photons_ms']:.0f} ms) to {worst['setting']} ({worst['dir_p50_deg']:.3g} deg, map "
+                     f"{worst['caustic_l1']:.3g}, {worst['t_photons_ms']:.0f} ms).")
+        ds = row(sc, "ds_min=2")
+        if ds:
+            line += (f" ds_min = 2 voxels: {ds['dir_p50_deg']:.3g} deg, map {ds['caustic_l1']:.3g} "
+                     f"({ds['t_photons_ms'] / t0:.2f}x the time).")
+        res = [r for r in rows if r["scene"] == sc and r["family"] == "resolution"]
+        if res:
+            line += " Resolution: " + ", ".join(f"{r['setting']} {r['dir_p50_deg']:.3g} deg / view "
+                                                f"{r['view_p50_deg']:.3g} deg" for r in res) + "."
+        ph = [r for r in rows
+              if r["scene"] == sc and r["family"] == "photons" and r.get("caustic_l1_truth") is not None]
+        if ph:
+            line += " Photons (map against the converged map at the largest M): " + ", ".join(
+                f"{r['setting']} {r['caustic_l1_truth']:.3g}" for r in ph) + "."
+        cr = next((r for r in conv.get(sc, []) if r["rtol"] == grin.RTOL), None)
+        if cr:
+            line += (f" The reference moves by at most {cr['dpos_max_vox']:.2g} voxel ({cr['dpos_max']:.2g} world) "
+                     f"from rtol {grin.RTOL:g} to 1e-12; it cost {refs.seconds.get((sc, N0, M0), float('nan')):.0f} s "
+                     f"at N = {N0}, M = {M0}.")
+        out.append("- " + line)
+    lens = [r for r in rows if r["scene"] == "luneburg" and r["family"] == "resolution"]
+    if lens:
+        out.append("- **luneburg against the continuous lens** (b < 0.9 R): the converged reference's own error "
+                   "(the field's discretization) falls with N, " + ", ".join(
+                       f"{r['setting']} {r['ref_lens_cf_p50_deg']:.3g} deg" for r in lens) + "; the method's stays "
+                   "near the integration error, " + ", ".join(
+                       f"{r['setting']} {r['lens_cf_p50_deg']:.3g} deg" for r in lens) + " (medians).")
+    return out
+
+
 def report(rows, conv, refs, N0, M0, seconds, a):
     import numba
 
@@ -321,14 +383,16 @@ def report(rows, conv, refs, N0, M0, seconds, a):
          "`benchmarks/grin_error_vs_time.py" + (" --quick" if a.quick else "") + "` (module docstring: scenes, knobs, "
          f"metrics). The method's renders on {a.threads} Numba thread(s) of a 2-vCPU machine shared with other jobs "
          f"(times: best of {a.repeats} after a warm-up render; still noisy, by tens of per cent), the references on "
-         f"{numba.get_num_threads()}; the whole run "
-         f"took {seconds / 60:.1f} min. Defaults: stepping paper, Euler, eps 0.005, "
+         f"{numba.get_num_threads()}; this run took {seconds / 60:.1f} min (references read back from `--refs` "
+         f"keep their first run's time, below; a run from scratch took 13 min). Times compare within a run: "
+         f"another run on the same machine gave times up to 2-3x longer (other jobs). Defaults: stepping paper, Euler, eps 0.005, "
          f"eps2 0.02, ds_min 1 voxel, N = {N0}, M = {M0} (photons^2 texels), 96x96 pixels.", "",
          "The reference is `--method exact` on the same scene: the ray equation by DOP853 (rtol "
          f"{grin.RTOL:g}, atol {grin.ATOL:g}, steps <= {grin.MAX_STEP:g} voxel) on the method's own field, photons "
          "and receivers (docs/oracle.md, \"Exact reference on volume scenes\"). So every error below is the "
          "method's integration (step rule, integrator, octree shortcut), not the field's discretization; the "
          "Luneburg rows add both against the continuous lens's closed form.", ""]
+    L += ["## Summary", ""] + summary(rows, conv, refs, N0, M0) + [""]
     L += ["## Convergence of the reference", "",
           "Tightening DOP853's tolerance (atol = rtol / 100) on the scene's own photons "
           f"(N = {N0}, M = {32 if a.quick else 64}): how far the exits move to the next tighter tolerance.", "",
