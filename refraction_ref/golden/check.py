@@ -217,21 +217,50 @@ def _context(gold):
     return pics
 
 
+def _edge_counts(cc, gc):
+    """(H, W) set-bit counts -> True where the candidate's count differs from the golden's and equals the
+    golden's count at one of the pixel's 8 neighbours (edges replicate): the coverage an edge moved
+    across the pixel's centre hands it.
+
+    A silhouette edge (a fold's, or the object's outline) separates pixels whose counts differ by the
+    fragments of the triangles that end there; an edge moved by a sub-pixel amount (another rasterizer's
+    snap, float32 set-up) flips the pixels whose centres it crosses to their neighbour's side. A bitmask
+    word that lost a set bit inside a surface (a blend that replaced the word) leaves a count no
+    neighbour has: 3 beside 2 and 4 where a fold's two sheets share a word.
+    """
+    H, W = gc.shape
+    p = np.pad(gc, 1, mode="edge")
+    out = np.zeros((H, W), bool)
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            if di == dj == 1:
+                continue
+            out |= p[di:di + H, dj:dj + W] == cc
+    return out & (cc != gc)
+
+
 def _ambiguity(key, g, spec, pics, c=None):
     """The ambiguity mask of a key (broadcastable to its failing mask), or None where none applies.
 
     Bit words (``spec['silhouette'] == 'counts'``): a silhouette explains a fragment that appears or
-    vanishes (the pixel's set-bit count differs), not a bit that moved: a moved bit is a slice tie or a
-    wrong slice map, counted against ``fraction`` wherever it is.
+    vanishes as an edge moves across the pixel's centre, which hands the pixel the coverage of its
+    neighbour across that edge: the candidate's set-bit count differs from the golden's and equals the
+    golden's count at one of the 8 neighbours (:func:`_edge_counts`). A bit that moved, or a fragment lost
+    from inside a surface (a count no neighbour has), is counted against ``fraction`` wherever it is.
+
+    Keys of a light's view (``stage.photon_trace.*``) are over the light's texels, not the camera's
+    pixels, even when the two pictures have the same size: only their own layers' edges are ambiguous.
     """
     if not spec.get("locate"):
         return None
     g = np.asarray(g)
+    if key.startswith("stage.photon_trace."):
+        pics = {shp: np.zeros(shp, bool) for shp in pics}
     for shp, mask in pics.items():
         if g.ndim >= 2 and g.shape[:2] == shp:  # per pixel (H, W, ...)
             m = mask.copy()
             if spec.get("silhouette") == "counts" and c is not None and g.dtype.kind == "u" and g.ndim == 3:
-                m &= _popcount(np.asarray(c, g.dtype)) != _popcount(g)
+                m &= _edge_counts(_popcount(np.asarray(c, g.dtype)), _popcount(g))
             if spec.get("own_edges") and g.ndim == 2:
                 m |= _changes(_codes(g))
             if spec.get("over") == "nonzero" and g.ndim == 2:  # the lit region's edge
@@ -307,12 +336,214 @@ def _imagespace_explanations(golden, name, gold, cand, passed):
     return out
 
 
-#: which upstream keys each explanation reads (the explanation is computed once they are judged)
+def _trace_explanations(golden, name, gold, cand, passed):
+    """The eye's trace run by the oracle on the candidate's own LDI: {position key: array}.
+
+    The trace reads the LDI's depths at its probes and differentiates them for the normals (a central
+    difference over ``2 delta`` pixels): one float32 ulp of a depth tilts a normal by
+    ``sqrt(2) ulp(d) / (2 delta p(d))`` (``p(d)`` the pixel's footprint at depth d: 7.7e-6 rad at d = 2.6
+    on the catalogue's 128 x 128 views), which moves the next interface point, a segment of the object's
+    size away, by 4-8e-6: more than ``close`` allows a position (``1e-6 + 1e-5 |g|``) per ulp. A
+    rasterizer whose depths are float32 (1-3 ulps from the oracle's, within ``ldi``'s tolerance) moves
+    every position after interface 0 so. Its positions are therefore also judged against the oracle's
+    trace run on its own passing LDI (with its own passing layer counts, ``zmax``, ``zlo``/``zhi`` and
+    search bounds, the golden's where it supplies none or they fail). Only the positions and path lengths
+    (``exit_pos``, ``path_pos``, ``path_length``): directions, codes and images are judged against the
+    golden alone. Used only if the same replay on the golden's own buffers reproduces the golden.
+    """
+    ldi = cand.get("stage.peel.ldi")
+    if ldi is None or not passed.get("stage.peel.ldi") or ldi.shape != gold["stage.peel.ldi"].shape:
+        return {}
+    from ..camera import Camera
+    from ..imagespace.pipeline import Bounds, Layers, MinMax, Voxels, check_materials, grid_camera, pass_trace
+    from ..meshes import scene_geometry
+    from ..scene import load_scene
+
+    sc = load_scene(os.path.join(golden, name, "scene.json"))
+    p = sc.data["imagespace"]
+    if p.get("peeling", "separate") != "separate" or p.get("depth", "bitmask") != "bitmask":
+        return {}
+
+    def pick(k, alt=None):
+        for kk in (k, alt):
+            if kk and kk in cand and passed.get(kk) and np.shape(cand[kk]) == np.shape(gold[k]):
+                return cand[kk]
+        return gold[k]
+
+    cam = Camera.from_dict(sc.data["camera"])
+    ior, _ = check_materials(scene_geometry(sc))
+    outside = float(sc.data["outside_ior"])
+
+    def run(src, layers):
+        mm = MinMax(None, None, src("stage.minmax.zmax"), None, 0.0, 0.0)
+        vox = Voxels(None, src("stage.voxelize.zlo"), src("stage.voxelize.zhi"), None, None)
+        total = np.asarray(src("stage.peel.depth_complexity", "depth_complexity")).astype(np.int32)
+        red = Bounds(src("stage.reduce.bounds_hi"), src("stage.reduce.bounds_lo"), "")
+        return pass_trace(mm, vox, Layers(layers, total, None, True, ""), red, grid_camera(cam, p["grid"]), p,
+                          ior, outside, record=int(p["record"]), image=cam)
+
+    keys = {"exit_pos": "exit_pos", "path_length": "path_length", "stage.trace.exit_pos": "exit_pos",
+            "stage.trace.path_pos": "path_pos", "stage.trace.path_length": "path_length"}
+    try:
+        gr = run(lambda k, alt=None: gold[k], gold["stage.peel.ldi"])
+        same = [k for k, t in keys.items() if k in gold and gr.get(t) is not None
+                and np.array_equal(np.asarray(gr[t], gold[k].dtype), gold[k], equal_nan=True)]
+        if not same:
+            return {}
+        cr = run(pick, ldi)
+        return {k: np.asarray(cr[keys[k]]) for k in same}
+    except (KeyError, ValueError, TypeError):  # a golden without these buffers: judge against the golden alone
+        return {}
+
+
+def _light_trace(sc, gold, light):
+    """The oracle's passes in light ``light``'s view and a trace of them on any LDI (``run(ldi)``), or None.
+
+    The light's depths, bitmask and bounds are not contract keys: the oracle's own (computed from the
+    scene) serve, and the layer counts follow the LDI given (its present layers, the oracle's count where
+    every layer is present).
+    """
+    from ..imagespace.pipeline import (Layers, check_materials, pass_minmax, pass_peel, pass_reduce, pass_trace,
+                                       pass_voxelize)
+    from ..lights import light_camera
+    from ..meshes import scene_geometry
+    from ..status import EXITED
+
+    d = sc.data
+    p = d["imagespace"]
+    if p.get("peeling", "separate") != "separate" or p.get("depth", "bitmask") != "bitmask":
+        return None
+    geom = scene_geometry(sc)
+    ior, _ = check_materials(geom)
+    lcam = light_camera(d["lights"][light], geom.vertices, int(p["photons"]))
+    mm = pass_minmax(geom, lcam, p)
+    vox = pass_voxelize(mm, lcam, p)
+    pl = pass_peel(vox, lcam.shape, p)
+    if not np.array_equal(pl.ldi, gold[f"stage.photon_trace.ldi_{light}"]):
+        return None
+
+    def run(ldi):
+        nfin = np.isfinite(ldi).sum(axis=0)
+        total = np.where(nfin >= ldi.shape[0], np.maximum(pl.total, nfin), nfin).astype(pl.total.dtype)
+        lay = Layers(ldi, total, None, True, "")
+        tr = pass_trace(mm, vox, lay, pass_reduce(mm, lay, p), lcam, p, ior, float(d["outside_ior"]))
+        ex = np.flatnonzero(tr["status"].ravel() == EXITED)
+        return tr["exit_pos"].reshape(-1, 3)[ex], tr["exit_dir"].reshape(-1, 3)[ex]
+
+    return run
+
+
+def _photon_explanations(golden, name, gold, cand, passed, light):
+    """The light's photon trace run by the oracle on the candidate's own light LDI: {exit_pos_l: array}.
+
+    The photons are the eye's trace in the light's view (§4.1): their exit points move with the light
+    LDI's last bits as the eye's positions do with the eye's (:func:`_trace_explanations`). Used only
+    where the candidate's ``stage.photon_trace.ldi_l`` passed, the oracle's light passes reproduce the
+    golden's LDI and photons, and the replay exits as many photons as the candidate's key holds.
+    """
+    k_ldi, k_pos = f"stage.photon_trace.ldi_{light}", f"stage.photon_trace.exit_pos_{light}"
+    ldi = cand.get(k_ldi)
+    if ldi is None or not passed.get(k_ldi) or ldi.shape != gold[k_ldi].shape or k_pos not in cand:
+        return {}
+    from ..scene import load_scene
+
+    try:
+        run = _light_trace(load_scene(os.path.join(golden, name, "scene.json")), gold, light)
+        if run is None:
+            return {}
+        og, dg = run(gold[k_ldi])
+        if not (np.array_equal(og, gold[k_pos]) and np.array_equal(dg, gold[f"stage.photon_trace.exit_dir_{light}"])):
+            return {}
+        oc, _ = run(ldi)
+        return {k_pos: oc} if oc.shape == np.shape(cand[k_pos]) else {}
+    except (KeyError, ValueError, TypeError, IndexError):
+        return {}
+
+
+def _hit_explanations(golden, name, gold, cand, passed, light):
+    """The receiver hits run by the oracle on the candidate's own photons and depth image: {hit_pos_l: array}.
+
+    The eye-space march samples the photon's line once per camera pixel against the receivers' depth
+    image: an exit point moved within its tolerance (or by the light LDI's last bits,
+    :func:`_photon_explanations`) can cross the depth image one sample earlier or later, a jump of up to a
+    pixel's footprint along the receiver. The hits are therefore also judged against the oracle's march
+    of the candidate's own passing ``exit_pos_l``, ``exit_dir_l`` and ``receiver_depth`` buffers (the
+    golden's where it supplies none or they fail); used only if the same march of the golden's buffers
+    reproduces the golden.
+    """
+    from ..caustics.pipeline import receiver_hits
+    from ..caustics.receivers import receiver_set
+    from ..camera import Camera
+    from ..scene import load_scene
+
+    k_hit = f"stage.receiver_hit.hit_pos_{light}"
+    ins = (f"stage.photon_trace.exit_pos_{light}", f"stage.photon_trace.exit_dir_{light}",
+           "stage.receiver_depth.depth", "stage.receiver_depth.triangle")
+    if not any(k in cand and passed.get(k) and np.shape(cand[k]) == np.shape(gold[k]) for k in ins):
+        return {}
+
+    def pick(k):
+        return cand[k] if (k in cand and passed.get(k) and np.shape(cand[k]) == np.shape(gold[k])) else gold[k]
+
+    try:
+        sc = load_scene(os.path.join(golden, name, "scene.json"))
+        d = sc.data
+        rs = receiver_set(sc, d["lights"][0], int(d["caustics"]["map_size"]))
+        cam = Camera.from_dict(d["camera"])
+        mode = d["imagespace"]["receiver_hit"]
+
+        def run(src):
+            P, _ = receiver_hits(rs, src(ins[0]), src(ins[1]), mode, cam, (src(ins[2]), src(ins[3])))
+            return P
+
+        if not np.array_equal(run(gold.__getitem__), gold[k_hit], equal_nan=True):
+            return {}
+        P = run(pick)
+        return {k_hit: P} if P.shape == gold[k_hit].shape else {}
+    except (KeyError, ValueError, TypeError, IndexError, ImportError):
+        return {}
+
+
+#: which upstream keys each explanation reads (the explanation is computed once they are judged), and the
+#: group of keys one replay explains
 _EXPLAINED_BY = {"stage.peel.ldi": ("stage.voxelize.bits",),
                  "stage.peel.depth_complexity": ("stage.voxelize.bits",),
                  "depth_complexity": ("stage.voxelize.bits",),
                  "stage.reduce.bounds_hi": ("stage.voxelize.bits", "stage.peel.ldi"),
                  "stage.reduce.bounds_lo": ("stage.voxelize.bits", "stage.peel.ldi")}
+_TRACE_UPSTREAM = ("stage.peel.ldi", "stage.peel.depth_complexity", "stage.minmax.zmax", "stage.voxelize.zlo",
+                   "stage.voxelize.zhi", "stage.reduce.bounds_hi", "stage.reduce.bounds_lo")
+_EXPLAINED_BY.update({k: _TRACE_UPSTREAM for k in ("exit_pos", "path_length", "stage.trace.exit_pos",
+                                                    "stage.trace.path_pos", "stage.trace.path_length")})
+_PER_LIGHT = (
+    (re.compile(r"stage\.photon_trace\.exit_pos_(\d+)"), "photons", ("stage.photon_trace.ldi_{0}",)),
+    (re.compile(r"stage\.receiver_hit\.hit_pos_(\d+)"), "hits",
+     ("stage.photon_trace.exit_pos_{0}", "stage.photon_trace.exit_dir_{0}", "stage.receiver_depth.depth",
+      "stage.receiver_depth.triangle")),
+)
+
+
+def _explanation(key):
+    """(group, light, upstream keys) of a key an image-space replay may explain, or None."""
+    if key in _EXPLAINED_BY:
+        return ("trace" if _EXPLAINED_BY[key] is _TRACE_UPSTREAM else "peel", None, _EXPLAINED_BY[key])
+    for rx, group, ups in _PER_LIGHT:
+        m = rx.fullmatch(key)
+        if m:
+            l = int(m.group(1))
+            return group, l, tuple(u.format(l) for u in ups)
+    return None
+
+
+def _explain(group, light, golden, name, gold, cand, passed):
+    """The replay of one group (:func:`_explanation`): {key: array}."""
+    if group == "peel":
+        return _imagespace_explanations(golden, name, gold, cand, passed)
+    if group == "trace":
+        return _trace_explanations(golden, name, gold, cand, passed)
+    if group == "photons":
+        return _photon_explanations(golden, name, gold, cand, passed, light)
+    return _hit_explanations(golden, name, gold, cand, passed, light)
 
 
 # --------------------------------------------------------------------- shared receiver edges (hit_face ties)
@@ -853,11 +1084,13 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
                             "--allow-extra (allow_extra=True) for a backend's own keys")
     order = list(entry["stages"])
     rank = {s: i for i, s in enumerate(order)}
+    # within a stage, the keys a replay may explain after the others (the light's exit points after its LDI)
+    later = (lambda k: _explanation(k) is not None) if entry["method"] == "imagespace" else (lambda k: False)
     keys = sorted((k for k in entry["keys"] if k in cand), key=lambda k: (rank.get(entry["keys"][k]["stage"],
-                                                                                     len(order)), k))
+                                                                                     len(order)), later(k), k))
     pics = _context(gold)
     passed = {}
-    explained = None
+    explained = {}  # (replay group, light) -> {key: the oracle's pass run on the candidate's upstream}
     judged_as = {}  # (golden sha256, tolerance) -> the key judged: a byte-identical copy is judged once
     photon_cache = {}
     for k in keys:
@@ -914,16 +1147,21 @@ def _judge_case(res, name, entry, candidate, golden, require, report, panels, al
                 r = judge(c, g, tol, batches.get(k), amb, judged=_weight_mask(k, tol, gold))
             except ValueError as e:
                 r = {"ok": False, "detail": str(e), "failing": 1.0, "allowed": 0.0, "error": {}, "bad": None}
-            if not r["ok"] and k in _EXPLAINED_BY and entry["method"] == "imagespace":
-                if explained is None:
-                    explained = _imagespace_explanations(golden, name, gold, cand, passed)
-                e = explained.get(k)
+            how = _explanation(k) if not r["ok"] and entry["method"] == "imagespace" else None
+            if how is not None:
+                group, light, upstream = how
+                if (group, light) not in explained:  # once per replay, after its upstream keys were judged
+                    explained[(group, light)] = _explain(group, light, golden, name, gold, cand, passed)
+                e = explained[(group, light)].get(k)
                 if e is not None and e.shape == g.shape:
                     r2 = judge(c, e.astype(g.dtype), tol, None, amb)
                     if r2["ok"]:
-                        ups = " and ".join(u for u in _EXPLAINED_BY[k] if u in cand)
-                        r2["detail"] = (f"differs from the golden where the candidate's own {ups} (within its "
-                                        f"tolerance) does; against the oracle's pass run on it: " + r2["detail"])
+                        own = [u for u in upstream if u in cand and passed.get(u)]
+                        ups = " and ".join(own) if len(own) < 3 else ", ".join(own[:-1]) + " and " + own[-1]
+                        r2["detail"] = (f"differs from the golden where the candidate's own {ups} (within "
+                                        + ("its tolerance) does" if len(own) < 2 else "their tolerances) do")
+                                        + "; against the oracle's pass run on " + ("it: " if len(own) < 2 else
+                                                                                  "them: ") + r2["detail"])
                         r2["explained_by"] = ups
                         r = r2
             st = _stopped_strict(k, entry["method"], c, g, tol, cand, gold)

@@ -16,6 +16,10 @@ Kinds (``docs/oracle.md``, "Conformance"):
     ``s`` pixels away along x and y. :data:`SNAP_SLOPE` = 1/512 admits a
     rasterizer that does not snap vertices to the oracle's 1/256 pixel
     grid, or casts rays analytically (``docs/oracle.md``, "Conformance").
+    ``snap_slope`` (the light's LDI) admits, on at most ``snap_fraction`` of
+    the informative elements outside the ambiguity mask, ``snap_slope *
+    step(g)`` (:data:`FLOAT32_SNAP_SLOPE` = 1/256: a float32 projection that
+    snaps a vertex to the neighbouring 1/256 step).
 ``angle``
     Unit vectors (directions, normals): the angle between them at most
     ``deg`` degrees, and ``|c|`` within ``norm`` of 1 (a normal that is not
@@ -69,7 +73,8 @@ import fnmatch
 import numpy as np
 
 __all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
-           "FINITENESS", "SNAP_SLOPE", "neighbour_step", "flux_error", "FLUX", "VOLUME_FLUX", "RADIANCE_FLOOR",
+           "FINITENESS", "SNAP_SLOPE", "FLOAT32_SNAP_SLOPE", "FLOAT32_SNAP_FRACTION", "neighbour_step",
+           "flux_error", "FLUX", "VOLUME_FLUX", "RADIANCE_FLOOR",
            "DEFAULT", "DEFAULT_INT", "fmt_share"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
@@ -110,6 +115,22 @@ _SLOPE = ("a rasterizer without the 1/256 vertex snap, or a ray caster, samples 
           "per axis from the snapped triangle's point: |c - g| may add (1/512) x the largest step to the 8 "
           "neighbours; coverage differs only at silhouettes")
 _DEPTH = "rasterized depths: another order of float64 arithmetic; " + _SLOPE + " (0.5 % elsewhere)"
+#: a vertex projected in float32 lands within eps of the float64 position (1.2e-5 pixel measured on the
+#: catalogue's 128-texel light views: a few ulps of the pixel coordinate); where the float64 position lies
+#: within eps of a midpoint between two 1/256 steps the snap picks the neighbouring step, moving the vertex
+#: by a whole step, 1/256 pixel, and the depths interpolated at the texel centres of its triangles by up to
+#: their weight times step(g)/256 (docs/oracle.md, "Float32 rasterizers")
+FLOAT32_SNAP_SLOPE = 1.0 / 256.0
+#: the share of a light LDI's texels that may lie beyond the slope term but within FLOAT32_SNAP_SLOPE: per
+#: vertex the chance of the other step is 2 x 256 eps per axis (1.2 % for both axes at eps = 1.2e-5); a
+#: texel leaves the 1/512 term only where such a vertex weighs more than 1/2 (a quarter of each triangle of
+#: its fan, the fans covering the surface three times: 3/4 of the vertex share) and moves along the depth's
+#: gradient (about half of them): 0.46 %, taken as zmin's and zlo's 0.5 %, the buffers the light's LDI
+#: stands for (its bitmask and depth bounds are not contract keys)
+FLOAT32_SNAP_FRACTION = 0.005
+_LIGHT_LDI = ("the light's layer depths: slice centres of its bitmask (not a contract key, so no replay); "
+              + _SLOPE + "; a float32 projection may snap a vertex to the neighbouring 1/256 step: up to "
+              "step(g)/256 on 0.5 % of the texels outside the light's silhouettes, beyond that on none")
 
 #: the radiance floor of the volumetric ``direction``: voxels whose golden radiance (summed over channels) is
 #: below this fraction of its maximum are not judged. Directions are normalised sums of float32 deposits: a
@@ -244,6 +265,9 @@ TOLERANCES = [
                         "(slice ties move a path)"}),
     ("*diffuse_*", {"kind": "close", "atol": 1e-6, "rtol": 1e-6, "fraction": 0.0, "over": "nonzero",
                     "locate": True, "why": "albedo per texel: differs only beside a depth discontinuity"}),
+    ("stage.photon_trace.ldi_*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "slope": SNAP_SLOPE,
+                                  "snap_slope": FLOAT32_SNAP_SLOPE, "snap_fraction": FLOAT32_SNAP_FRACTION,
+                                  "fraction": 0.0, "over": "finite", "locate": True, "why": _LIGHT_LDI}),
     ("*ldi*", {"kind": "close", "atol": 1e-5, "rtol": 1e-5, "slope": SNAP_SLOPE, "fraction": 0.0, "over": "finite",
                "locate": True,
                "why": "layer depths are slice centres: they differ only where the bitmask does (judged against "
@@ -675,6 +699,13 @@ def judge(cand, gold, spec, batches=None, ambiguous=None, judged=None):
     amb = np.zeros(bad.shape, bool) if ambiguous is None else _fold(np.asarray(ambiguous, bool), bad.shape)
     located = bad & ~amb
     nonfinite = nonfinite_mismatch(c, g)
+    snap = None
+    if spec.get("snap_slope") and spec["kind"] == "close":
+        # the located failures within the wider term count against snap_fraction, the rest against fraction
+        hard = _elementwise(c, g, dict(spec, slope=spec["snap_slope"]), batches)[0]
+        if judged is not None:
+            hard = hard & jm
+        snap = located & ~hard
 
     inside = float(spec.get("inside", INSIDE)) if ambiguous is not None else 1.0
 
@@ -695,10 +726,18 @@ def judge(cand, gold, spec, batches=None, ambiguous=None, judged=None):
         v["ok"] = all(p["ok"] for p in parts.values())
         v["failing"] = max(p["failing"] for p in parts.values())
     else:
-        v = verdict(located, info, bad, amb)
+        v = verdict(located if snap is None else located & ~snap, info, bad, amb)
     cn = v["counts"]
     detail += (f"; {fmt_share(cn['located'], cn['informative'])} of the informative elements failing outside "
                f"the ambiguity mask ({cn['inside_ambiguity']} more inside it, {100 * inside:.3g} % allowed there)")
+    if snap is not None:
+        n_snap, n_info = int(np.count_nonzero(snap)), max(cn["informative"], 1)
+        ok_snap = n_snap <= float(spec.get("snap_fraction", 0.0)) * n_info
+        v["ok"] = v["ok"] and ok_snap
+        cn["snap"] = n_snap
+        detail += (f"; {fmt_share(n_snap, cn['informative'])} more beyond it but within {spec['snap_slope']:.3g} "
+                   f"step(g) (a vertex on the neighbouring snap step; "
+                   f"{100 * float(spec.get('snap_fraction', 0.0)):.3g} % allowed){'' if ok_snap else ' FAIL'}")
     if spec.get("flux") and spec["kind"] == "close" and c.shape == g.shape:
         fe, ratio = flux_error(c, g)
         ok_flux = bool(np.all(fe <= spec["flux"]))
