@@ -23,7 +23,11 @@ present layers, lit texels). A downstream buffer whose upstream input
 differs within tolerance is judged against what that difference explains:
 for the image-space method the layer counts and the LDI against the
 candidate's own bitmask, the search bounds against the candidate's own LDI,
-each run through the oracle's pass.
+the trace's positions against the oracle's trace on the candidate's own LDI,
+the photons' exits against the light's passes on its own light LDI and their
+hits against the march of its own photons, each run through the oracle's pass
+(float32 depths move positions beyond float64's tolerance through the
+normals' central differences: docs/oracle.md, "Float32 rasterizers").
 
 Writes ``report.md`` (per case and key: pass or fail, the measured error
 beside the allowance and the tolerance's rationale, the earliest failing
