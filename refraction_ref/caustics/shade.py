@@ -38,8 +38,8 @@ from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
 from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
-__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_map_margin", "exact_visibility",
-           "take_rows"]
+__all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_map_margin", "shadow_map_test",
+           "ShadowMaps", "exact_visibility", "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -212,13 +212,37 @@ class _LightView(NamedTuple):
 
 
 @nb.njit(cache=True, inline="always")
+def _screen_of(x, y, z, view):
+    """Camera.to_screen of view-space point (x, y, z) in its operations' order: (col, row, depth along the view)."""
+    d = -z
+    s = 1.0 if view.ortho else d
+    col = (x / (s * view.sx) * 0.5 + 0.5) * view.width
+    row = (0.5 - y / (s * view.sy) * 0.5) * view.height
+    return col, row, d
+
+
+@nb.njit(cache=True, inline="always")
 def _light_screen(pv, k, view):
     """Camera.to_screen of view-space point k in its operations' order: (col, row, depth along the view)."""
-    d = -pv[k, 2]
-    s = 1.0 if view.ortho else d
-    col = (pv[k, 0] / (s * view.sx) * 0.5 + 0.5) * view.width
-    row = (0.5 - pv[k, 1] / (s * view.sy) * 0.5) * view.height
-    return col, row, d
+    return _screen_of(pv[k, 0], pv[k, 1], pv[k, 2], view)
+
+
+@nb.njit(cache=True, inline="always")
+def _to_view(x, y, z, m, t, c):
+    """Column ``c`` of :func:`~refraction_ref.vec3.affine`'s ``p @ m + t`` (Camera.world_to_view), in its order."""
+    return x * m[0, c] + y * m[1, c] + z * m[2, c] + t[c]
+
+
+def _world_to_view_args(lcam):
+    """``(m, t)`` of ``Camera.world_to_view``'s affine map, computed as it computes them."""
+    b = lcam.basis
+    return (np.ascontiguousarray(b.T, dtype=np.float64),
+            np.ascontiguousarray(-np.asarray(lcam.eye, dtype=np.float64) @ b.T, dtype=np.float64))
+
+
+def _light_view(lcam, bias):
+    return _LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width), float(lcam.height),
+                      float(bias))
 
 
 @nb.njit(cache=True, inline="always")
@@ -342,6 +366,89 @@ def _shadow_margin_kernel(pv, zmin, view, tie, out):
 
 
 @nb.njit(cache=True, parallel=True)
+def _shadow_test_kernel(p, m, t, zmin, view, tie, idx, code, margin):
+    # per point: Camera.world_to_view (affine's order), then _shadow_map_kernel's verdict and
+    # _shadow_margin_kernel's margin and tie probes, written to the point's own row idx[k]
+    bias = view.bias
+    for k0 in nb.prange(p.shape[0]):
+        k = np.int64(k0)
+        x, y, z = p[k, 0], p[k, 1], p[k, 2]
+        col, row, d = _screen_of(_to_view(x, y, z, m, t, 0), _to_view(x, y, z, m, t, 1),
+                                 _to_view(x, y, z, m, t, 2), view)
+        mg = _margin_at(col, row, d, zmin, bias)
+        q = idx[k]
+        code[q] = 2 if mg > 0 else 1
+        if tie > 0:
+            for r in range(4):
+                dc = tie if r == 0 else (-tie if r == 1 else 0.0)
+                dr = tie if r == 2 else (-tie if r == 3 else 0.0)
+                if (_margin_at(col + dc, row + dr, d, zmin, bias) > 0) != (mg > 0):
+                    mg = 0.0
+        margin[q] = np.float32(mg)
+
+
+def shadow_map_test(lcam, zmin, points, bias, tie, idx, code, margin):
+    """The shadow test's verdict and margin at world points, written to rows ``idx`` of two buffers.
+
+    ``code[idx] = np.where(shadow_map_visibility(...) > 0, 1, 2)`` and
+    ``margin[idx] = shadow_map_margin(..., tie)`` (cast to the buffer's float32), in one pass over
+    the points on every thread: each point's light-view position is computed once for both.
+
+    Parameters
+    ----------
+    lcam : Camera
+    zmin : (N, N) float64
+    points : (M, 3) array_like
+    bias : float
+    tie : float
+        Texels (:func:`shadow_map_margin`).
+    idx : (M,) array_like of int
+        Distinct rows of ``code`` and ``margin``.
+    code : (K,) uint8
+        1 lit, 2 in shadow, written at ``idx``.
+    margin : (K,) float32
+        Written at ``idx``.
+
+    References
+    ----------
+    .. [1] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
+    """
+    p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return
+    m, t = _world_to_view_args(lcam)
+    _shadow_test_kernel(p, m, t, np.ascontiguousarray(zmin, dtype=np.float64), _light_view(lcam, bias),
+                        float(tie), np.ascontiguousarray(idx, dtype=np.int64), code, margin)
+
+
+class ShadowMaps:
+    """Visibility of each light from its min-depth image: ``vis(l, points, normals)`` (normals unused).
+
+    A callable like any ``visibility`` argument of :func:`shade_points`, which recognises it and
+    tests the shadow inside its per-point kernel instead of calling it.
+
+    Parameters
+    ----------
+    shadow : list of (lcam, zmin, bias) or None
+        Per light its camera, nearest depth image and bias; None casts no shadow.
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
+
+    def __init__(self, shadow):
+        self.shadow = list(shadow)
+
+    def __call__(self, l, points, normals):
+        if self.shadow[l] is None:
+            return np.ones(len(points))
+        lcam, zmin, bias = self.shadow[l]
+        return shadow_map_visibility(lcam, zmin, points, bias)
+
+
+@nb.njit(cache=True, parallel=True)
 def _shadow_rays_kernel(p, n, tl, s, o, d):
     # exact_visibility's rays towards a directional light: side = +-1 as n . to_light >= 0
     # (einsum's order), o = p + s (to_light + side n), d = to_light
@@ -420,6 +527,155 @@ def exact_visibility(obj_tris, light, points, normals, chunk=None, scene=None, s
     return (~hit).astype(np.float64)
 
 
+class _ShadeReceivers(NamedTuple):
+    """The receivers as :func:`_shade_kernel` reads them."""
+
+    normals: np.ndarray  # (T, 3) unit face normals
+    owner: np.ndarray  # (T,) int64 receiver of each triangle
+    albedo: np.ndarray  # (R, 3)
+    frames: np.ndarray  # (R, 4, 3) centre, U, W, (w, d, 0): map_position's frame per receiver
+    size: np.ndarray  # (R, 2) float64 (Hc, Wc) of each receiver's box
+    maps: np.ndarray  # (R, Hc, Wc, 3) caustic irradiance (one shape for all)
+
+
+class _ShadeLights(NamedTuple):
+    """The lights and their shadow maps as :func:`_shade_kernel` reads them."""
+
+    L: np.ndarray  # (nl, ML, 3) direction of travel; ML = 1: the same at every point
+    fall: np.ndarray  # (nl, ML)
+    radiance: np.ndarray  # (nl, 3)
+    shadowed: np.ndarray  # (nl,) bool: the light has a shadow map
+    m: np.ndarray  # (nl, 3, 3) world_to_view's matrix of the light's camera
+    t: np.ndarray  # (nl, 3) and its offset
+    views: np.ndarray  # (nl, 6) sx, sy, ortho, width, height, bias (_LightView)
+    zmin: np.ndarray  # (nl, N, N) nearest depth from the light (one shape for all)
+
+
+def _fused_args(rs, lights, maps_rgb, P, visibility):
+    """:func:`_shade_kernel`'s inputs, or None where it does not apply (visibility not a
+    :class:`ShadowMaps`, maps or shadow maps of several shapes, a light of another type)."""
+    if not isinstance(visibility, ShadowMaps) or len(visibility.shadow) < len(lights) or not len(maps_rgb):
+        return None
+    nl, nr, M = len(lights), len(rs.boxes), len(P)
+    if any(lt["type"] not in ("directional", "point") for lt in lights) or nr != len(maps_rgb):
+        return None
+    shapes = {np.shape(E) for E in maps_rgb}
+    zshapes = {np.shape(sh[1]) for sh in visibility.shadow[:nl] if sh is not None}
+    if len(shapes) != 1 or len(zshapes) > 1:
+        return None
+    maps = (np.ascontiguousarray(maps_rgb[0], dtype=np.float64)[None] if nr == 1
+            else np.ascontiguousarray(np.stack(maps_rgb), dtype=np.float64))
+    frames = np.empty((nr, 4, 3))
+    size = np.empty((nr, 2))
+    for r, box in enumerate(rs.boxes):  # as map_position packs them
+        frames[r] = np.array([box.center, box.U, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
+        size[r] = [float(box.size[0]), float(box.size[1])]
+    rcv = _ShadeReceivers(np.ascontiguousarray(rs.normals, dtype=np.float64),
+                          np.ascontiguousarray(rs.owner, dtype=np.int64),
+                          np.ascontiguousarray(rs.albedo, dtype=np.float64), frames, size, maps)
+    ML = M if any(lt["type"] == "point" for lt in lights) else 1
+    L = np.empty((nl, ML, 3))
+    fall = np.empty((nl, ML))
+    radiance = np.empty((nl, 3))
+    shadowed = np.zeros(nl, np.bool_)
+    m = np.zeros((nl, 3, 3))
+    t = np.zeros((nl, 3))
+    view = np.zeros((nl, 6))
+    zs = zshapes.pop() if zshapes else (1, 1)
+    zmin = None
+    for l, lt in enumerate(lights):
+        Ll, fl = light_direction_at(lt, P[:ML])  # directional: the same row at every point
+        L[l], fall[l] = Ll, fl
+        radiance[l] = np.asarray(lt["radiance"], dtype=np.float64)
+        sh = visibility.shadow[l]
+        if sh is not None:
+            lcam, z, bias = sh
+            shadowed[l] = True
+            m[l], t[l] = _world_to_view_args(lcam)
+            view[l] = [float(lcam.sx), float(lcam.sy), 1.0 if lcam.ortho else 0.0, float(lcam.width),
+                       float(lcam.height), float(bias)]
+            if nl == 1:
+                zmin = np.ascontiguousarray(z, dtype=np.float64)[None]
+    if zmin is None:
+        zmin = np.full((nl,) + tuple(zs), np.inf)
+        for l in range(nl):
+            if shadowed[l]:
+                zmin[l] = visibility.shadow[l][1]
+    return rcv, _ShadeLights(L, fall, radiance, shadowed, m, t, view, zmin)
+
+
+@nb.njit(cache=True, parallel=True)
+def _shade_kernel(P, faces, dirs, rcv, lts, out):
+    # shade_points per point, its kernels' operations in their order: the facing normal, per light
+    # the cosine, the shadow test where the point faces the light (0 elsewhere) and the direct
+    # term added to a sum that starts at 0, then the caustic map's bilinear look-up added, times
+    # the albedo
+    normals, owner, albedo, frames, size, maps = rcv.normals, rcv.owner, rcv.albedo, rcv.frames, rcv.size, rcv.maps
+    L, fall, radiance, shadowed = lts.L, lts.fall, lts.radiance, lts.shadowed
+    mat, off, views, zmin = lts.m, lts.t, lts.views, lts.zmin
+    nl = radiance.shape[0]
+    ML = L.shape[1]
+    Hc, Wc = maps.shape[1], maps.shape[2]
+    for k0 in nb.prange(P.shape[0]):
+        k = np.int64(k0)
+        f = faces[k]
+        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+        if _einsum_dot(nx, ny, nz, dirs[k, 0], dirs[k, 1], dirs[k, 2]) > 0:
+            nx, ny, nz = -nx, -ny, -nz
+        px, py, pz = P[k, 0], P[k, 1], P[k, 2]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        j = k if ML > 1 else np.int64(0)
+        for l in range(nl):
+            c = -_einsum_dot(nx, ny, nz, L[l, j, 0], L[l, j, 1], L[l, j, 2])
+            cos = c if (c > 0.0 or c != c) else 0.0
+            v = 0.0
+            if cos > 0:
+                v = 1.0
+                if shadowed[l]:
+                    view = _LightView(views[l, 0], views[l, 1], views[l, 2] != 0.0, views[l, 3], views[l, 4],
+                                      views[l, 5])
+                    m = mat[l]
+                    tt = off[l]
+                    col, row, d = _screen_of(_to_view(px, py, pz, m, tt, 0), _to_view(px, py, pz, m, tt, 1),
+                                             _to_view(px, py, pz, m, tt, 2), view)
+                    v = 0.0 if _margin_at(col, row, d, zmin[l], view.bias) > 0 else 1.0
+            w = cos * fall[l, j] * v
+            s0 += radiance[l, 0] * w
+            s1 += radiance[l, 1] * w
+            s2 += radiance[l, 2] * w
+        r = owner[f]
+        # map_position's col and row, then sample_bilinear's look-up
+        qx = px - frames[r, 0, 0]
+        qy = py - frames[r, 0, 1]
+        qz = pz - frames[r, 0, 2]
+        cc = ((qx * frames[r, 1, 0] + qy * frames[r, 1, 1] + qz * frames[r, 1, 2]) / frames[r, 3, 0] + 0.5) * size[r, 1]
+        rr = ((qx * frames[r, 2, 0] + qy * frames[r, 2, 1] + qz * frames[r, 2, 2]) / frames[r, 3, 1] + 0.5) * size[r, 0]
+        x = min(max(cc - 0.5, 0.0), Wc - 1.0)
+        y = min(max(rr - 0.5, 0.0), Hc - 1.0)
+        if math.isnan(cc):
+            x = 0.0
+        if math.isnan(rr):
+            y = 0.0
+        j0 = min(np.int64(math.floor(x)), Wc - 1)
+        i0 = min(np.int64(math.floor(y)), Hc - 1)
+        j1 = min(j0 + 1, Wc - 1)
+        i1 = min(i0 + 1, Hc - 1)
+        fx = x - j0
+        fy = y - i0
+        E = maps[r]
+        s0 += ((1 - fy) * ((1 - fx) * E[i0, j0, 0] + fx * E[i0, j1, 0])
+               + fy * ((1 - fx) * E[i1, j0, 0] + fx * E[i1, j1, 0]))
+        s1 += ((1 - fy) * ((1 - fx) * E[i0, j0, 1] + fx * E[i0, j1, 1])
+               + fy * ((1 - fx) * E[i1, j0, 1] + fx * E[i1, j1, 1]))
+        s2 += ((1 - fy) * ((1 - fx) * E[i0, j0, 2] + fx * E[i0, j1, 2])
+               + fy * ((1 - fx) * E[i1, j0, 2] + fx * E[i1, j1, 2]))
+        out[k, 0] = albedo[r, 0] * s0
+        out[k, 1] = albedo[r, 1] * s1
+        out[k, 2] = albedo[r, 2] * s2
+
+
 def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     """Colour of receiver points (see the module docstring).
 
@@ -449,10 +705,16 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     """
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     M = len(P)
-    out = np.zeros((M, 3))
     if M == 0:
-        return out
+        return np.zeros((M, 3))
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1)
+    fused = _fused_args(rs, lights, maps_rgb, P, visibility)
+    if fused is not None:  # shadow maps: every point's colour in one kernel, no per-point temporaries
+        out = np.empty((M, 3))
+        _shade_kernel(np.ascontiguousarray(P), faces, np.ascontiguousarray(ray_dirs, dtype=np.float64).reshape(-1, 3),
+                      fused[0], fused[1], out)
+        return out
+    out = np.zeros((M, 3))
     n = np.empty((M, 3))
     _facing_normals_kernel(rs.normals, faces, np.ascontiguousarray(ray_dirs, dtype=np.float64).reshape(-1, 3), n)
     owner = np.empty(M, np.int64)

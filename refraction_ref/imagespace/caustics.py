@@ -37,7 +37,7 @@ import numpy as np
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import _take_kernel, shadow_map_margin, shadow_map_visibility, take_rows
+from ..caustics.shade import ShadowMaps, _take_kernel, shadow_map_test, take_rows
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -173,12 +173,7 @@ def _st_final(ctx):
     rs = b["receivers"]["rs"]
     rd = b["receiver_depth"]
     shadow = [None if L is None else L["shadow"] for L in b["photon_trace"]["lights"]]
-
-    def vis(l, pts, nrm):
-        if shadow[l] is None:
-            return np.ones(len(pts))
-        lcam, zmin, bias = shadow[l]
-        return shadow_map_visibility(lcam, zmin, pts, bias)
+    vis = ShadowMaps(shadow)  # shade_points tests these shadow maps inside its per-point kernel
 
     # the eye's front depth per image pixel (the grid texel under it when imagespace.grid differs)
     eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape)}
@@ -223,8 +218,9 @@ def _shadow_buffers(shape, ri, P, shadow):
             code[ri], margin[ri] = 1, -np.inf
         else:
             lcam, zmin, bias = sh
-            code[ri] = np.where(shadow_map_visibility(lcam, zmin, P, bias) > 0, 1, 2)
-            margin[ri] = shadow_map_margin(lcam, zmin, P, bias, SHADOW_TIE)
+            # code[ri] = np.where(shadow_map_visibility(...) > 0, 1, 2), margin[ri] = shadow_map_margin(...):
+            # one kernel, each point's light-view position computed once for both
+            shadow_map_test(lcam, zmin, P, bias, SHADOW_TIE, ri, code, margin)
         out[f"shadow_{l}"] = code.reshape(H, W)
         out[f"shadow_margin_{l}"] = margin.reshape(H, W)
     return out

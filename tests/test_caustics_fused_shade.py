@@ -1,0 +1,108 @@
+"""The final pass's fused kernels against the NumPy code they replaced, on 1 and 2 threads.
+
+``shade_points`` with a :class:`~refraction_ref.caustics.shade.ShadowMaps` visibility colours every
+point in one kernel (the facing normal, each light's cosine, shadow-map test and direct term, the
+caustic map's look-up, the albedo); ``shadow_map_test`` writes the shadow buffers' verdict and
+margin in one pass. Both must give the bits of the NumPy expressions (``_shade_points_numpy``,
+``_shadow_map_margin_numpy`` of ``test_caustics_parallel``) whatever the lights, receivers and
+threads.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_caustics_parallel import SCENE, _shade_points_numpy, _shadow_map_margin_numpy
+
+import refraction_ref as rr
+from refraction_ref.camera import Camera
+from refraction_ref.caustics import shade
+from refraction_ref.caustics.receivers import receiver_set
+
+
+def _light_cam(ortho, size=32):
+    return Camera.from_dict({"eye": [0.3, 3.0, 0.2], "target": [0, 0, 0], "up": [0, 0, 1], "fov_y": 40,
+                             "width": size, "height": size, "near": 0.1, "far": 10, "ortho": ortho,
+                             **({"ortho_height": 3.0} if ortho else {})})
+
+
+def _case(lights, n_receivers=2, seed=11, M=6000):
+    with open(SCENE) as f:
+        raw = json.load(f)
+    raw["lights"] = lights
+    rcv = [{"mesh": "plane", "size": [4, 4], "transform": {"translate": [0, -0.5, 0]}, "albedo": [0.8, 0.6, 0.4]},
+           {"mesh": "plane", "size": [2, 2], "transform": {"translate": [0, 0.3, -1.0], "rotate": [90, 0, 0]}}]
+    raw["receivers"] = rcv[:n_receivers]
+    sc = rr.load_scene(raw)
+    rs = receiver_set(sc, sc.data["lights"][0], 32)
+    rng = np.random.default_rng(seed)
+    faces = rng.integers(0, len(rs.tris), M)
+    b = rng.dirichlet([1, 1, 1], M)
+    P = np.einsum("ij,ijk->ik", b, rs.tris[faces])
+    P[::701] = np.nan  # NaN cosines and map positions
+    d = rng.normal(size=(M, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    maps = [rng.random(box.size + (3,)) for box in rs.boxes]
+    return sc, rs, P, faces, d, maps, rng
+
+
+@pytest.mark.parametrize("lights, n_receivers, shadowed", [
+    ([{"type": "directional", "direction": [0.2, -1.0, -0.1], "radiance": [1, 0.5, 0.25]}], 1, [True]),
+    ([{"type": "directional", "direction": [0.2, -1.0, -0.1], "radiance": [1, 0.5, 0.25]},
+      {"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}], 2, [True, False]),
+    ([{"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]},
+      {"type": "directional", "direction": [-0.3, -1.0, 0.2], "radiance": [0.5, 1, 1]}], 2, [True, True]),
+])
+def test_fused_shade_points_equals_numpy(on_one_and_two_threads, lights, n_receivers, shadowed):
+    sc, rs, P, faces, d, maps, rng = _case(lights, n_receivers)
+    shadow = []
+    for l, s in enumerate(shadowed):
+        if not s:
+            shadow.append(None)
+            continue
+        zmin = rng.uniform(2.5, 3.8, (32, 32))
+        zmin[rng.random((32, 32)) < 0.2] = np.inf
+        shadow.append((_light_cam(l % 2 == 1), zmin, 0.01))
+    vis = shade.ShadowMaps(shadow)
+    assert shade._fused_args(rs, sc.data["lights"], maps, P, vis) is not None  # the fused kernel runs
+    want = _shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
+    # the generic path (any callable) gives the same bits too
+    generic = shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, lambda l, p, n: vis(l, p, n))
+    a, b = on_one_and_two_threads(lambda: shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, vis))
+    for got in (a, b, generic):
+        assert np.array_equal(got, want, equal_nan=True)
+    assert np.nanstd(want) > 0
+    # some points are shadowed, some lit, some face away from a light
+    v0 = vis(0, P, None)
+    assert 0 < np.nansum(v0 == 0) < len(P)
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_shadow_map_test_equals_numpy(on_one_and_two_threads, ortho):
+    rng = np.random.default_rng(41)
+    lcam = _light_cam(ortho)
+    zmin = rng.uniform(2.5, 3.5, (32, 32))
+    zmin[rng.random((32, 32)) < 0.2] = np.inf
+    p = rng.uniform(-1.5, 1.5, (4000, 3))
+    p[::500] = np.nan
+    p[1::500] = [0.3, 5.0, 0.2]  # behind the light
+    K = 9000
+    idx = rng.permutation(K)[:len(p)]
+    for tie in (0.0, 5e-3, 0.3):
+        code_w = np.zeros(K, np.uint8)
+        margin_w = np.full(K, np.nan, np.float32)
+        code_w[idx] = np.where(shade.shadow_map_visibility(lcam, zmin, p, 0.01) > 0, 1, 2)
+        margin_w[idx] = _shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
+        assert (code_w == 2).sum() > 100 and (code_w == 1).sum() > 100
+
+        def run():
+            code = np.zeros(K, np.uint8)
+            margin = np.full(K, np.nan, np.float32)
+            shade.shadow_map_test(lcam, zmin, p, 0.01, tie, idx, code, margin)
+            return code, margin
+
+        for code, margin in on_one_and_two_threads(run):
+            assert np.array_equal(code, code_w)
+            assert np.array_equal(margin, margin_w, equal_nan=True)
