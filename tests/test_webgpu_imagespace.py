@@ -14,8 +14,9 @@ exits and hits against the oracle's passes on its own light LDI and photons
 it. A suite built before that rule records the light LDI's older tolerance
 (no float32 snap term): `is_caustics_sphere` fails `stage.photon_trace.ldi_0`
 on 2 texels there; rebuild it.
-``REFRACTION_REF_GOLDEN=DIR`` reuses a suite already built (holding the cases
-used); the full case and bug matrix is ``-m slow``.
+By default (and in CI) the backend runs every image-space case of the catalogue
+and each bug on one case that shows it; every bug on every case is ``-m slow``.
+``REFRACTION_REF_GOLDEN=DIR`` reuses a suite already built (holding the cases).
 """
 import importlib.util
 import json
@@ -39,8 +40,6 @@ _spec.loader.exec_module(backend)
 CASES = ["is_bubble_0_75", "is_bunny_1_2", "is_caustics_slanted", "is_caustics_sphere", "is_close_camera",
          "is_diamond_2_4", "is_grazing", "is_ior_1", "is_ior_1_01", "is_layer_limit",
          "is_open_mesh", "is_sphere_1_5", "is_tir_followed", "is_two_objects"]
-#: the default (fast) run: the bunny (every eye pass exposed), a caustic case, and a case that passes whole
-QUICK_CASES = ["is_bunny_1_2", "is_caustics_slanted", "is_ior_1"]
 CAUSTIC_CASES = {"is_caustics_slanted", "is_caustics_sphere"}
 
 _IOR_ONE = {"is_ior_1"}                              # the bubble is air in water: it refracts
@@ -109,11 +108,6 @@ def adapter():
 
 
 @pytest.fixture(scope="module")
-def golden_quick(adapter, tmp_path_factory):
-    return _golden(tmp_path_factory, QUICK_CASES)
-
-
-@pytest.fixture(scope="module")
 def golden_all(adapter, tmp_path_factory):
     return _golden(tmp_path_factory, CASES)
 
@@ -155,10 +149,6 @@ def _clean(golden, cand, cases):
     assert rep.ok
 
 
-def test_backend_passes_check_quick(golden_quick, tmp_path):
-    _clean(golden_quick, tmp_path, QUICK_CASES)
-
-
 def test_the_catalogue_image_space_cases_are_the_ones_listed():
     cat = Path(rr.__file__).parent / "data" / "golden"
     assert sorted(p.stem for p in cat.glob("is_*.json")) == sorted(CASES)
@@ -168,9 +158,9 @@ def test_every_planted_bug_is_listed():
     assert sorted(EXPOSED) == sorted(backend.all_bugs().keys() - {"hw_interp"})
 
 
-def test_an_unknown_bug_is_refused(golden_quick):
+def test_an_unknown_bug_is_refused(golden_all):
     with pytest.raises(ValueError, match="unknown planted bug"):
-        backend.render_case(os.path.join(golden_quick, "is_ior_1", "scene.json"), bugs=["typo"])
+        backend.render_case(os.path.join(golden_all, "is_ior_1", "scene.json"), bugs=["typo"])
 
 
 def _assert_bug(golden, out, bug, cases):
@@ -190,11 +180,10 @@ def _assert_bug(golden, out, bug, cases):
 
 
 @pytest.mark.parametrize("bug", sorted(QUICK_BUGS))
-def test_planted_bug_names_its_pass(golden_quick, tmp_path, bug):
-    _assert_bug(golden_quick, tmp_path, bug, [QUICK_BUGS[bug]])
+def test_planted_bug_names_its_pass(golden_all, tmp_path, bug):
+    _assert_bug(golden_all, tmp_path, bug, [QUICK_BUGS[bug]])
 
 
-@pytest.mark.slow
 def test_backend_passes_check_on_every_image_space_case(golden_all, tmp_path):
     _clean(golden_all, tmp_path, CASES)
 
