@@ -25,6 +25,10 @@ from refraction_ref.golden.tolerances import (DEFAULT, DEFAULT_INT, FLUX, RADIAN
 def test_a_share_never_reads_zero():
     assert fmt_share(3, 262144) == "3 of 262144 (0.0011 %)"
     assert fmt_share(0, 10) == "0 of 10 (0 %)" and fmt_share(1, 3) == "1 of 3 (33 %)"
+    # no exponent at 100 %, and a share short of all never reads 100
+    assert fmt_share(13768, 13768) == "13768 of 13768 (100 %)"
+    assert fmt_share(12480, 13768) == "12480 of 13768 (91 %)"
+    assert fmt_share(9999, 10000) == "9999 of 10000 (99.99 %)"
 
 
 def test_index_keys_are_exact_and_each_key_has_its_own_rationale():

@@ -1247,7 +1247,9 @@ def format_report(out):
                 if cn and "located" in cn:
                     frac = f"{fmt_share(cn['located'], cn['informative'])} / {100 * j['allowed']:.3g} %"
                 elif "failing" in j:
-                    frac = f"{100 * j['failing']:.2g} % / {100 * j['allowed']:.3g} %"
+                    pct = 100 * j['failing']
+                    frac = f"{pct:.2g} % / {100 * j['allowed']:.3g} %" if pct < 10 else \
+                        f"{pct:.0f} % / {100 * j['allowed']:.3g} %"     # not 1e+02
                 else:
                     frac = ""
                 links = "".join(f" ([{w}]({j[w]}))" for w in ("panel", "mask") if j.get(w))

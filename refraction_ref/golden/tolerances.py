@@ -544,7 +544,17 @@ def fmt_share(n, total):
     str
     """
     n, total = int(n), int(total)
-    pct = "0" if n == 0 else f"{100.0 * n / max(total, 1):.2g}"
+    share = 100.0 * n / max(total, 1)
+    if n == 0:
+        pct = "0"
+    elif share >= 10:
+        # two significant digits would print 1e+02; and a share short of all must not read 100
+        pct, digits = f"{share:.0f}", 0
+        while n < total and float(pct) >= 100:
+            digits += 1
+            pct = f"{share:.{digits}f}"
+    else:
+        pct = f"{share:.2g}"
     return f"{n} of {total} ({pct} %)"
 
 
