@@ -45,6 +45,19 @@ VOLUME = {
     "volumetric": {"resolution": 16, "photons": 12, "padding": 2, "blur": 3, "supersample": 2},
 }
 
+#: a graded-index volume (a Luneburg lens sampled on 8^3 voxels) for the exact method's graded-index graph
+_g = (np.arange(8) + 0.5) / 8 * 1.6 - 0.8
+_r2 = (_g[:, None, None] ** 2 + _g[None, :, None] ** 2 + _g[None, None, :] ** 2) / 0.6 ** 2
+GRIN = {
+    "camera": {"width": 8, "height": 8, "eye": [0.0, 0.6, 3.0], "target": [0.0, -0.2, 0.0], "fov_y": 40},
+    "objects": [], "volume": {"ior": np.where(_r2 < 1, np.sqrt(2 - np.minimum(_r2, 1)), 1.0).tolist(),
+                              "bounds": [[-0.8, -0.8, -0.8], [0.8, 0.8, 0.8]]},
+    "lights": [{"type": "directional", "direction": [0.0, -1.0, 0.0]}],
+    "receivers": [{"mesh": "plane", "size": [1.6, 1.6], "transform": {"translate": [0.0, -1.4, 0.0]}}],
+    "volumetric": {"photons": 8},
+    "caustics": {"map_size": 12},
+}
+
 #: one valid, different value per knob: a knob without an entry fails test_every_knob_has_a_mutation
 MUTATIONS = {
     "imagespace": {"iterations": 6, "layers": 3, "slices": 128, "bounds": "global", "mip_size": 8,
@@ -77,6 +90,7 @@ CASES = [  # (method, base scene, blocks whose knobs it reads)
     ("levelmap", WATER, ("levelmap", "water", "caustics")),
     ("exact", WATER, ("caustics",)),
     ("volumetric", VOLUME, ("volumetric",)),
+    ("exact", GRIN, ("volumetric", "caustics")),   # the graded-index reference reads the volumetric knobs
 ]
 
 
@@ -127,7 +141,8 @@ MUTATION_CASES = [(method, base, key, value) for method, base, blocks in CASES
 
 
 @pytest.mark.parametrize("method,base,key,value", MUTATION_CASES,
-                         ids=[f"{m}-{'water' if 'water' in b else 'mesh'}-{k}" for m, b, k, _ in MUTATION_CASES])
+                         ids=[f"{m}-{'water' if 'water' in b else 'volume' if 'volume' in b else 'mesh'}-{k}"
+                              for m, b, k, _ in MUTATION_CASES])
 def test_every_knob_reruns_its_readers_and_matches_a_fresh_render(method, base, key, value):
     s = rr.Session(base)
     s.render(method)
