@@ -30,10 +30,12 @@ rows, so the bits do not depend on the number of threads.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
+from ..camera import primary_dir
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
@@ -41,10 +43,10 @@ from ..caustics.shade import ShadowMaps, _take_kernel, shadow_map_test, take_row
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
-from ..optics import beer_lambert, refract
+from ..optics import beer_lambert, refract3
 from ..status import EXITED
 from .grid import at_pixels
-from .normals import layer_normals
+from .normals import NORMAL_METHODS, no_lut, normal_at
 
 __all__ = ["imagespace_caustic_stages"]
 
@@ -102,29 +104,81 @@ def _depth_points(origin, rdir, rdepth, idx, fwd):
     return out
 
 
+class _FrontView(NamedTuple):
+    """The eye camera's scalars and the front surface's normal rule, for :func:`_final_rays_kernel`."""
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+    eta: float  # outside / ior at the front surface
+    method: int  # NORMAL_METHODS
+    delta: int
+
+
+class _FinalRays(NamedTuple):
+    """Inputs and outputs of :func:`_final_rays_kernel`."""
+
+    xi: np.ndarray  # (nx,) exit pixels (flat)
+    exit_pos: np.ndarray  # (H W, 3) world
+    exit_dir: np.ndarray  # (H W, 3) world
+    oi: np.ndarray  # (no,) the object's pixels (flat)
+    ldi: np.ndarray  # (1, H, W) the front depth, +inf where none (layer_normals' input)
+    zfront: np.ndarray  # (H W,) the front depth as _final_imagespace reads it
+    eye3: np.ndarray  # (3, 3) identity: primary_rays_view's basis
+    basis: np.ndarray  # (3, 3) Camera.basis (view_to_world's matrix)
+    eye: np.ndarray  # (3,) Camera.eye (view_to_world's offset)
+    zero3: np.ndarray  # (3,) dir_view_to_world's offset
+    O: np.ndarray  # (nx + no, 3) out: the rays' world origins
+    D: np.ndarray  # (nx + no, 3) out: their world directions
+
+
 @nb.njit(cache=True, parallel=True)
-def _front_points_kernel(t, dv, oi, zfront, W, H, sx, sy, ortho, pv):
-    # t = where(all(isfinite(t)), t, dv) in place; pv: _final_imagespace's NumPy expressions
-    for k0 in nb.prange(oi.shape[0]):
+def _final_rays_kernel(view, lut, rays):
+    # rows 0 .. nx-1: the exit rays (take_rows of exit_pos, exit_dir at xi); rows nx ..: the thesis's
+    # single-surface rays at the object's pixels, in the operations' order of what they replace:
+    # primary_rays_view's direction (rotated by the identity), layer_normals' normal (NaN where the
+    # layer is absent), refract, _front_points_kernel (t, or the direction where t is not finite, and
+    # the front point), then Camera.view_to_world / dir_view_to_world (vec3.affine's order)
+    W, H, sx, sy, ortho, eta = view.W, view.H, view.sx, view.sy, view.ortho, view.eta
+    method, delta = view.method, view.delta
+    xi, exit_pos, exit_dir, oi, ldi, zfront = rays.xi, rays.exit_pos, rays.exit_dir, rays.oi, rays.ldi, rays.zfront
+    e3, basis, eye, zero3, O, D = rays.eye3, rays.basis, rays.eye, rays.zero3, rays.O, rays.D
+    nx = xi.shape[0]
+    for k0 in nb.prange(nx + oi.shape[0]):
         k = np.int64(k0)
-        if not (math.isfinite(t[k, 0]) and math.isfinite(t[k, 1]) and math.isfinite(t[k, 2])):
+        if k < nx:
+            q = xi[k]
             for c in range(3):
-                t[k, c] = dv[k, c]
-        p = oi[k]
+                O[k, c] = exit_pos[q, c]
+                D[k, c] = exit_dir[q, c]
+            continue
+        p = oi[k - nx]
         ii = p // W
         jj = p - ii * W
+        x, y, z = primary_dir(ii, jj, W, H, sx, sy, ortho)
+        dvx = x * e3[0, 0] + y * e3[1, 0] + z * e3[2, 0]
+        dvy = x * e3[0, 1] + y * e3[1, 1] + z * e3[2, 1]
+        dvz = x * e3[0, 2] + y * e3[1, 2] + z * e3[2, 2]
+        nxx, nyy, nzz = np.nan, np.nan, np.nan
+        if math.isfinite(ldi[0, ii, jj]):
+            nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, method, delta, W, H, sx, sy, ortho)
+        tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, eta)
+        if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
+            tx, ty, tz = dvx, dvy, dvz
         xs = jj + 0.5
         ys = ii + 0.5
-        x = (xs / W * 2.0 - 1.0) * sx
-        y = (1.0 - ys / H * 2.0) * sy
+        px = (xs / W * 2.0 - 1.0) * sx
+        py = (1.0 - ys / H * 2.0) * sy
         dfront = zfront[p]
-        if ortho:
-            pv[k, 0] = x
-            pv[k, 1] = y
-        else:
-            pv[k, 0] = x * dfront
-            pv[k, 1] = y * dfront
-        pv[k, 2] = -dfront
+        if not ortho:
+            px = px * dfront
+            py = py * dfront
+        pz = -dfront
+        for c in range(3):
+            O[k, c] = px * basis[0, c] + py * basis[1, c] + pz * basis[2, c] + eye[c]
+            D[k, c] = tx * basis[0, c] + ty * basis[1, c] + tz * basis[2, c] + zero3[c]
 
 
 def _st_photon_trace(ctx, layered_trace):
@@ -329,22 +383,25 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     plen = np.empty(len(oi))
     _take_kernel(np.ascontiguousarray(tr["path_length"], dtype=np.float64).reshape(-1), oi, plen)  # path_length[obj]
     trans = beer_lambert(absorption, plen, ior)  # per pixel: only the object's
-    o_full = take_rows(tr["exit_pos"].reshape(-1, 3), xi)  # world space (layered_trace)
-    d_full = take_rows(tr["exit_dir"].reshape(-1, 3), xi)
-    # the thesis's final pass: refraction at the front surface only
-    nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, p["normals"], int(p["delta"]))
-    dv = take_rows(cam.primary_rays_view().reshape(-1, 3), oi)
-    t, _ = refract(dv, take_rows(nrm.reshape(-1, 3), oi), outside / ior)
-    # np.where(all(isfinite(t), axis=1), t, dv), and the front points in view space (pixel
-    # centres (jj + .5, ii + .5) at depth zfront), on every thread
-    pv = np.empty((len(oi), 3))
-    _front_points_kernel(t, dv, oi, np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), W, H,
-                         float(cam.sx), float(cam.sy), bool(cam.ortho), pv)
     # both passes' rays in one march and one shading: each ray's colour is its own, and one call
-    # instead of two halves the serial work around the kernels
-    n_full = len(o_full)
-    c, cd = shade_rays(scene, rs, cam, np.concatenate([o_full, cam.view_to_world(pv)]),
-                        np.concatenate([d_full, cam.dir_view_to_world(t)]), mode, eyebuf, rgb_maps, vis, direct)
+    # instead of two halves the serial work around the kernels. The exit rays (world space,
+    # layered_trace), then the thesis's final pass: refraction at the front surface only, its
+    # normal, refraction and front point per object pixel (not the whole image's normals and
+    # directions), both written into the rays' rows by one kernel on every thread
+    n_full = len(xi)
+    if p["normals"] not in NORMAL_METHODS:
+        raise ValueError(f"normals: unknown method {p['normals']!r}; choose one of {sorted(NORMAL_METHODS)}")
+    ldi = np.ascontiguousarray(np.where(np.isfinite(zfront), zfront, np.inf), dtype=np.float64)[None]
+    Wk, Hk, sx, sy = cam.kernel_args()
+    O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
+    _final_rays_kernel(_FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
+                                  NORMAL_METHODS[p["normals"]], int(p["delta"])), no_lut(zfront.shape),
+                       _FinalRays(xi, np.ascontiguousarray(tr["exit_pos"], dtype=np.float64).reshape(-1, 3),
+                                  np.ascontiguousarray(tr["exit_dir"], dtype=np.float64).reshape(-1, 3), oi, ldi,
+                                  np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), np.eye(3),
+                                  np.ascontiguousarray(cam.basis, dtype=np.float64),
+                                  np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), O, D))
+    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct)
     base = base.reshape(-1, 3)
     put_rows(base, ri, cd)
     full = np.empty_like(base)
