@@ -106,3 +106,65 @@ def test_shadow_map_test_equals_numpy(on_one_and_two_threads, ortho):
         for code, margin in on_one_and_two_threads(run):
             assert np.array_equal(code, code_w)
             assert np.array_equal(margin, margin_w, equal_nan=True)
+
+
+def _final_rays_numpy(cam, zfront, exit_pos, exit_dir, xi, oi, method, delta, eta):
+    """The final pass's rays as _final_imagespace built them before its kernel: the exit rays, then
+    the front surface's refracted rays (whole-image normals and directions, refract, front points)."""
+    from refraction_ref.imagespace.normals import layer_normals
+    from refraction_ref.optics import refract
+
+    H, W = cam.shape
+    o_full = exit_pos.reshape(-1, 3)[xi]
+    d_full = exit_dir.reshape(-1, 3)[xi]
+    nrm = layer_normals(np.where(np.isfinite(zfront), zfront, np.inf), cam, method, delta)
+    dv = cam.primary_rays_view().reshape(-1, 3)[oi]
+    t, _ = refract(dv, nrm.reshape(-1, 3)[oi], eta)
+    t = np.where(np.all(np.isfinite(t), axis=1)[:, None], t, dv)
+    ii, jj = oi // W, oi % W
+    x = ((jj + 0.5) / W * 2.0 - 1.0) * float(cam.sx)
+    y = (1.0 - (ii + 0.5) / H * 2.0) * float(cam.sy)
+    dfront = zfront.reshape(-1)[oi]
+    pv = np.stack([x, y, -dfront], axis=1) if cam.ortho else np.stack([x * dfront, y * dfront, -dfront], axis=1)
+    return (np.concatenate([o_full, cam.view_to_world(pv)]), np.concatenate([d_full, cam.dir_view_to_world(t)]))
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+@pytest.mark.parametrize("method, delta", [("central", 1), ("central", 2), ("forward", 1), ("mesh3x3", 1),
+                                           ("cross", 1)])
+def test_final_rays_kernel_equals_numpy(on_one_and_two_threads, ortho, method, delta):
+    from refraction_ref.imagespace import caustics as ic
+    from refraction_ref.imagespace.normals import NORMAL_METHODS, no_lut
+
+    rng = np.random.default_rng(23)
+    cam = _light_cam(ortho, 40)
+    H, W = cam.shape
+    yy, xx = np.mgrid[0:H, 0:W]
+    zfront = 3.0 - 0.4 * np.exp(-((xx - 20) ** 2 + (yy - 18) ** 2) / 90.0) + 0.01 * rng.random((H, W))
+    zfront[(xx - 20) ** 2 + (yy - 18) ** 2 > 15 ** 2] = np.inf
+    zfront[5, 20] = np.nan
+    obj = np.isfinite(zfront)
+    obj[18, 20:24] = False  # a receiver in front
+    oi = np.flatnonzero(obj)
+    xi = oi[rng.random(len(oi)) < 0.7]
+    exit_pos = rng.normal(size=(H, W, 3))
+    exit_dir = rng.normal(size=(H, W, 3))
+    eta = 1.0 / 1.33
+    want = _final_rays_numpy(cam, zfront, exit_pos, exit_dir, xi, oi, method, delta, eta)
+
+    def run():
+        n = len(xi) + len(oi)
+        O, D = np.empty((n, 3)), np.empty((n, 3))
+        Wk, Hk, sx, sy = cam.kernel_args()
+        ic._final_rays_kernel(
+            ic._FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), eta, NORMAL_METHODS[method], delta),
+            no_lut(zfront.shape),
+            ic._FinalRays(xi, exit_pos.reshape(-1, 3), exit_dir.reshape(-1, 3), oi,
+                          np.where(np.isfinite(zfront), zfront, np.inf)[None], zfront.reshape(-1), np.eye(3),
+                          np.ascontiguousarray(cam.basis), np.ascontiguousarray(cam.eye, dtype=np.float64),
+                          np.zeros(3), O, D))
+        return O, D
+
+    for O, D in on_one_and_two_threads(run):
+        assert np.array_equal(O, want[0]) and np.array_equal(D, want[1])
+    assert np.isfinite(want[1]).all() and want[1][len(xi):].std() > 0
