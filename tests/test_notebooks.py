@@ -119,6 +119,9 @@ def test_volumetric_walkthrough():
     assert k["proto_photons"] >= 10
     assert k["proto_max_dev_vox"]["euler"] < 1e-4 and k["proto_max_dev_vox"]["rk4"] < 1e-4
     assert len(k["blob_levels_on_path"]) >= 3
+    # eq. 6 and the deposit walk by hand (every photon of an 8x8 photon texture, summed per z-slab) give the
+    # package's stage.march.deposit within float32 summation
+    assert k["deposit_hand_dev"] < 1e-5
 
 
 def test_levelmap_walkthrough():
