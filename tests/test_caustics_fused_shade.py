@@ -168,3 +168,33 @@ def test_final_rays_kernel_equals_numpy(on_one_and_two_threads, ortho, method, d
     for O, D in on_one_and_two_threads(run):
         assert np.array_equal(O, want[0]) and np.array_equal(D, want[1])
     assert np.isfinite(want[1]).all() and want[1][len(xi):].std() > 0
+
+
+@pytest.mark.parametrize("n_receivers", [1, 2])
+def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_receivers):
+    lights = [{"type": "directional", "direction": [0.2, -1.0, -0.1], "radiance": [1, 0.5, 0.25]},
+              {"type": "directional", "direction": [-0.3, -1.0, 0.2], "radiance": [0.5, 1, 1]}]
+    sc, rs, P, faces, d, maps, rng = _case(lights, n_receivers)
+    zmin = rng.uniform(2.5, 3.8, (32, 32))
+    vis = shade.ShadowMaps([(_light_cam(False), zmin, 0.01), None])
+    N = 4000
+    face = faces[:N].copy()
+    face[rng.random(N) < 0.3] = -1
+    hi = np.flatnonzero(face >= 0)
+    direct = (P[N:], faces[N:], d[N:])
+    c = _shade_points_numpy(rs, sc.data["lights"], maps, np.concatenate([P[:N][hi], direct[0]]),
+                            np.concatenate([face[hi], direct[1]]), np.concatenate([d[:N][hi], direct[2]]), vis)
+    want = np.zeros((N, 3))
+    want[hi] = c[:len(hi)]
+
+    def run():
+        out = np.zeros((N, 3))
+        cd = shade.shade_rows(rs, sc.data["lights"], maps, P[:N], face, d[:N], hi, direct, vis, out)
+        return out, cd
+
+    for out, cd in on_one_and_two_threads(run):
+        assert np.array_equal(out, want, equal_nan=True) and np.array_equal(cd, c[len(hi):], equal_nan=True)
+    # a point light: not this kernel's (None, out untouched)
+    out = np.zeros((N, 3))
+    pl = [{"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}]
+    assert shade.shade_rows(rs, pl, maps, P[:N], face, d[:N], hi, direct, vis, out) is None and not out.any()

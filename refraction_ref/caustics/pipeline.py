@@ -70,7 +70,7 @@ from ..environment import environment_lookup
 from ..graph import Stage
 from ..status import EXITED
 from .receivers import eye_buffers, hit_exact, march_eyespace, receiver_set
-from .shade import shade_points, take_rows
+from .shade import shade_points, shade_rows, take_rows
 from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
                     splat_bilinear, splat_bilinear_groups)
 
@@ -751,6 +751,12 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
     hi = np.flatnonzero(face >= 0)
     mi = np.flatnonzero(face < 0)
     nh = len(hi)
+    if direct is not None:  # shadow maps, directional lights: shaded in place, no gathered rows
+        cd = shade_rows(rs, scene.data["lights"], rgb_maps, P, face, d, hi, direct, vis, out)
+        if cd is not None:
+            if len(mi):
+                put_rows(out, mi, environment_lookup(scene.data["environment"], take_rows(d, mi), scene.base_dir))
+            return out, cd
     # the hit rays' points, faces and directions, then the direct points: gathered and copied
     # into one set of rows on every thread (np.concatenate of the boolean selections, row for row)
     nd = 0 if direct is None else len(direct[0])

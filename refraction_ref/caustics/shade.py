@@ -39,7 +39,7 @@ from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
 __all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_map_margin", "shadow_map_test",
-           "ShadowMaps", "exact_visibility", "take_rows"]
+           "ShadowMaps", "shade_rows", "exact_visibility", "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -604,76 +604,178 @@ def _fused_args(rs, lights, maps_rgb, P, visibility):
     return rcv, _ShadeLights(L, fall, radiance, shadowed, m, t, view, zmin)
 
 
+@nb.njit(cache=True, inline="always")
+def _shade_one(px, py, pz, f, dx, dy, dz, j, normals, owner, albedo, frames, size, maps, L, fall, radiance, shadowed,
+               mat, off, views, zmin):
+    """One point's colour, shade_points' kernels' operations in their order: the facing normal, per light
+    the cosine, the shadow test where the point faces the light (0 elsewhere) and the direct term added
+    to a sum that starts at 0, then the caustic map's bilinear look-up added, times the albedo. ``j``:
+    the point's row of the per-point light arrays (0 when they hold one row)."""
+    nl = radiance.shape[0]
+    Hc, Wc = maps.shape[1], maps.shape[2]
+    nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+    if _einsum_dot(nx, ny, nz, dx, dy, dz) > 0:
+        nx, ny, nz = -nx, -ny, -nz
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for l in range(nl):
+        c = -_einsum_dot(nx, ny, nz, L[l, j, 0], L[l, j, 1], L[l, j, 2])
+        cos = c if (c > 0.0 or c != c) else 0.0
+        v = 0.0
+        if cos > 0:
+            v = 1.0
+            if shadowed[l]:
+                view = _LightView(views[l, 0], views[l, 1], views[l, 2] != 0.0, views[l, 3], views[l, 4],
+                                  views[l, 5])
+                m = mat[l]
+                tt = off[l]
+                col, row, d = _screen_of(_to_view(px, py, pz, m, tt, 0), _to_view(px, py, pz, m, tt, 1),
+                                         _to_view(px, py, pz, m, tt, 2), view)
+                v = 0.0 if _margin_at(col, row, d, zmin[l], view.bias) > 0 else 1.0
+        w = cos * fall[l, j] * v
+        s0 += radiance[l, 0] * w
+        s1 += radiance[l, 1] * w
+        s2 += radiance[l, 2] * w
+    r = owner[f]
+    # map_position's col and row, then sample_bilinear's look-up
+    qx = px - frames[r, 0, 0]
+    qy = py - frames[r, 0, 1]
+    qz = pz - frames[r, 0, 2]
+    cc = ((qx * frames[r, 1, 0] + qy * frames[r, 1, 1] + qz * frames[r, 1, 2]) / frames[r, 3, 0] + 0.5) * size[r, 1]
+    rr = ((qx * frames[r, 2, 0] + qy * frames[r, 2, 1] + qz * frames[r, 2, 2]) / frames[r, 3, 1] + 0.5) * size[r, 0]
+    x = min(max(cc - 0.5, 0.0), Wc - 1.0)
+    y = min(max(rr - 0.5, 0.0), Hc - 1.0)
+    if math.isnan(cc):
+        x = 0.0
+    if math.isnan(rr):
+        y = 0.0
+    j0 = min(np.int64(math.floor(x)), Wc - 1)
+    i0 = min(np.int64(math.floor(y)), Hc - 1)
+    j1 = min(j0 + 1, Wc - 1)
+    i1 = min(i0 + 1, Hc - 1)
+    fx = x - j0
+    fy = y - i0
+    E = maps[r]
+    s0 += ((1 - fy) * ((1 - fx) * E[i0, j0, 0] + fx * E[i0, j1, 0])
+           + fy * ((1 - fx) * E[i1, j0, 0] + fx * E[i1, j1, 0]))
+    s1 += ((1 - fy) * ((1 - fx) * E[i0, j0, 1] + fx * E[i0, j1, 1])
+           + fy * ((1 - fx) * E[i1, j0, 1] + fx * E[i1, j1, 1]))
+    s2 += ((1 - fy) * ((1 - fx) * E[i0, j0, 2] + fx * E[i0, j1, 2])
+           + fy * ((1 - fx) * E[i1, j0, 2] + fx * E[i1, j1, 2]))
+    return albedo[r, 0] * s0, albedo[r, 1] * s1, albedo[r, 2] * s2
+
+
 @nb.njit(cache=True, parallel=True)
 def _shade_kernel(P, faces, dirs, rcv, lts, out):
-    # shade_points per point, its kernels' operations in their order: the facing normal, per light
-    # the cosine, the shadow test where the point faces the light (0 elsewhere) and the direct
-    # term added to a sum that starts at 0, then the caustic map's bilinear look-up added, times
-    # the albedo
+    # shade_points per point (_shade_one)
     normals, owner, albedo, frames, size, maps = rcv.normals, rcv.owner, rcv.albedo, rcv.frames, rcv.size, rcv.maps
     L, fall, radiance, shadowed = lts.L, lts.fall, lts.radiance, lts.shadowed
     mat, off, views, zmin = lts.m, lts.t, lts.views, lts.zmin
-    nl = radiance.shape[0]
     ML = L.shape[1]
-    Hc, Wc = maps.shape[1], maps.shape[2]
     for k0 in nb.prange(P.shape[0]):
         k = np.int64(k0)
-        f = faces[k]
-        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
-        if _einsum_dot(nx, ny, nz, dirs[k, 0], dirs[k, 1], dirs[k, 2]) > 0:
-            nx, ny, nz = -nx, -ny, -nz
-        px, py, pz = P[k, 0], P[k, 1], P[k, 2]
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
         j = k if ML > 1 else np.int64(0)
-        for l in range(nl):
-            c = -_einsum_dot(nx, ny, nz, L[l, j, 0], L[l, j, 1], L[l, j, 2])
-            cos = c if (c > 0.0 or c != c) else 0.0
-            v = 0.0
-            if cos > 0:
-                v = 1.0
-                if shadowed[l]:
-                    view = _LightView(views[l, 0], views[l, 1], views[l, 2] != 0.0, views[l, 3], views[l, 4],
-                                      views[l, 5])
-                    m = mat[l]
-                    tt = off[l]
-                    col, row, d = _screen_of(_to_view(px, py, pz, m, tt, 0), _to_view(px, py, pz, m, tt, 1),
-                                             _to_view(px, py, pz, m, tt, 2), view)
-                    v = 0.0 if _margin_at(col, row, d, zmin[l], view.bias) > 0 else 1.0
-            w = cos * fall[l, j] * v
-            s0 += radiance[l, 0] * w
-            s1 += radiance[l, 1] * w
-            s2 += radiance[l, 2] * w
-        r = owner[f]
-        # map_position's col and row, then sample_bilinear's look-up
-        qx = px - frames[r, 0, 0]
-        qy = py - frames[r, 0, 1]
-        qz = pz - frames[r, 0, 2]
-        cc = ((qx * frames[r, 1, 0] + qy * frames[r, 1, 1] + qz * frames[r, 1, 2]) / frames[r, 3, 0] + 0.5) * size[r, 1]
-        rr = ((qx * frames[r, 2, 0] + qy * frames[r, 2, 1] + qz * frames[r, 2, 2]) / frames[r, 3, 1] + 0.5) * size[r, 0]
-        x = min(max(cc - 0.5, 0.0), Wc - 1.0)
-        y = min(max(rr - 0.5, 0.0), Hc - 1.0)
-        if math.isnan(cc):
-            x = 0.0
-        if math.isnan(rr):
-            y = 0.0
-        j0 = min(np.int64(math.floor(x)), Wc - 1)
-        i0 = min(np.int64(math.floor(y)), Hc - 1)
-        j1 = min(j0 + 1, Wc - 1)
-        i1 = min(i0 + 1, Hc - 1)
-        fx = x - j0
-        fy = y - i0
-        E = maps[r]
-        s0 += ((1 - fy) * ((1 - fx) * E[i0, j0, 0] + fx * E[i0, j1, 0])
-               + fy * ((1 - fx) * E[i1, j0, 0] + fx * E[i1, j1, 0]))
-        s1 += ((1 - fy) * ((1 - fx) * E[i0, j0, 1] + fx * E[i0, j1, 1])
-               + fy * ((1 - fx) * E[i1, j0, 1] + fx * E[i1, j1, 1]))
-        s2 += ((1 - fy) * ((1 - fx) * E[i0, j0, 2] + fx * E[i0, j1, 2])
-               + fy * ((1 - fx) * E[i1, j0, 2] + fx * E[i1, j1, 2]))
-        out[k, 0] = albedo[r, 0] * s0
-        out[k, 1] = albedo[r, 1] * s1
-        out[k, 2] = albedo[r, 2] * s2
+        c0, c1, c2 = _shade_one(P[k, 0], P[k, 1], P[k, 2], faces[k], dirs[k, 0], dirs[k, 1], dirs[k, 2], j, normals,
+                                owner, albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin)
+        out[k, 0] = c0
+        out[k, 1] = c1
+        out[k, 2] = c2
+
+
+class _ShadeRows(NamedTuple):
+    """Where :func:`_shade_rows_kernel` reads its points and writes their colours."""
+
+    P: np.ndarray  # (N, 3) the rays' hit points
+    face: np.ndarray  # (N,) their receiver triangles
+    d: np.ndarray  # (N, 3) the rays' directions
+    hi: np.ndarray  # (nh,) the rows of the rays that hit a receiver
+    Pd: np.ndarray  # (nd, 3) points seen directly
+    fd: np.ndarray  # (nd,)
+    dd: np.ndarray  # (nd, 3)
+    out: np.ndarray  # (N, 3) the rays' colours, written at rows hi
+    out_d: np.ndarray  # (nd, 3) the direct points' colours
+
+
+@nb.njit(cache=True, parallel=True)
+def _shade_rows_kernel(rows, rcv, lts):
+    # shade_points of the rows P[hi], then of the direct points, each colour written to its own row
+    # (out[hi], out_d): what gathering the rows into one array, shading it and scattering the colours
+    # back gave, without the gathered copies; directional lights only (their arrays hold one row)
+    P, face, d, hi, Pd, fd, dd, out, out_d = rows.P, rows.face, rows.d, rows.hi, rows.Pd, rows.fd, rows.dd, \
+        rows.out, rows.out_d
+    normals, owner, albedo, frames, size, maps = rcv.normals, rcv.owner, rcv.albedo, rcv.frames, rcv.size, rcv.maps
+    L, fall, radiance, shadowed = lts.L, lts.fall, lts.radiance, lts.shadowed
+    mat, off, views, zmin = lts.m, lts.t, lts.views, lts.zmin
+    nh = hi.shape[0]
+    j = np.int64(0)
+    for k0 in nb.prange(nh + Pd.shape[0]):
+        k = np.int64(k0)
+        if k < nh:
+            q = hi[k]
+            c0, c1, c2 = _shade_one(P[q, 0], P[q, 1], P[q, 2], face[q], d[q, 0], d[q, 1], d[q, 2], j, normals, owner,
+                                    albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin)
+            out[q, 0] = c0
+            out[q, 1] = c1
+            out[q, 2] = c2
+        else:
+            q = k - nh
+            c0, c1, c2 = _shade_one(Pd[q, 0], Pd[q, 1], Pd[q, 2], fd[q], dd[q, 0], dd[q, 1], dd[q, 2], j, normals,
+                                    owner, albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views,
+                                    zmin)
+            out_d[q, 0] = c0
+            out_d[q, 1] = c1
+            out_d[q, 2] = c2
+
+
+def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out):
+    """``out[hi] = c[:nh]`` and ``c[nh:]`` of ``c = shade_points`` over the rows ``hi`` of ``(P, face, d)``
+    followed by the ``direct`` points, without gathering the rows: one kernel on every thread.
+
+    For a :class:`ShadowMaps` visibility and directional lights only (else None: gather and call
+    :func:`shade_points`).
+
+    Parameters
+    ----------
+    rs : ReceiverSet
+    lights : list of dict
+    maps_rgb : list of (Hc, Wc, 3) arrays
+    P, d : (N, 3) float64
+        Points and ray directions.
+    face : (N,) int64
+    hi : (nh,) int64
+        Distinct rows to shade.
+    direct : (points, faces, ray directions)
+        ``nd`` more points, shaded after the rows.
+    visibility : ShadowMaps
+    out : (N, 3) float64
+        Written at rows ``hi``.
+
+    Returns
+    -------
+    (nd, 3) float64 or None
+        The direct points' colours; None where the kernel does not apply (``out`` untouched).
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    """
+    if not lights or any(lt["type"] != "directional" for lt in lights):
+        return None
+    fused = _fused_args(rs, lights, maps_rgb, np.zeros((1, 3)), visibility)
+    if fused is None:
+        return None
+    Pd = np.ascontiguousarray(direct[0], dtype=np.float64).reshape(-1, 3)
+    out_d = np.empty((len(Pd), 3))
+    _shade_rows_kernel(_ShadeRows(np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3),
+                                  np.ascontiguousarray(face, dtype=np.int64).reshape(-1),
+                                  np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3),
+                                  np.ascontiguousarray(hi, dtype=np.int64),
+                                  Pd, np.ascontiguousarray(direct[1], dtype=np.int64).reshape(-1),
+                                  np.ascontiguousarray(direct[2], dtype=np.float64).reshape(-1, 3), out, out_d),
+                       fused[0], fused[1])
+    return out_d
 
 
 def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
