@@ -73,6 +73,11 @@ def test_imagespace_walkthrough():
     assert k["forward_vs_facing_deg"] < 3
     # the silhouette is where every estimator is worst (Fig. 3.4)
     assert all(s["rim_median"] > s["inside_median"] for s in k["normal_split_deg"].values())
+    # eqs. 3.1, 3.2 and the 3x3 mesh written out in NumPy for one texel give layer_normals' normals
+    assert k["normals_by_hand_max_diff"] < 1e-9
+    # exercise 2: with eq. 3.2's normals the exit error is larger at the rim than inside
+    rim, inside = k["ex2_rim_inside_deg"]["central δ=2"]
+    assert rim > inside
 
 
 def test_caustics_walkthrough():
