@@ -198,3 +198,39 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
     out = np.zeros((N, 3))
     pl = [{"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}]
     assert shade.shade_rows(rs, pl, maps, P[:N], face, d[:N], hi, direct, vis, out) is None and not out.any()
+
+
+@pytest.mark.parametrize("chunk", [7, 4096])
+def test_final_composite_kernels_equal_numpy(on_one_and_two_threads, chunk):
+    from refraction_ref.imagespace import caustics as ic
+
+    rng = np.random.default_rng(31)
+    H, W = 30, 40
+    cls = rng.integers(0, 3, H * W)  # 0 receiver seen directly, 1 environment, 2 object
+    st = rng.integers(0, 4, H * W).astype(np.int8)
+    ri, bi, oi = (np.flatnonzero(cls == v) for v in range(3))
+    obj = cls == 2
+    xi = np.flatnonzero(obj & (st == 1))
+    si = np.flatnonzero(obj & (st != 1))
+    cd, env_bg, env_stuck = rng.random((len(ri), 3)), rng.random((len(bi), 3)), rng.random((len(si), 3)) * 3
+    c = rng.random((len(xi) + len(oi), 3)) * 5
+    trans = np.exp(-rng.random((len(oi), 3)))
+    # the NumPy expressions _final_imagespace used
+    base = np.zeros((H * W, 3))
+    base[bi] = env_bg
+    base[ri] = cd
+    full, single = base.copy(), base.copy()
+    full[xi] = c[:len(xi)]
+    full[si] = env_stuck
+    full[oi] *= trans
+    single[oi] = c[len(xi):]
+
+    def run():
+        f32, s32 = np.empty((H * W, 3), np.float32), np.empty((H * W, 3), np.float32)
+        ic._put32_kernel(ri, cd, f32, s32)
+        ic._put32_kernel(bi, env_bg, f32, s32)
+        ic._object_pixels_kernel(ic._ObjectRows(oi, st, c, len(xi), env_stuck, trans, f32, s32), chunk)
+        return f32, s32
+
+    for f32, s32 in on_one_and_two_threads(run):
+        assert np.array_equal(f32, full.astype(np.float32)) and np.array_equal(s32, single.astype(np.float32))

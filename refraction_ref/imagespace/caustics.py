@@ -52,40 +52,6 @@ __all__ = ["imagespace_caustic_stages"]
 
 
 @nb.njit(cache=True, parallel=True)
-def _mul_rows_kernel(a, idx, vals):
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        for c in range(a.shape[1]):
-            a[idx[k], c] *= vals[k, c]
-
-
-def _mul_rows(a, idx, vals):
-    """``a[idx] *= vals`` (rows of an (N, C) float64 array), on every thread."""
-    if len(idx):
-        _mul_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
-
-
-@nb.njit(cache=True, parallel=True)
-def _copy2_kernel(a, b, c):
-    # b[:] = a; c[:] = a (rows of (N, 3) float64)
-    for k0 in nb.prange(a.shape[0]):
-        k = np.int64(k0)
-        for j in range(3):
-            b[k, j] = a[k, j]
-            c[k, j] = a[k, j]
-
-
-@nb.njit(cache=True, parallel=True)
-def _to_float32_kernel(a, b, a32, b32):
-    # a.astype(np.float32), b.astype(np.float32): the same rounding, row by row
-    for k0 in nb.prange(a.shape[0]):
-        k = np.int64(k0)
-        for j in range(3):
-            a32[k, j] = np.float32(a[k, j])
-            b32[k, j] = np.float32(b[k, j])
-
-
-@nb.njit(cache=True, parallel=True)
 def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
     # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
     for k0 in nb.prange(idx.shape[0]):
@@ -102,6 +68,73 @@ def _depth_points(origin, rdir, rdepth, idx, fwd):
         _depth_points_kernel(origin, rdir, rdepth, np.ascontiguousarray(idx, np.int64),
                              np.ascontiguousarray(fwd, dtype=np.float64), out)
     return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _put32_kernel(idx, vals, a32, b32):
+    # a32[idx] = b32[idx] = vals.astype(np.float32), row by row
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        q = idx[k]
+        for c in range(3):
+            a32[q, c] = np.float32(vals[k, c])
+            b32[q, c] = np.float32(vals[k, c])
+
+
+class _ObjectRows(NamedTuple):
+    """The object's pixels and the rows :func:`_object_pixels_kernel` reads their colours from."""
+
+    oi: np.ndarray  # (no,) the object's pixels (flat, ascending)
+    st: np.ndarray  # (H W,) trace status: 1 exited (its exit ray's colour), else stuck
+    c: np.ndarray  # (n_full + no, 3) the exit rays' colours (rows of the exit pixels, ascending), then the single-surface rays'
+    n_full: int
+    env_stuck: np.ndarray  # (nstuck, 3) the environment along the stuck pixels' last directions (ascending)
+    trans: np.ndarray  # (no, 3) transmittance per object pixel
+    f32: np.ndarray  # (H W, 3) out: image_caustics
+    s32: np.ndarray  # (H W, 3) out: image_caustics_single
+
+
+#: object pixels per chunk of :func:`_object_pixels_kernel` (each chunk counts its exit pixels, then
+#: walks its rows with its first exit and stuck rows known)
+_OBJECT_CHUNK = 4096
+
+
+@nb.njit(cache=True, parallel=True)
+def _object_pixels_kernel(rows, chunk):
+    # full[p] = (exit: c[its exit row], else env_stuck[its stuck row]) * trans[k] and single[p] =
+    # c[n_full + k], cast to float32, for the k-th object pixel p = oi[k]: an exit pixel's row in c
+    # is the number of exit pixels before it (xi = flatnonzero(obj & st == 1) is ascending, and
+    # so is oi), a stuck pixel's in env_stuck the number of stuck ones
+    oi, st, c, n_full, env_stuck, trans, f32, s32 = rows.oi, rows.st, rows.c, rows.n_full, rows.env_stuck, \
+        rows.trans, rows.f32, rows.s32
+    n = oi.shape[0]
+    nch = (n + chunk - 1) // chunk
+    nx = np.zeros(nch + 1, np.int64)
+    for b0 in nb.prange(nch):
+        b = np.int64(b0)
+        m = 0
+        for k in range(b * chunk, min(b * chunk + chunk, n)):
+            if st[oi[k]] == 1:
+                m += 1
+        nx[b + 1] = m
+    for b in range(nch):  # exit rows before each chunk (an integer sum: exact)
+        nx[b + 1] += nx[b]
+    for b0 in nb.prange(nch):
+        b = np.int64(b0)
+        xr = nx[b]
+        sr = b * chunk - nx[b]
+        for k in range(b * chunk, min(b * chunk + chunk, n)):
+            p = oi[k]
+            if st[p] == 1:
+                for q in range(3):
+                    f32[p, q] = np.float32(c[xr, q] * trans[k, q])
+                xr += 1
+            else:
+                for q in range(3):
+                    f32[p, q] = np.float32(env_stuck[sr, q] * trans[k, q])
+                sr += 1
+            for q in range(3):
+                s32[p, q] = np.float32(c[n_full + k, q])
 
 
 class _FrontView(NamedTuple):
@@ -357,7 +390,6 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     obj = np.isfinite(zfront)
     rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
     obj &= ~rec
-    base = np.zeros((H, W, 3))
     # receivers seen directly: shaded with the object's rays below (one call); the rows of
     # the boolean masks (row-major) gathered by kernels on every thread
     ri = np.flatnonzero(rec)
@@ -369,9 +401,11 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
                             np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
               rtri.reshape(-1)[ri], dirs)
     bi = np.flatnonzero(~rec & ~obj)
-    if len(bi):  # base[bg] = environment_lookup(env, rdir[bg]): rows gathered and put on every thread
-        put_rows(base.reshape(-1, 3), bi, environment_lookup(env, take_rows(rdir_f, bi), scene.base_dir))
+    # environment_lookup(env, rdir[bg]): the rows gathered on every thread
+    env_bg = environment_lookup(env, take_rows(rdir_f, bi), scene.base_dir) if len(bi) else np.zeros((0, 3))
     if not obj.any():
+        base = np.zeros((H, W, 3))
+        put_rows(base.reshape(-1, 3), bi, env_bg)
         _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
                                    direct)
         return base.astype(np.float32), base.astype(np.float32), (ri, direct[0])
@@ -402,19 +436,21 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
                                   np.ascontiguousarray(cam.basis, dtype=np.float64),
                                   np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), O, D))
     c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct)
-    base = base.reshape(-1, 3)
-    put_rows(base, ri, cd)
-    full = np.empty_like(base)
-    single = np.empty_like(base)
-    _copy2_kernel(base, full, single)  # base.copy() twice, on every thread
-    if n_full:
-        put_rows(full, xi, c[:n_full])
+    # the two images in float32, each pixel written once from its own rows on every thread (what
+    # base / full / single in float64 and their astype(np.float32) gave): receivers seen directly
+    # (cd) and the environment (env_bg) in both; the object's pixels: the exit ray's colour or,
+    # stuck, the environment along the last direction, times the transmittance (full), and the
+    # single-surface ray's colour (single)
     si = np.flatnonzero(obj & (st != 1))
-    if len(si):  # full[stuck] = environment_lookup(env, last_dir[stuck])
-        put_rows(full, si, environment_lookup(env, take_rows(tr["last_dir"].reshape(-1, 3), si), scene.base_dir))
-    _mul_rows(full, oi, trans)  # full[obj] *= trans
-    put_rows(single, oi, c[n_full:])
+    env_stuck = (environment_lookup(env, take_rows(tr["last_dir"].reshape(-1, 3), si), scene.base_dir) if len(si)
+                 else np.zeros((0, 3)))
     f32 = np.empty((H, W, 3), np.float32)
     s32 = np.empty((H, W, 3), np.float32)
-    _to_float32_kernel(full, single, f32.reshape(-1, 3), s32.reshape(-1, 3))  # astype(np.float32), on every thread
+    f32f, s32f = f32.reshape(-1, 3), s32.reshape(-1, 3)
+    _put32_kernel(np.ascontiguousarray(ri, dtype=np.int64), np.ascontiguousarray(cd, dtype=np.float64), f32f, s32f)
+    _put32_kernel(np.ascontiguousarray(bi, dtype=np.int64), np.ascontiguousarray(env_bg, dtype=np.float64), f32f,
+                  s32f)
+    _object_pixels_kernel(_ObjectRows(oi, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c), n_full,
+                                      np.ascontiguousarray(env_stuck, dtype=np.float64),
+                                      np.ascontiguousarray(trans, dtype=np.float64), f32f, s32f), _OBJECT_CHUNK)
     return f32, s32, (ri, direct[0])
