@@ -234,3 +234,50 @@ def test_final_composite_kernels_equal_numpy(on_one_and_two_threads, chunk):
 
     for f32, s32 in on_one_and_two_threads(run):
         assert np.array_equal(f32, full.astype(np.float32)) and np.array_equal(s32, single.astype(np.float32))
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_pixel_classes_and_direct_rays_equal_numpy(on_one_and_two_threads, ortho):
+    from refraction_ref.imagespace import caustics as ic
+
+    rng = np.random.default_rng(29)
+    cam = _light_cam(ortho, 36)
+    H, W = cam.shape
+    zfront = rng.uniform(2.0, 4.0, (H, W))
+    zfront[rng.random((H, W)) < 0.4] = np.inf
+    zfront[rng.random((H, W)) < 0.05] = np.nan
+    rdepth = rng.uniform(2.0, 4.0, (H, W))
+    rdepth[rng.random((H, W)) < 0.3] = np.inf
+    rtri = rng.integers(-1, 9, (H, W))
+    st = rng.integers(0, 4, (H, W)).astype(np.int8)
+    # the NumPy expressions of _final_imagespace
+    obj = np.isfinite(zfront)
+    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
+    obj &= ~rec
+    want = [np.flatnonzero(m) for m in (rec, ~rec & ~obj, obj, obj & (st == 1), obj & (st != 1))]
+    assert all(len(w) > 10 for w in want)
+    origin, rdir = cam.primary_rays()
+    rdir_f = rdir.reshape(-1, 3)
+    ri, bi = want[0], want[1]
+    dirs = rdir_f[ri]
+    fwd = -cam.basis[2]
+    pts = origin.reshape(-1, 3)[ri] + dirs * (rdepth.reshape(-1)[ri] / (dirs[:, 0] * fwd[0] + dirs[:, 1] * fwd[1]
+                                                                        + dirs[:, 2] * fwd[2]))[:, None]
+
+    def run():
+        px, ldi = ic._classify(zfront, rdepth, st)
+        Wk, Hk, sx, sy = cam.kernel_args()
+        out = ic._DirectOut(np.empty((len(px.ri), 3)), np.empty(len(px.ri), np.int64), np.empty((len(px.ri), 3)),
+                            np.empty((len(px.bi), 3)))
+        ic._direct_rays_kernel(ic._EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
+                               ic._DirectGeometry(np.ascontiguousarray(cam.basis), np.asarray(cam.eye, dtype=float),
+                                                  np.ascontiguousarray(fwd), rdepth.reshape(-1), rtri.reshape(-1)),
+                               px, out)
+        return px, ldi, out
+
+    for px, ldi, out in on_one_and_two_threads(run):
+        for got, w in zip(px, want):
+            assert np.array_equal(got, w)
+        assert np.array_equal(ldi[0], np.where(np.isfinite(zfront), zfront, np.inf))
+        assert np.array_equal(out.Pd, pts) and np.array_equal(out.fd, rtri.reshape(-1)[ri])
+        assert np.array_equal(out.dd, dirs) and np.array_equal(out.db, rdir_f[bi])

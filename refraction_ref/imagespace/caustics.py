@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..camera import primary_dir
+from ..camera import _pixel_xy, primary_dir
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
@@ -49,25 +49,6 @@ from .grid import at_pixels
 from .normals import NORMAL_METHODS, no_lut, normal_at
 
 __all__ = ["imagespace_caustic_stages"]
-
-
-@nb.njit(cache=True, parallel=True)
-def _depth_points_kernel(origin, rdir, rdepth, idx, fwd, out):
-    # origin[i] + d (depth[i] / (d . fwd)), vec3.dot's order
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        s = rdepth[i] / (rdir[i, 0] * fwd[0] + rdir[i, 1] * fwd[1] + rdir[i, 2] * fwd[2])
-        for c in range(3):
-            out[k, c] = origin[i, c] + rdir[i, c] * s
-
-
-def _depth_points(origin, rdir, rdepth, idx, fwd):
-    out = np.empty((len(idx), 3))
-    if len(idx):
-        _depth_points_kernel(origin, rdir, rdepth, np.ascontiguousarray(idx, np.int64),
-                             np.ascontiguousarray(fwd, dtype=np.float64), out)
-    return out
 
 
 @nb.njit(cache=True, parallel=True)
@@ -135,6 +116,163 @@ def _object_pixels_kernel(rows, chunk):
                 sr += 1
             for q in range(3):
                 s32[p, q] = np.float32(c[n_full + k, q])
+
+
+class _Pixels(NamedTuple):
+    """The final pass's pixel classes (:func:`_classify_kernel`): flat indices, ascending."""
+
+    ri: np.ndarray  # receivers seen directly
+    bi: np.ndarray  # the environment (neither a receiver in front nor the object)
+    oi: np.ndarray  # the object
+    xi: np.ndarray  # the object, its trace exited (status 1)
+    si: np.ndarray  # the object, its trace stuck (status not 1)
+
+
+@nb.njit(cache=True, inline="always")
+def _pixel_class(zf, rd, s):
+    """0 receiver seen directly, 1 environment, 2 object exited, 3 object stuck: the NumPy masks
+    ``obj = isfinite(zfront)``, ``rec = isfinite(rdepth) & (rdepth < where(obj, zfront, inf))``,
+    ``obj &= ~rec`` and ``status == 1``, at one pixel."""
+    o = math.isfinite(zf)
+    if math.isfinite(rd) and rd < (zf if o else np.inf):
+        return 0
+    if not o:
+        return 1
+    return 2 if s == 1 else 3
+
+
+@nb.njit(cache=True, parallel=True)
+def _class_count_kernel(zfront, rdepth, st, ldi, cnt):
+    # cnt[i + 1, c]: pixels of class c in image row i; ldi = where(isfinite(zfront), zfront, inf)
+    H, W = zfront.shape
+    for i0 in nb.prange(H):
+        i = np.int64(i0)
+        for c in range(4):
+            cnt[i + 1, c] = 0
+        for j in range(W):
+            zf = zfront[i, j]
+            ldi[i, j] = zf if math.isfinite(zf) else np.inf
+            cnt[i + 1, _pixel_class(zf, rdepth[i, j], st[i, j])] += 1
+
+
+@nb.njit(cache=True, parallel=True)
+def _class_fill_kernel(zfront, rdepth, st, first, rows):
+    # each image row writes its pixels' flat indices from the row's first slot of each class
+    # (first[i, c]: the pixels of class c in the rows above), so each list is ascending
+    ri, bi, oi, xi, si = rows.ri, rows.bi, rows.oi, rows.xi, rows.si
+    H, W = zfront.shape
+    for i0 in nb.prange(H):
+        i = np.int64(i0)
+        a0, a1, a2, a3 = first[i, 0], first[i, 1], first[i, 2], first[i, 3]
+        ao = a2 + a3
+        for j in range(W):
+            c = _pixel_class(zfront[i, j], rdepth[i, j], st[i, j])
+            p = i * W + j
+            if c == 0:
+                ri[a0] = p
+                a0 += 1
+            elif c == 1:
+                bi[a1] = p
+                a1 += 1
+            else:
+                oi[ao] = p
+                ao += 1
+                if c == 2:
+                    xi[a2] = p
+                    a2 += 1
+                else:
+                    si[a3] = p
+                    a3 += 1
+
+
+def _classify(zfront, rdepth, st):
+    """``(_Pixels, ldi)``: the flat indices of each class of :func:`_pixel_class`, ascending (as
+    ``np.flatnonzero`` of the NumPy masks), and the front depth with +inf where none (1, H, W), by
+    two passes over the image rows on every thread."""
+    zf = np.ascontiguousarray(zfront, dtype=np.float64)
+    rd = np.ascontiguousarray(rdepth, dtype=np.float64)
+    st = np.ascontiguousarray(st)
+    H = zf.shape[0]
+    ldi = np.empty((1,) + zf.shape)
+    cnt = np.zeros((H + 1, 4), np.int64)
+    _class_count_kernel(zf, rd, st, ldi[0], cnt)
+    first = np.cumsum(cnt, axis=0)  # integers: exact
+    n = first[H]
+    rows = _Pixels(np.empty(n[0], np.int64), np.empty(n[1], np.int64), np.empty(n[2] + n[3], np.int64),
+                   np.empty(n[2], np.int64), np.empty(n[3], np.int64))
+    _class_fill_kernel(zf, rd, st, first, rows)
+    return rows, ldi
+
+
+class _EyeView(NamedTuple):
+    """The eye camera's scalars, for :func:`_direct_rays_kernel`."""
+
+    W: int
+    H: int
+    sx: float
+    sy: float
+    ortho: bool
+
+
+class _DirectGeometry(NamedTuple):
+    """What :func:`_direct_rays_kernel` reads."""
+
+    basis: np.ndarray  # (3, 3) Camera.basis
+    eye: np.ndarray  # (3,)
+    fwd: np.ndarray  # (3,) -basis[2]
+    rdepth: np.ndarray  # (H W,) the receivers' depth image
+    rtri: np.ndarray  # (H W,) the receiver triangle seen at each pixel
+
+
+class _DirectOut(NamedTuple):
+    """What :func:`_direct_rays_kernel` writes."""
+
+    Pd: np.ndarray  # (nr, 3) points seen directly
+    fd: np.ndarray  # (nr,) int64 their triangles
+    dd: np.ndarray  # (nr, 3) the primary rays' directions there
+    db: np.ndarray  # (nb, 3) the primary rays' directions at the environment pixels
+
+
+@nb.njit(cache=True, parallel=True)
+def _direct_rays_kernel(view, geo, rows, out):
+    # per receiver pixel seen directly (rows.ri): Camera.primary_rays' origin and direction
+    # (_primary_rays' operations), _depth_points' point and the receiver triangle under it; per
+    # environment pixel (rows.bi): the direction
+    W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
+    basis, eye, fwd, rdepth, rtri = geo.basis, geo.eye, geo.fwd, geo.rdepth, geo.rtri
+    ri, bi = rows.ri, rows.bi
+    Pd, fd, dd, db = out.Pd, out.fd, out.dd, out.db
+    nr = ri.shape[0]
+    for k0 in nb.prange(nr + bi.shape[0]):
+        k = np.int64(k0)
+        p = ri[k] if k < nr else bi[k - nr]
+        i = p // W
+        j = p - i * W
+        x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
+        d0 = x * basis[0, 0] + y * basis[1, 0] + z * basis[2, 0]
+        d1 = x * basis[0, 1] + y * basis[1, 1] + z * basis[2, 1]
+        d2 = x * basis[0, 2] + y * basis[1, 2] + z * basis[2, 2]
+        if k >= nr:
+            q = k - nr
+            db[q, 0] = d0
+            db[q, 1] = d1
+            db[q, 2] = d2
+            continue
+        if ortho:
+            xw, yw = _pixel_xy(i, j, W, H, sx, sy)
+            o0 = eye[0] + xw * basis[0, 0] + yw * basis[1, 0]
+            o1 = eye[1] + xw * basis[0, 1] + yw * basis[1, 1]
+            o2 = eye[2] + xw * basis[0, 2] + yw * basis[1, 2]
+        else:
+            o0, o1, o2 = eye[0], eye[1], eye[2]
+        sc = rdepth[p] / (d0 * fwd[0] + d1 * fwd[1] + d2 * fwd[2])
+        Pd[k, 0] = o0 + d0 * sc
+        Pd[k, 1] = o1 + d1 * sc
+        Pd[k, 2] = o2 + d2 * sc
+        fd[k] = rtri[p]
+        dd[k, 0] = d0
+        dd[k, 1] = d1
+        dd[k, 2] = d2
 
 
 class _FrontView(NamedTuple):
@@ -385,35 +523,34 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     tr = eye["trace"]
     zfront = eye["zmin"]
     rdepth, rtri = eyebuf
-    origin, rdir = cam.primary_rays()
     env = scene.data["environment"]
-    obj = np.isfinite(zfront)
-    rec = np.isfinite(rdepth) & (rdepth < np.where(obj, zfront, np.inf))
-    obj &= ~rec
-    # receivers seen directly: shaded with the object's rays below (one call); the rows of
-    # the boolean masks (row-major) gathered by kernels on every thread
-    ri = np.flatnonzero(rec)
-    rdir_f = np.ascontiguousarray(rdir.reshape(-1, 3))
-    dirs = take_rows(rdir_f, ri)
-    fwd = -cam.basis[2]
-    # origin[rec] + dirs * (rdepth[rec] / dot(dirs, fwd))[:, None]
-    direct = (_depth_points(np.ascontiguousarray(origin.reshape(-1, 3)), rdir_f,
-                            np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1), ri, fwd),
-              rtri.reshape(-1)[ri], dirs)
-    bi = np.flatnonzero(~rec & ~obj)
-    # environment_lookup(env, rdir[bg]): the rows gathered on every thread
-    env_bg = environment_lookup(env, take_rows(rdir_f, bi), scene.base_dir) if len(bi) else np.zeros((0, 3))
-    if not obj.any():
+    st = tr["status"]
+    # the pixel classes (receiver seen directly, environment, object exited or stuck) as flat
+    # indices, ascending, and the front depth for the normals, on every thread
+    px, ldi = _classify(zfront, rdepth, st)
+    ri, bi, oi, xi = px.ri, px.bi, px.oi, px.xi
+    # receivers seen directly: shaded with the object's rays below (one call): each one's primary
+    # ray, its point origin + dir (rdepth / dir . fwd) and triangle; the environment pixels'
+    # directions; by one kernel on every thread (not the whole image's rays)
+    Wk, Hk, sx, sy = cam.kernel_args()
+    direct = (np.empty((len(ri), 3)), np.empty(len(ri), np.int64), np.empty((len(ri), 3)))
+    dirs_bg = np.empty((len(bi), 3))
+    if len(ri) + len(bi):
+        _direct_rays_kernel(_EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
+                            _DirectGeometry(np.ascontiguousarray(cam.basis, dtype=np.float64),
+                                            np.ascontiguousarray(cam.eye, dtype=np.float64),
+                                            np.ascontiguousarray(-cam.basis[2], dtype=np.float64),
+                                            np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1),
+                                            np.ascontiguousarray(rtri).reshape(-1)),
+                            px, _DirectOut(*direct, dirs_bg))
+    env_bg = environment_lookup(env, dirs_bg, scene.base_dir) if len(bi) else np.zeros((0, 3))
+    if not len(oi):
         base = np.zeros((H, W, 3))
         put_rows(base.reshape(-1, 3), bi, env_bg)
-        _, base[rec] = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis,
-                                   direct)
+        _, cd = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis, direct)
+        put_rows(base.reshape(-1, 3), ri, cd)
         return base.astype(np.float32), base.astype(np.float32), (ri, direct[0])
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
-    st = tr["status"]
-    ex = obj & (st == 1)
-    oi = np.flatnonzero(obj)
-    xi = np.flatnonzero(ex)
     plen = np.empty(len(oi))
     _take_kernel(np.ascontiguousarray(tr["path_length"], dtype=np.float64).reshape(-1), oi, plen)  # path_length[obj]
     trans = beer_lambert(absorption, plen, ior)  # per pixel: only the object's
@@ -425,8 +562,6 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     n_full = len(xi)
     if p["normals"] not in NORMAL_METHODS:
         raise ValueError(f"normals: unknown method {p['normals']!r}; choose one of {sorted(NORMAL_METHODS)}")
-    ldi = np.ascontiguousarray(np.where(np.isfinite(zfront), zfront, np.inf), dtype=np.float64)[None]
-    Wk, Hk, sx, sy = cam.kernel_args()
     O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
     _final_rays_kernel(_FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
                                   NORMAL_METHODS[p["normals"]], int(p["delta"])), no_lut(zfront.shape),
@@ -441,7 +576,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # (cd) and the environment (env_bg) in both; the object's pixels: the exit ray's colour or,
     # stuck, the environment along the last direction, times the transmittance (full), and the
     # single-surface ray's colour (single)
-    si = np.flatnonzero(obj & (st != 1))
+    si = px.si
     env_stuck = (environment_lookup(env, take_rows(tr["last_dir"].reshape(-1, 3), si), scene.base_dir) if len(si)
                  else np.zeros((0, 3)))
     f32 = np.empty((H, W, 3), np.float32)
