@@ -187,13 +187,31 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
     want = np.zeros((N, 3))
     want[hi] = c[:len(hi)]
 
-    def run():
-        out = np.zeros((N, 3))
-        cd = shade.shade_rows(rs, sc.data["lights"], maps, P[:N], face, d[:N], hi, direct, vis, out)
-        return out, cd
+    nd, K = len(direct[0]), len(direct[0]) + 500
+    dest = rng.permutation(K)[:nd]
+    code_w = np.zeros((2, K), np.uint8)
+    margin_w = np.full((2, K), np.nan, np.float32)
+    lcam = vis.shadow[0][0]
+    code_w[0, dest] = np.where(shade.shadow_map_visibility(lcam, zmin, direct[0], 0.01) > 0, 1, 2)
+    margin_w[0, dest] = _shadow_map_margin_numpy(lcam, zmin, direct[0], 0.01, 0.3)
+    code_w[1, dest], margin_w[1, dest] = 1, -np.inf  # no shadow map
+    assert (code_w[0, dest] == 2).sum() > 10 and (margin_w[0, dest] == 0).sum() > 10
 
-    for out, cd in on_one_and_two_threads(run):
-        assert np.array_equal(out, want, equal_nan=True) and np.array_equal(cd, c[len(hi):], equal_nan=True)
+    def run(bufs):
+        out = np.zeros((N, 3))
+        code = np.zeros((2, K), np.uint8)
+        margin = np.full((2, K), np.nan, np.float32)
+        cd = shade.shade_rows(rs, sc.data["lights"], maps, P[:N], face, d[:N], hi, direct, vis, out,
+                              (dest, code, margin, 0.3) if bufs else None)
+        return out, cd, code, margin
+
+    for bufs in (False, True):
+        for out, cd, code, margin in on_one_and_two_threads(lambda: run(bufs)):
+            assert np.array_equal(out, want, equal_nan=True) and np.array_equal(cd, c[len(hi):], equal_nan=True)
+            if bufs:
+                assert np.array_equal(code, code_w) and np.array_equal(margin, margin_w, equal_nan=True)
+            else:
+                assert not code.any() and np.isnan(margin).all()
     # a point light: not this kernel's (None, out untouched)
     out = np.zeros((N, 3))
     pl = [{"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}]

@@ -715,7 +715,7 @@ def caustic_arrays(scene, method, bufs, stats):
     return arrays, info
 
 
-def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
+def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, shadow_buffers=None):
     """Colour seen along world rays: the receiver they meet (shaded), else the environment.
 
     Parameters
@@ -736,6 +736,9 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
     direct : (points, faces, ray directions), optional
         Receiver points seen directly, shaded in the same call (every point's
         colour is its own).
+    shadow_buffers : (dest, code, margin, tie), optional
+        Filled for the direct points where :func:`~refraction_ref.caustics.shade.shade_rows`
+        shades them (:func:`~refraction_ref.caustics.shade.shade_rows_applies`), else untouched.
 
     Returns
     -------
@@ -752,7 +755,7 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None):
     mi = np.flatnonzero(face < 0)
     nh = len(hi)
     if direct is not None:  # shadow maps, directional lights: shaded in place, no gathered rows
-        cd = shade_rows(rs, scene.data["lights"], rgb_maps, P, face, d, hi, direct, vis, out)
+        cd = shade_rows(rs, scene.data["lights"], rgb_maps, P, face, d, hi, direct, vis, out, shadow_buffers)
         if cd is not None:
             if len(mi):
                 put_rows(out, mi, environment_lookup(scene.data["environment"], take_rows(d, mi), scene.base_dir))

@@ -39,7 +39,7 @@ from ..lights import light_direction_at
 from .receivers import map_position, occluded
 
 __all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_map_margin", "shadow_map_test",
-           "ShadowMaps", "shade_rows", "exact_visibility", "take_rows"]
+           "ShadowMaps", "shade_rows", "shade_rows_applies", "exact_visibility", "take_rows"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -606,11 +606,14 @@ def _fused_args(rs, lights, maps_rgb, P, visibility):
 
 @nb.njit(cache=True, inline="always")
 def _shade_one(px, py, pz, f, dx, dy, dz, j, normals, owner, albedo, frames, size, maps, L, fall, radiance, shadowed,
-               mat, off, views, zmin):
+               mat, off, views, zmin, code, margin, tie, dest):
     """One point's colour, shade_points' kernels' operations in their order: the facing normal, per light
     the cosine, the shadow test where the point faces the light (0 elsewhere) and the direct term added
     to a sum that starts at 0, then the caustic map's bilinear look-up added, times the albedo. ``j``:
-    the point's row of the per-point light arrays (0 when they hold one row)."""
+    the point's row of the per-point light arrays (0 when they hold one row). With ``dest >= 0`` the
+    point's shadow buffers too, from the same test (:func:`_shadow_test_kernel`'s verdict and margin,
+    whether or not the point faces the light; 1 and -inf for a light without a shadow map), at
+    ``code[l, dest]``, ``margin[l, dest]``."""
     nl = radiance.shape[0]
     Hc, Wc = maps.shape[1], maps.shape[2]
     nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
@@ -622,17 +625,29 @@ def _shade_one(px, py, pz, f, dx, dy, dz, j, normals, owner, albedo, frames, siz
     for l in range(nl):
         c = -_einsum_dot(nx, ny, nz, L[l, j, 0], L[l, j, 1], L[l, j, 2])
         cos = c if (c > 0.0 or c != c) else 0.0
-        v = 0.0
-        if cos > 0:
-            v = 1.0
-            if shadowed[l]:
-                view = _LightView(views[l, 0], views[l, 1], views[l, 2] != 0.0, views[l, 3], views[l, 4],
-                                  views[l, 5])
-                m = mat[l]
-                tt = off[l]
-                col, row, d = _screen_of(_to_view(px, py, pz, m, tt, 0), _to_view(px, py, pz, m, tt, 1),
-                                         _to_view(px, py, pz, m, tt, 2), view)
-                v = 0.0 if _margin_at(col, row, d, zmin[l], view.bias) > 0 else 1.0
+        v = 1.0 if cos > 0 else 0.0
+        if shadowed[l] and (cos > 0 or dest >= 0):
+            view = _LightView(views[l, 0], views[l, 1], views[l, 2] != 0.0, views[l, 3], views[l, 4], views[l, 5])
+            m = mat[l]
+            tt = off[l]
+            zl = zmin[l]
+            col, row, d = _screen_of(_to_view(px, py, pz, m, tt, 0), _to_view(px, py, pz, m, tt, 1),
+                                     _to_view(px, py, pz, m, tt, 2), view)
+            mg = _margin_at(col, row, d, zl, view.bias)
+            if cos > 0:
+                v = 0.0 if mg > 0 else 1.0
+            if dest >= 0:
+                code[l, dest] = 2 if mg > 0 else 1
+                if tie > 0:
+                    for q in range(4):
+                        dc = tie if q == 0 else (-tie if q == 1 else 0.0)
+                        dr = tie if q == 2 else (-tie if q == 3 else 0.0)
+                        if (_margin_at(col + dc, row + dr, d, zl, view.bias) > 0) != (mg > 0):
+                            mg = 0.0
+                margin[l, dest] = np.float32(mg)
+        elif dest >= 0:
+            code[l, dest] = 1
+            margin[l, dest] = np.float32(-np.inf)
         w = cos * fall[l, j] * v
         s0 += radiance[l, 0] * w
         s1 += radiance[l, 1] * w
@@ -673,11 +688,14 @@ def _shade_kernel(P, faces, dirs, rcv, lts, out):
     L, fall, radiance, shadowed = lts.L, lts.fall, lts.radiance, lts.shadowed
     mat, off, views, zmin = lts.m, lts.t, lts.views, lts.zmin
     ML = L.shape[1]
+    code = np.zeros((0, 0), np.uint8)
+    margin = np.zeros((0, 0), np.float32)
     for k0 in nb.prange(P.shape[0]):
         k = np.int64(k0)
         j = k if ML > 1 else np.int64(0)
         c0, c1, c2 = _shade_one(P[k, 0], P[k, 1], P[k, 2], faces[k], dirs[k, 0], dirs[k, 1], dirs[k, 2], j, normals,
-                                owner, albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin)
+                                owner, albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin,
+                                code, margin, 0.0, np.int64(-1))
         out[k, 0] = c0
         out[k, 1] = c1
         out[k, 2] = c2
@@ -695,6 +713,10 @@ class _ShadeRows(NamedTuple):
     dd: np.ndarray  # (nd, 3)
     out: np.ndarray  # (N, 3) the rays' colours, written at rows hi
     out_d: np.ndarray  # (nd, 3) the direct points' colours
+    dest: np.ndarray  # (nd,) int64 the direct points' columns of code and margin (empty: none written)
+    code: np.ndarray  # (nl, K) uint8 out: shadow verdict (1 lit, 2 in shadow) per light
+    margin: np.ndarray  # (nl, K) float32 out: shadow_map_margin per light
+    tie: float  # texels (shadow_map_margin)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -704,6 +726,8 @@ def _shade_rows_kernel(rows, rcv, lts):
     # back gave, without the gathered copies; directional lights only (their arrays hold one row)
     P, face, d, hi, Pd, fd, dd, out, out_d = rows.P, rows.face, rows.d, rows.hi, rows.Pd, rows.fd, rows.dd, \
         rows.out, rows.out_d
+    dest, code, margin, tie = rows.dest, rows.code, rows.margin, rows.tie
+    bufs = dest.shape[0] > 0
     normals, owner, albedo, frames, size, maps = rcv.normals, rcv.owner, rcv.albedo, rcv.frames, rcv.size, rcv.maps
     L, fall, radiance, shadowed = lts.L, lts.fall, lts.radiance, lts.shadowed
     mat, off, views, zmin = lts.m, lts.t, lts.views, lts.zmin
@@ -714,7 +738,8 @@ def _shade_rows_kernel(rows, rcv, lts):
         if k < nh:
             q = hi[k]
             c0, c1, c2 = _shade_one(P[q, 0], P[q, 1], P[q, 2], face[q], d[q, 0], d[q, 1], d[q, 2], j, normals, owner,
-                                    albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin)
+                                    albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views, zmin,
+                                    code, margin, tie, np.int64(-1))
             out[q, 0] = c0
             out[q, 1] = c1
             out[q, 2] = c2
@@ -722,13 +747,32 @@ def _shade_rows_kernel(rows, rcv, lts):
             q = k - nh
             c0, c1, c2 = _shade_one(Pd[q, 0], Pd[q, 1], Pd[q, 2], fd[q], dd[q, 0], dd[q, 1], dd[q, 2], j, normals,
                                     owner, albedo, frames, size, maps, L, fall, radiance, shadowed, mat, off, views,
-                                    zmin)
+                                    zmin, code, margin, tie, dest[q] if bufs else np.int64(-1))
             out_d[q, 0] = c0
             out_d[q, 1] = c1
             out_d[q, 2] = c2
 
 
-def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out):
+def shade_rows_applies(rs, lights, maps_rgb, visibility):
+    """Whether :func:`shade_rows` shades in place (a :class:`ShadowMaps` visibility, directional lights
+    only, caustic maps and shadow maps of one shape each).
+
+    Parameters
+    ----------
+    rs : ReceiverSet
+    lights : list of dict
+    maps_rgb : list of (Hc, Wc, 3) arrays
+    visibility : callable
+
+    Returns
+    -------
+    bool
+    """
+    return (bool(lights) and all(lt["type"] == "directional" for lt in lights)
+            and _fused_args(rs, lights, maps_rgb, np.zeros((1, 3)), visibility) is not None)
+
+
+def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out, shadow_buffers=None):
     """``out[hi] = c[:nh]`` and ``c[nh:]`` of ``c = shade_points`` over the rows ``hi`` of ``(P, face, d)``
     followed by the ``direct`` points, without gathering the rows: one kernel on every thread.
 
@@ -750,11 +794,17 @@ def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out):
     visibility : ShadowMaps
     out : (N, 3) float64
         Written at rows ``hi``.
+    shadow_buffers : (dest, code, margin, tie), optional
+        Also the direct points' shadow buffers from the same shadow test: per light ``l``,
+        ``code[l, dest]`` (uint8: 1 lit, 2 in shadow, as :func:`shadow_map_test`) and
+        ``margin[l, dest]`` (float32: :func:`shadow_map_margin` with ``tie``), whether or not a point
+        faces the light; 1 and -inf for a light without a shadow map.
 
     Returns
     -------
     (nd, 3) float64 or None
-        The direct points' colours; None where the kernel does not apply (``out`` untouched).
+        The direct points' colours; None where the kernel does not apply (``out`` and the buffers
+        untouched; :func:`shade_rows_applies`).
 
     References
     ----------
@@ -768,12 +818,20 @@ def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out):
         return None
     Pd = np.ascontiguousarray(direct[0], dtype=np.float64).reshape(-1, 3)
     out_d = np.empty((len(Pd), 3))
+    if shadow_buffers is None or not len(Pd):
+        dest, code, margin, tie = np.zeros(0, np.int64), np.zeros((0, 0), np.uint8), np.zeros((0, 0), np.float32), 0.0
+    else:
+        dest, code, margin, tie = shadow_buffers
+        dest = np.ascontiguousarray(dest, dtype=np.int64)
+        if len(dest) != len(Pd) or code.shape[0] != len(lights) or margin.shape[0] != len(lights):
+            raise ValueError("shade_rows: shadow_buffers need one column per direct point and one row per light")
     _shade_rows_kernel(_ShadeRows(np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3),
                                   np.ascontiguousarray(face, dtype=np.int64).reshape(-1),
                                   np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3),
                                   np.ascontiguousarray(hi, dtype=np.int64),
                                   Pd, np.ascontiguousarray(direct[1], dtype=np.int64).reshape(-1),
-                                  np.ascontiguousarray(direct[2], dtype=np.float64).reshape(-1, 3), out, out_d),
+                                  np.ascontiguousarray(direct[2], dtype=np.float64).reshape(-1, 3), out, out_d,
+                                  dest, code, margin, float(tie)),
                        fused[0], fused[1])
     return out_d
 

@@ -39,7 +39,7 @@ from ..camera import _pixel_xy, primary_dir
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import ShadowMaps, _take_kernel, shadow_map_test, take_rows
+from ..caustics.shade import ShadowMaps, _take_kernel, shade_rows_applies, shadow_map_test, take_rows
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -402,12 +402,11 @@ def _st_final(ctx):
 
     # the eye's front depth per image pixel (the grid texel under it when imagespace.grid differs)
     eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape)}
-    img, img1, (ri, points) = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"],
-                                                vis, p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
+    img, img1, shadow_bufs = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"],
+                                               vis, p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
     ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
              "single-surface (the thesis's) final passes")
-    return {"image_caustics": img, "image_caustics_single": img1,
-            **_shadow_buffers(rd["cam"].shape, ri, points, shadow)}
+    return {"image_caustics": img, "image_caustics_single": img1, **shadow_bufs}
 
 
 #: texels: a receiver point this close to a light texel's edge, across which the shadow test decides
@@ -518,7 +517,9 @@ def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
 
 def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
     """The final pass (§4.1): ``image_caustics`` (multi-layer), ``image_caustics_single`` (the thesis's), and
-    ``(ri, points)``: the receiver pixels seen directly (flat indices) and their points, for the shadow buffers."""
+    the shadow buffers ``shadow_l``, ``shadow_margin_l`` of :func:`_shadow_buffers` (``vis``: a
+    :class:`~refraction_ref.caustics.shade.ShadowMaps`), filled by the shading kernel from its own
+    shadow test where it shades in place, else by :func:`_shadow_buffers`."""
     H, W = cam.shape
     tr = eye["trace"]
     zfront = eye["zmin"]
@@ -544,12 +545,28 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
                                             np.ascontiguousarray(rtri).reshape(-1)),
                             px, _DirectOut(*direct, dirs_bg))
     env_bg = environment_lookup(env, dirs_bg, scene.base_dir) if len(bi) else np.zeros((0, 3))
+    # the shadow buffers at the receiver pixels seen directly: written by the shading kernel from the
+    # shadow test it makes there anyway, where it shades in place; else tested on their own after
+    nl = len(vis.shadow)
+    if shade_rows_applies(rs, scene.data["lights"], rgb_maps, vis):
+        code = np.zeros((nl, H * W), np.uint8)
+        margin = np.full((nl, H * W), np.nan, np.float32)
+        bufs = (ri, code, margin, SHADOW_TIE)
+        shadow_out = {}
+        for l in range(nl):
+            shadow_out[f"shadow_{l}"] = code[l].reshape(H, W)
+            shadow_out[f"shadow_margin_{l}"] = margin[l].reshape(H, W)
+    else:
+        bufs = None
     if not len(oi):
         base = np.zeros((H, W, 3))
         put_rows(base.reshape(-1, 3), bi, env_bg)
-        _, cd = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis, direct)
+        _, cd = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis, direct,
+                           bufs)
         put_rows(base.reshape(-1, 3), ri, cd)
-        return base.astype(np.float32), base.astype(np.float32), (ri, direct[0])
+        if bufs is None:
+            shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
+        return base.astype(np.float32), base.astype(np.float32), shadow_out
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
     plen = np.empty(len(oi))
     _take_kernel(np.ascontiguousarray(tr["path_length"], dtype=np.float64).reshape(-1), oi, plen)  # path_length[obj]
@@ -570,7 +587,9 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
                                   np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), np.eye(3),
                                   np.ascontiguousarray(cam.basis, dtype=np.float64),
                                   np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), O, D))
-    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct)
+    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct, bufs)
+    if bufs is None:
+        shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
     # the two images in float32, each pixel written once from its own rows on every thread (what
     # base / full / single in float64 and their astype(np.float32) gave): receivers seen directly
     # (cd) and the environment (env_bg) in both; the object's pixels: the exit ray's colour or,
@@ -588,4 +607,4 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     _object_pixels_kernel(_ObjectRows(oi, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c), n_full,
                                       np.ascontiguousarray(env_stuck, dtype=np.float64),
                                       np.ascontiguousarray(trans, dtype=np.float64), f32f, s32f), _OBJECT_CHUNK)
-    return f32, s32, (ri, direct[0])
+    return f32, s32, shadow_out
