@@ -154,19 +154,21 @@ def test_final_rays_kernel_equals_numpy(on_one_and_two_threads, ortho, method, d
 
     def run():
         n = len(xi) + len(oi)
-        O, D = np.empty((n, 3)), np.empty((n, 3))
+        O, D, Ov, Dv = (np.empty((n, 3)) for _ in range(4))
         Wk, Hk, sx, sy = cam.kernel_args()
+        m, t = shade._world_to_view_args(cam)
         ic._final_rays_kernel(
             ic._FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), eta, NORMAL_METHODS[method], delta),
             no_lut(zfront.shape),
             ic._FinalRays(xi, exit_pos.reshape(-1, 3), exit_dir.reshape(-1, 3), oi,
                           np.where(np.isfinite(zfront), zfront, np.inf)[None], zfront.reshape(-1), np.eye(3),
                           np.ascontiguousarray(cam.basis), np.ascontiguousarray(cam.eye, dtype=np.float64),
-                          np.zeros(3), O, D))
-        return O, D
+                          np.zeros(3), m, t, O, D, Ov, Dv))
+        return O, D, Ov, Dv
 
-    for O, D in on_one_and_two_threads(run):
+    for O, D, Ov, Dv in on_one_and_two_threads(run):
         assert np.array_equal(O, want[0]) and np.array_equal(D, want[1])
+        assert np.array_equal(Ov, cam.world_to_view(want[0])) and np.array_equal(Dv, cam.dir_world_to_view(want[1]))
     assert np.isfinite(want[1]).all() and want[1][len(xi):].std() > 0
 
 

@@ -204,7 +204,7 @@ def skip_reason(scene):
     return f"the scene has no {' and no '.join(missing)}: no caustics to map"
 
 
-def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
+def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None, view=None):
     """Where world rays meet the receivers: eye-space march or Embree.
 
     Parameters
@@ -218,6 +218,9 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
         The eye camera (eye-space mode).
     eyebuf : (depth, tri), optional
         :func:`~refraction_ref.caustics.receivers.eye_buffers` (eye-space mode).
+    view : (origins, dirs) in the camera's view space, optional
+        ``cam.world_to_view(origins)`` and ``cam.dir_world_to_view(dirs)`` (eye-space mode), when the
+        caller computed them already (with their operations, so the same bits).
 
     Returns
     -------
@@ -231,7 +234,8 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None):
     if mode == "exact":
         t, face = hit_exact(rs.tris, o, d)
     else:
-        t, pix = march_eyespace(cam.world_to_view(o), cam.dir_world_to_view(d), eyebuf[0], cam)
+        ov, dv = (cam.world_to_view(o), cam.dir_world_to_view(d)) if view is None else view
+        t, pix = march_eyespace(ov, dv, eyebuf[0], cam)
         face = np.empty(len(o), np.int64)  # the triangle seen at the hit's pixel, -1 none
         _pixel_face_kernel(pix, np.ascontiguousarray(eyebuf[1], dtype=np.int64), face)
     P = np.empty(o.shape)
@@ -715,7 +719,7 @@ def caustic_arrays(scene, method, bufs, stats):
     return arrays, info
 
 
-def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, shadow_buffers=None):
+def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, shadow_buffers=None, view=None):
     """Colour seen along world rays: the receiver they meet (shaded), else the environment.
 
     Parameters
@@ -739,6 +743,8 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, s
     shadow_buffers : (dest, code, margin, tie), optional
         Filled for the direct points where :func:`~refraction_ref.caustics.shade.shade_rows`
         shades them (:func:`~refraction_ref.caustics.shade.shade_rows_applies`), else untouched.
+    view : (origins, dirs), optional
+        The rays in the camera's view space (:func:`receiver_hits`).
 
     Returns
     -------
@@ -748,7 +754,7 @@ def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, s
     out = np.zeros((len(o), 3))
     d = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
     if len(o):
-        P, face = receiver_hits(rs, o, d, mode, cam, eyebuf)
+        P, face = receiver_hits(rs, o, d, mode, cam, eyebuf, view)
     else:
         P, face = np.zeros((0, 3)), np.zeros(0, np.int64)
     hi = np.flatnonzero(face >= 0)

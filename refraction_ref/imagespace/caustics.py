@@ -39,7 +39,8 @@ from ..camera import _pixel_xy, primary_dir
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import ShadowMaps, _take_kernel, shade_rows_applies, shadow_map_test, take_rows
+from ..caustics.shade import (ShadowMaps, _take_kernel, _world_to_view_args, shade_rows_applies,
+                               shadow_map_test, take_rows)
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -300,9 +301,23 @@ class _FinalRays(NamedTuple):
     eye3: np.ndarray  # (3, 3) identity: primary_rays_view's basis
     basis: np.ndarray  # (3, 3) Camera.basis (view_to_world's matrix)
     eye: np.ndarray  # (3,) Camera.eye (view_to_world's offset)
-    zero3: np.ndarray  # (3,) dir_view_to_world's offset
+    zero3: np.ndarray  # (3,) dir_view_to_world's (and dir_world_to_view's) offset
+    m: np.ndarray  # (3, 3) world_to_view's matrix (basis.T)
+    t: np.ndarray  # (3,) world_to_view's offset (-eye @ basis.T)
     O: np.ndarray  # (nx + no, 3) out: the rays' world origins
     D: np.ndarray  # (nx + no, 3) out: their world directions
+    Ov: np.ndarray  # (nx + no, 3) out: Camera.world_to_view(O)
+    Dv: np.ndarray  # (nx + no, 3) out: Camera.dir_world_to_view(D)
+
+
+@nb.njit(cache=True, inline="always")
+def _to_view_rows(O, D, k, m, t, zero3, Ov, Dv):
+    """Row ``k`` of Camera.world_to_view(O) and dir_world_to_view(D) (vec3.affine's order)."""
+    x, y, z = O[k, 0], O[k, 1], O[k, 2]
+    a, b, c = D[k, 0], D[k, 1], D[k, 2]
+    for q in range(3):
+        Ov[k, q] = x * m[0, q] + y * m[1, q] + z * m[2, q] + t[q]
+        Dv[k, q] = a * m[0, q] + b * m[1, q] + c * m[2, q] + zero3[q]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -316,6 +331,7 @@ def _final_rays_kernel(view, lut, rays):
     method, delta = view.method, view.delta
     xi, exit_pos, exit_dir, oi, ldi, zfront = rays.xi, rays.exit_pos, rays.exit_dir, rays.oi, rays.ldi, rays.zfront
     e3, basis, eye, zero3, O, D = rays.eye3, rays.basis, rays.eye, rays.zero3, rays.O, rays.D
+    m, tv, Ov, Dv = rays.m, rays.t, rays.Ov, rays.Dv
     nx = xi.shape[0]
     for k0 in nb.prange(nx + oi.shape[0]):
         k = np.int64(k0)
@@ -324,6 +340,7 @@ def _final_rays_kernel(view, lut, rays):
             for c in range(3):
                 O[k, c] = exit_pos[q, c]
                 D[k, c] = exit_dir[q, c]
+            _to_view_rows(O, D, k, m, tv, zero3, Ov, Dv)
             continue
         p = oi[k - nx]
         ii = p // W
@@ -350,6 +367,8 @@ def _final_rays_kernel(view, lut, rays):
         for c in range(3):
             O[k, c] = px * basis[0, c] + py * basis[1, c] + pz * basis[2, c] + eye[c]
             D[k, c] = tx * basis[0, c] + ty * basis[1, c] + tz * basis[2, c] + zero3[c]
+        _to_view_rows(O, D, k, m, tv, zero3, Ov, Dv)
+
 
 
 def _st_photon_trace(ctx, layered_trace):
@@ -580,14 +599,17 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     if p["normals"] not in NORMAL_METHODS:
         raise ValueError(f"normals: unknown method {p['normals']!r}; choose one of {sorted(NORMAL_METHODS)}")
     O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
+    Ov, Dv = np.empty_like(O), np.empty_like(D)
+    m, t = _world_to_view_args(cam)
     _final_rays_kernel(_FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
                                   NORMAL_METHODS[p["normals"]], int(p["delta"])), no_lut(zfront.shape),
                        _FinalRays(xi, np.ascontiguousarray(tr["exit_pos"], dtype=np.float64).reshape(-1, 3),
                                   np.ascontiguousarray(tr["exit_dir"], dtype=np.float64).reshape(-1, 3), oi, ldi,
                                   np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), np.eye(3),
                                   np.ascontiguousarray(cam.basis, dtype=np.float64),
-                                  np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), O, D))
-    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct, bufs)
+                                  np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), m, t, O, D, Ov,
+                                  Dv))
+    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct, bufs, (Ov, Dv))
     if bufs is None:
         shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
     # the two images in float32, each pixel written once from its own rows on every thread (what
