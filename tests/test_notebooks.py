@@ -101,6 +101,12 @@ def test_caustics_walkthrough():
     # exercise 3: Beer-Lambert with absorption (0, 1, 2) keeps red whole, green more than blue
     r, g, b = k["absorbed_rgb_ratio"]
     assert r == pytest.approx(1.0) and 0 < b < g < 1
+    # the NumPy binary search with the contract's bilinear reads: no layer at the last probe of every photon the
+    # package loses after its first interface, and R5 = the package's exit point of the photons out after two
+    assert k["search_lost_agree"] == 1.0 and k["search_r5_max_dev"] < 1e-9
+    # one photon's splat E = flux |n.V| / A_texel with bilinear weights, for every landed photon, and the gather's
+    # Gaussian taps by hand give stage.splat.splat_0 and caustic_map_0 (float32 storage)
+    assert k["splat_hand_dev"] < 1e-6 and k["gather_hand_dev"] < 1e-6
 
 
 def test_volumetric_walkthrough():
