@@ -133,6 +133,9 @@ def test_volumetric_walkthrough():
     # eq. 6 and the deposit walk by hand (every photon of an 8x8 photon texture, summed per z-slab) give the
     # package's stage.march.deposit within float32 summation
     assert k["deposit_hand_dev"] < 1e-5
+    # Sun's viewing pass (§4.5) by hand for one pixel: the sum T sigma L p(cos) seg along the curved ray plus T L_env,
+    # with Henyey-Greenstein at g = 0 and 0.5, gives the package's image there within float32 rounding
+    assert set(k["view_hand_dev"]) == {"0.0", "0.5"} and max(k["view_hand_dev"].values()) < 1e-5
 
 
 def test_levelmap_walkthrough():
