@@ -78,6 +78,9 @@ def test_imagespace_walkthrough():
     # exercise 2: with eq. 3.2's normals the exit error is larger at the rim than inside
     rim, inside = k["ex2_rim_inside_deg"]["central δ=2"]
     assert rim > inside
+    # exercise 3: with TIR followed, each former TIR pixel exits, is lost or reaches a limit (none stays TIR)
+    assert k["ex3_former_tir"][3] == 0 and sum(k["ex3_former_tir"]) == k["status_hist"][3]
+    assert all(g > 0 for g in k["grain_inside_deg"].values())
 
 
 def test_caustics_walkthrough():
