@@ -68,7 +68,7 @@ class _ObjectRows(NamedTuple):
 
     oi: np.ndarray  # (no,) the object's pixels (flat, ascending)
     st: np.ndarray  # (H W,) trace status: 1 exited (its exit ray's colour), else stuck
-    c: np.ndarray  # (n_full + no, 3) the exit rays' colours (rows of the exit pixels, ascending), then the single-surface rays'
+    c: np.ndarray  # (n_full + no, 3) the exit rays' colours (exit pixels ascending), then the single-surface rays'
     n_full: int
     env_stuck: np.ndarray  # (nstuck, 3) the environment along the stuck pixels' last directions (ascending)
     trans: np.ndarray  # (no, 3) transmittance per object pixel
