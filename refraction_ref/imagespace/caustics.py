@@ -320,20 +320,51 @@ def _to_view_rows(O, D, k, m, t, zero3, Ov, Dv):
         Dv[k, q] = a * m[0, q] + b * m[1, q] + c * m[2, q] + zero3[q]
 
 
+@nb.njit(cache=True, inline="always")
+def _front_ray(p, ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method, delta):
+    """The thesis's single-surface ray at object pixel ``p`` in view space: its front point and
+    direction, in the operations' order of what it replaced: primary_rays_view's direction (rotated
+    by the identity ``e3``), layer_normals' normal (NaN where the layer is absent), refract, then
+    _front_points_kernel (the refracted direction, or the primary one where it is not finite, and
+    the pixel centre's point at depth ``zfront``)."""
+    ii = p // W
+    jj = p - ii * W
+    x, y, z = primary_dir(ii, jj, W, H, sx, sy, ortho)
+    dvx = x * e3[0, 0] + y * e3[1, 0] + z * e3[2, 0]
+    dvy = x * e3[0, 1] + y * e3[1, 1] + z * e3[2, 1]
+    dvz = x * e3[0, 2] + y * e3[1, 2] + z * e3[2, 2]
+    nxx, nyy, nzz = np.nan, np.nan, np.nan
+    if math.isfinite(ldi[0, ii, jj]):
+        nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, method, delta, W, H, sx, sy, ortho)
+    tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, eta)
+    if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
+        tx, ty, tz = dvx, dvy, dvz
+    xs = jj + 0.5
+    ys = ii + 0.5
+    px = (xs / W * 2.0 - 1.0) * sx
+    py = (1.0 - ys / H * 2.0) * sy
+    dfront = zfront[p]
+    if not ortho:
+        px = px * dfront
+        py = py * dfront
+    return px, py, -dfront, tx, ty, tz
+
+
 @nb.njit(cache=True, parallel=True)
 def _final_rays_kernel(view, lut, rays):
     # rows 0 .. nx-1: the exit rays (take_rows of exit_pos, exit_dir at xi); rows nx ..: the thesis's
-    # single-surface rays at the object's pixels, in the operations' order of what they replace:
-    # primary_rays_view's direction (rotated by the identity), layer_normals' normal (NaN where the
-    # layer is absent), refract, _front_points_kernel (t, or the direction where t is not finite, and
-    # the front point), then Camera.view_to_world / dir_view_to_world (vec3.affine's order)
+    # single-surface rays at the object's pixels (_front_ray), then Camera.view_to_world /
+    # dir_view_to_world (vec3.affine's order); each row also in view space (_to_view_rows)
     W, H, sx, sy, ortho, eta = view.W, view.H, view.sx, view.sy, view.ortho, view.eta
     method, delta = view.method, view.delta
     xi, exit_pos, exit_dir, oi, ldi, zfront = rays.xi, rays.exit_pos, rays.exit_dir, rays.oi, rays.ldi, rays.zfront
     e3, basis, eye, zero3, O, D = rays.eye3, rays.basis, rays.eye, rays.zero3, rays.O, rays.D
     m, tv, Ov, Dv = rays.m, rays.t, rays.Ov, rays.Dv
     nx = xi.shape[0]
-    for k0 in nb.prange(nx + oi.shape[0]):
+    no = oi.shape[0]
+    # iteration k makes exit row k and front row nx + k: OpenMP hands each thread one contiguous
+    # block of iterations, which so holds as many cheap copies as refracted rays
+    for k0 in nb.prange(max(nx, no)):
         k = np.int64(k0)
         if k < nx:
             q = xi[k]
@@ -341,34 +372,14 @@ def _final_rays_kernel(view, lut, rays):
                 O[k, c] = exit_pos[q, c]
                 D[k, c] = exit_dir[q, c]
             _to_view_rows(O, D, k, m, tv, zero3, Ov, Dv)
-            continue
-        p = oi[k - nx]
-        ii = p // W
-        jj = p - ii * W
-        x, y, z = primary_dir(ii, jj, W, H, sx, sy, ortho)
-        dvx = x * e3[0, 0] + y * e3[1, 0] + z * e3[2, 0]
-        dvy = x * e3[0, 1] + y * e3[1, 1] + z * e3[2, 1]
-        dvz = x * e3[0, 2] + y * e3[1, 2] + z * e3[2, 2]
-        nxx, nyy, nzz = np.nan, np.nan, np.nan
-        if math.isfinite(ldi[0, ii, jj]):
-            nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, method, delta, W, H, sx, sy, ortho)
-        tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, eta)
-        if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
-            tx, ty, tz = dvx, dvy, dvz
-        xs = jj + 0.5
-        ys = ii + 0.5
-        px = (xs / W * 2.0 - 1.0) * sx
-        py = (1.0 - ys / H * 2.0) * sy
-        dfront = zfront[p]
-        if not ortho:
-            px = px * dfront
-            py = py * dfront
-        pz = -dfront
-        for c in range(3):
-            O[k, c] = px * basis[0, c] + py * basis[1, c] + pz * basis[2, c] + eye[c]
-            D[k, c] = tx * basis[0, c] + ty * basis[1, c] + tz * basis[2, c] + zero3[c]
-        _to_view_rows(O, D, k, m, tv, zero3, Ov, Dv)
-
+        if k < no:
+            px, py, pz, tx, ty, tz = _front_ray(oi[k], ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method,
+                                                delta)
+            r = nx + k
+            for c in range(3):
+                O[r, c] = px * basis[0, c] + py * basis[1, c] + pz * basis[2, c] + eye[c]
+                D[r, c] = tx * basis[0, c] + ty * basis[1, c] + tz * basis[2, c] + zero3[c]
+            _to_view_rows(O, D, r, m, tv, zero3, Ov, Dv)
 
 
 def _st_photon_trace(ctx, layered_trace):
