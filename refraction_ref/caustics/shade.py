@@ -767,6 +767,11 @@ def shade_rows_applies(rs, lights, maps_rgb, visibility):
     Returns
     -------
     bool
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     return (bool(lights) and all(lt["type"] == "directional" for lt in lights)
             and _fused_args(rs, lights, maps_rgb, np.zeros((1, 3)), visibility) is not None)

@@ -22,9 +22,12 @@ shared with the volumetric method and the exact reference. The knobs:
 and gathering window in the ``caustics`` block (``caustics.map_size``,
 ``caustics.gather``). Outputs: see :mod:`refraction_ref.caustics.pipeline`.
 
-Threads: the final pass's row gathers and scatters (receiver pixels, the
-object's pixels, the front points) are kernels that write only their own
-rows, so the bits do not depend on the number of threads.
+Threads: the final pass's kernels write only their own rows (each pixel
+class's flat indices from per-image-row counts and offsets; the rays, the
+shading and the two images row by row), so the bits do not depend on the
+number of threads. With the OpenMP layer each thread gets one contiguous
+block of a kernel's iterations, so a kernel whose rows differ in cost
+interleaves them (:func:`_final_rays_kernel`).
 """
 
 from __future__ import annotations
