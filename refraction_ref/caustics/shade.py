@@ -42,6 +42,24 @@ __all__ = ["sample_bilinear", "shade_points", "shadow_map_visibility", "shadow_m
            "ShadowMaps", "shade_rows", "shade_rows_applies", "exact_visibility", "take_rows"]
 
 
+@nb.njit(cache=True, inline="always")
+def _bilinear_texels(col, row, Wc, Hc):
+    """The four texels and weights of a bilinear look-up at map position ``(col, row)``.
+
+    Texel centres at +0.5; positions clamped to the map and NaN read as its
+    first texel (:func:`sample_bilinear`'s rules): ``(i0, j0, i1, j1, fx, fy)``.
+    """
+    x = min(max(col - 0.5, 0.0), Wc - 1.0)
+    y = min(max(row - 0.5, 0.0), Hc - 1.0)
+    if math.isnan(col):
+        x = 0.0
+    if math.isnan(row):
+        y = 0.0
+    j0 = min(np.int64(math.floor(x)), Wc - 1)
+    i0 = min(np.int64(math.floor(y)), Hc - 1)
+    return i0, j0, min(i0 + 1, Hc - 1), min(j0 + 1, Wc - 1), x - j0, y - i0
+
+
 @nb.njit(cache=True, parallel=True)
 def _add_bilinear_kernel(E, col, row, sel, out):
     # out[sel[k]] += the bilinear look-up of E at (col[k], row[k]): sample_bilinear's
@@ -49,18 +67,7 @@ def _add_bilinear_kernel(E, col, row, sel, out):
     Hc, Wc, C = E.shape
     for k0 in nb.prange(col.shape[0]):
         k = np.int64(k0)
-        x = min(max(col[k] - 0.5, 0.0), Wc - 1.0)
-        y = min(max(row[k] - 0.5, 0.0), Hc - 1.0)
-        if math.isnan(col[k]):
-            x = 0.0
-        if math.isnan(row[k]):
-            y = 0.0
-        j0 = min(np.int64(math.floor(x)), Wc - 1)
-        i0 = min(np.int64(math.floor(y)), Hc - 1)
-        j1 = min(j0 + 1, Wc - 1)
-        i1 = min(i0 + 1, Hc - 1)
-        fx = x - j0
-        fy = y - i0
+        i0, j0, i1, j1, fx, fy = _bilinear_texels(col[k], row[k], Wc, Hc)
         q = sel[k]
         for c in range(C):
             out[q, c] += ((1 - fy) * ((1 - fx) * E[i0, j0, c] + fx * E[i0, j1, c])
@@ -659,18 +666,7 @@ def _shade_one(px, py, pz, f, dx, dy, dz, j, normals, owner, albedo, frames, siz
     qz = pz - frames[r, 0, 2]
     cc = ((qx * frames[r, 1, 0] + qy * frames[r, 1, 1] + qz * frames[r, 1, 2]) / frames[r, 3, 0] + 0.5) * size[r, 1]
     rr = ((qx * frames[r, 2, 0] + qy * frames[r, 2, 1] + qz * frames[r, 2, 2]) / frames[r, 3, 1] + 0.5) * size[r, 0]
-    x = min(max(cc - 0.5, 0.0), Wc - 1.0)
-    y = min(max(rr - 0.5, 0.0), Hc - 1.0)
-    if math.isnan(cc):
-        x = 0.0
-    if math.isnan(rr):
-        y = 0.0
-    j0 = min(np.int64(math.floor(x)), Wc - 1)
-    i0 = min(np.int64(math.floor(y)), Hc - 1)
-    j1 = min(j0 + 1, Wc - 1)
-    i1 = min(i0 + 1, Hc - 1)
-    fx = x - j0
-    fy = y - i0
+    i0, j0, i1, j1, fx, fy = _bilinear_texels(cc, rr, Wc, Hc)
     E = maps[r]
     s0 += ((1 - fy) * ((1 - fx) * E[i0, j0, 0] + fx * E[i0, j1, 0])
            + fy * ((1 - fx) * E[i1, j0, 0] + fx * E[i1, j1, 0]))
