@@ -348,10 +348,23 @@ def shadow_map_margin(lcam, zmin, points, bias, tie=0.0):
     pv = lcam.world_to_view(p)
     out = np.empty(len(p))
     # per point on every thread: the NumPy expressions of the test, element by element
-    _shadow_margin_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64),
-                          _LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width),
-                                     float(lcam.height), float(bias)), float(tie), out)
+    _shadow_margin_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64), _light_view(lcam, bias), float(tie),
+                          out)
     return out
+
+
+@nb.njit(cache=True, inline="always")
+def _tie_probes(col, row, d, zmin, bias, tie, m):
+    """``m`` set to 0 where the verdict of the shadow test changes when the point moves ``tie`` texel
+    along either axis: four probes in their order, each compared with the margin as the probes
+    before left it (:func:`shadow_map_margin`); ``m`` unchanged when ``tie <= 0``."""
+    if tie > 0:
+        for q in range(4):
+            dc = tie if q == 0 else (-tie if q == 1 else 0.0)
+            dr = tie if q == 2 else (-tie if q == 3 else 0.0)
+            if (_margin_at(col + dc, row + dr, d, zmin, bias) > 0) != (m > 0):
+                m = 0.0
+    return m
 
 
 @nb.njit(cache=True, parallel=True)
@@ -362,14 +375,7 @@ def _shadow_margin_kernel(pv, zmin, view, tie, out):
     for k0 in nb.prange(pv.shape[0]):
         k = np.int64(k0)
         col, row, d = _light_screen(pv, k, view)
-        m = _margin_at(col, row, d, zmin, bias)
-        if tie > 0:
-            for q in range(4):
-                dc = tie if q == 0 else (-tie if q == 1 else 0.0)
-                dr = tie if q == 2 else (-tie if q == 3 else 0.0)
-                if (_margin_at(col + dc, row + dr, d, zmin, bias) > 0) != (m > 0):
-                    m = 0.0
-        out[k] = m
+        out[k] = _tie_probes(col, row, d, zmin, bias, tie, _margin_at(col, row, d, zmin, bias))
 
 
 @nb.njit(cache=True, parallel=True)
@@ -385,13 +391,7 @@ def _shadow_test_kernel(p, m, t, zmin, view, tie, idx, code, margin):
         mg = _margin_at(col, row, d, zmin, bias)
         q = idx[k]
         code[q] = 2 if mg > 0 else 1
-        if tie > 0:
-            for r in range(4):
-                dc = tie if r == 0 else (-tie if r == 1 else 0.0)
-                dr = tie if r == 2 else (-tie if r == 3 else 0.0)
-                if (_margin_at(col + dc, row + dr, d, zmin, bias) > 0) != (mg > 0):
-                    mg = 0.0
-        margin[q] = np.float32(mg)
+        margin[q] = np.float32(_tie_probes(col, row, d, zmin, bias, tie, mg))
 
 
 def shadow_map_test(lcam, zmin, points, bias, tie, idx, code, margin):
@@ -558,18 +558,23 @@ class _ShadeLights(NamedTuple):
     zmin: np.ndarray  # (nl, N, N) nearest depth from the light (one shape for all)
 
 
-def _fused_args(rs, lights, maps_rgb, P, visibility):
-    """:func:`_shade_kernel`'s inputs, or None where it does not apply (visibility not a
-    :class:`ShadowMaps`, maps or shadow maps of several shapes, a light of another type)."""
+def _fusable(rs, lights, maps_rgb, visibility):
+    """Whether :func:`_shade_kernel` applies: a :class:`ShadowMaps` visibility, directional or point
+    lights, one caustic map per receiver, maps and shadow maps of one shape each."""
     if not isinstance(visibility, ShadowMaps) or len(visibility.shadow) < len(lights) or not len(maps_rgb):
+        return False
+    if any(lt["type"] not in ("directional", "point") for lt in lights) or len(rs.boxes) != len(maps_rgb):
+        return False
+    zshapes = {np.shape(sh[1]) for sh in visibility.shadow[:len(lights)] if sh is not None}
+    return len({np.shape(E) for E in maps_rgb}) == 1 and len(zshapes) <= 1
+
+
+def _fused_args(rs, lights, maps_rgb, P, visibility):
+    """:func:`_shade_kernel`'s inputs, or None where it does not apply (:func:`_fusable`)."""
+    if not _fusable(rs, lights, maps_rgb, visibility):
         return None
     nl, nr, M = len(lights), len(rs.boxes), len(P)
-    if any(lt["type"] not in ("directional", "point") for lt in lights) or nr != len(maps_rgb):
-        return None
-    shapes = {np.shape(E) for E in maps_rgb}
     zshapes = {np.shape(sh[1]) for sh in visibility.shadow[:nl] if sh is not None}
-    if len(shapes) != 1 or len(zshapes) > 1:
-        return None
     maps = (np.ascontiguousarray(maps_rgb[0], dtype=np.float64)[None] if nr == 1
             else np.ascontiguousarray(np.stack(maps_rgb), dtype=np.float64))
     frames = np.empty((nr, 4, 3))
@@ -645,13 +650,7 @@ def _shade_one(px, py, pz, f, dx, dy, dz, j, normals, owner, albedo, frames, siz
                 v = 0.0 if mg > 0 else 1.0
             if dest >= 0:
                 code[l, dest] = 2 if mg > 0 else 1
-                if tie > 0:
-                    for q in range(4):
-                        dc = tie if q == 0 else (-tie if q == 1 else 0.0)
-                        dr = tie if q == 2 else (-tie if q == 3 else 0.0)
-                        if (_margin_at(col + dc, row + dr, d, zl, view.bias) > 0) != (mg > 0):
-                            mg = 0.0
-                margin[l, dest] = np.float32(mg)
+                margin[l, dest] = np.float32(_tie_probes(col, row, d, zl, view.bias, tie, mg))
         elif dest >= 0:
             code[l, dest] = 1
             margin[l, dest] = np.float32(-np.inf)
@@ -770,7 +769,7 @@ def shade_rows_applies(rs, lights, maps_rgb, visibility):
        Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     return (bool(lights) and all(lt["type"] == "directional" for lt in lights)
-            and _fused_args(rs, lights, maps_rgb, np.zeros((1, 3)), visibility) is not None)
+            and _fusable(rs, lights, maps_rgb, visibility))
 
 
 def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out, shadow_buffers=None):
@@ -812,11 +811,9 @@ def shade_rows(rs, lights, maps_rgb, P, face, d, hi, direct, visibility, out, sh
     .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
        Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
-    if not lights or any(lt["type"] != "directional" for lt in lights):
+    if not shade_rows_applies(rs, lights, maps_rgb, visibility):
         return None
     fused = _fused_args(rs, lights, maps_rgb, np.zeros((1, 3)), visibility)
-    if fused is None:
-        return None
     Pd = np.ascontiguousarray(direct[0], dtype=np.float64).reshape(-1, 3)
     out_d = np.empty((len(Pd), 3))
     if shadow_buffers is None or not len(Pd):
