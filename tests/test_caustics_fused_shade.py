@@ -220,8 +220,7 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
     assert shade.shade_rows(rs, pl, maps, P[:N], face, d[:N], hi, direct, vis, out) is None and not out.any()
 
 
-@pytest.mark.parametrize("chunk", [7, 4096])
-def test_final_composite_kernels_equal_numpy(on_one_and_two_threads, chunk):
+def test_final_composite_kernels_equal_numpy(on_one_and_two_threads):
     from refraction_ref.imagespace import caustics as ic
 
     rng = np.random.default_rng(31)
@@ -244,12 +243,14 @@ def test_final_composite_kernels_equal_numpy(on_one_and_two_threads, chunk):
     full[si] = env_stuck
     full[oi] *= trans
     single[oi] = c[len(xi):]
+    # each object pixel's row among the exited (xi) or the stuck (si) pixels
+    orow = np.where(st[oi] == 1, np.searchsorted(xi, oi), np.searchsorted(si, oi))
 
     def run():
         f32, s32 = np.empty((H * W, 3), np.float32), np.empty((H * W, 3), np.float32)
         ic._put32_kernel(ri, cd, f32, s32)
         ic._put32_kernel(bi, env_bg, f32, s32)
-        ic._object_pixels_kernel(ic._ObjectRows(oi, st, c, len(xi), env_stuck, trans, f32, s32), chunk)
+        ic._object_pixels_kernel(ic._ObjectRows(oi, orow, st, c, len(xi), env_stuck, trans, f32, s32))
         return f32, s32
 
     for f32, s32 in on_one_and_two_threads(run):
@@ -295,8 +296,10 @@ def test_pixel_classes_and_direct_rays_equal_numpy(on_one_and_two_threads, ortho
                                px, out)
         return px, ldi, out
 
+    oi, xi, si = want[2], want[3], want[4]
+    orow = np.where(st.reshape(-1)[oi] == 1, np.searchsorted(xi, oi), np.searchsorted(si, oi))
     for px, ldi, out in on_one_and_two_threads(run):
-        for got, w in zip(px, want):
+        for got, w in zip((px.ri, px.bi, px.oi, px.xi, px.si, px.orow), want + [orow]):
             assert np.array_equal(got, w)
         assert np.array_equal(ldi[0], np.where(np.isfinite(zfront), zfront, np.inf))
         assert np.array_equal(out.Pd, pts) and np.array_equal(out.fd, rtri.reshape(-1)[ri])

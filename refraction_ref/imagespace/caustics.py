@@ -70,6 +70,7 @@ class _ObjectRows(NamedTuple):
     """The object's pixels and the rows :func:`_object_pixels_kernel` reads their colours from."""
 
     oi: np.ndarray  # (no,) the object's pixels (flat, ascending)
+    orow: np.ndarray  # (no,) each one's row in c (exited) or env_stuck (stuck): _Pixels.orow
     st: np.ndarray  # (H W,) trace status: 1 exited (its exit ray's colour), else stuck
     c: np.ndarray  # (n_full + no, 3) the exit rays' colours (exit pixels ascending), then the single-surface rays'
     n_full: int
@@ -79,47 +80,24 @@ class _ObjectRows(NamedTuple):
     s32: np.ndarray  # (H W, 3) out: image_caustics_single
 
 
-#: object pixels per chunk of :func:`_object_pixels_kernel` (each chunk counts its exit pixels, then
-#: walks its rows with its first exit and stuck rows known)
-_OBJECT_CHUNK = 4096
-
-
 @nb.njit(cache=True, parallel=True)
-def _object_pixels_kernel(rows, chunk):
+def _object_pixels_kernel(rows):
     # full[p] = (exit: c[its exit row], else env_stuck[its stuck row]) * trans[k] and single[p] =
-    # c[n_full + k], cast to float32, for the k-th object pixel p = oi[k]: an exit pixel's row in c
-    # is the number of exit pixels before it (xi = flatnonzero(obj & st == 1) is ascending, and
-    # so is oi), a stuck pixel's in env_stuck the number of stuck ones
-    oi, st, c, n_full, env_stuck, trans, f32, s32 = rows.oi, rows.st, rows.c, rows.n_full, rows.env_stuck, \
-        rows.trans, rows.f32, rows.s32
-    n = oi.shape[0]
-    nch = (n + chunk - 1) // chunk
-    nx = np.zeros(nch + 1, np.int64)
-    for b0 in nb.prange(nch):
-        b = np.int64(b0)
-        m = 0
-        for k in range(b * chunk, min(b * chunk + chunk, n)):
-            if st[oi[k]] == 1:
-                m += 1
-        nx[b + 1] = m
-    for b in range(nch):  # exit rows before each chunk (an integer sum: exact)
-        nx[b + 1] += nx[b]
-    for b0 in nb.prange(nch):
-        b = np.int64(b0)
-        xr = nx[b]
-        sr = b * chunk - nx[b]
-        for k in range(b * chunk, min(b * chunk + chunk, n)):
-            p = oi[k]
-            if st[p] == 1:
-                for q in range(3):
-                    f32[p, q] = np.float32(c[xr, q] * trans[k, q])
-                xr += 1
-            else:
-                for q in range(3):
-                    f32[p, q] = np.float32(env_stuck[sr, q] * trans[k, q])
-                sr += 1
+    # c[n_full + k], cast to float32, for the k-th object pixel p = oi[k]
+    oi, orow, st, c, n_full, env_stuck, trans, f32, s32 = rows.oi, rows.orow, rows.st, rows.c, rows.n_full, \
+        rows.env_stuck, rows.trans, rows.f32, rows.s32
+    for k0 in nb.prange(oi.shape[0]):
+        k = np.int64(k0)
+        p = oi[k]
+        r = orow[k]
+        if st[p] == 1:
             for q in range(3):
-                s32[p, q] = np.float32(c[n_full + k, q])
+                f32[p, q] = np.float32(c[r, q] * trans[k, q])
+        else:
+            for q in range(3):
+                f32[p, q] = np.float32(env_stuck[r, q] * trans[k, q])
+        for q in range(3):
+            s32[p, q] = np.float32(c[n_full + k, q])
 
 
 class _Pixels(NamedTuple):
@@ -128,6 +106,7 @@ class _Pixels(NamedTuple):
     ri: np.ndarray  # receivers seen directly
     bi: np.ndarray  # the environment (neither a receiver in front nor the object)
     oi: np.ndarray  # the object
+    orow: np.ndarray  # per object pixel (as oi) its index in xi (exited) or si (stuck)
     xi: np.ndarray  # the object, its trace exited (status 1)
     si: np.ndarray  # the object, its trace stuck (status not 1)
 
@@ -163,7 +142,7 @@ def _class_count_kernel(zfront, rdepth, st, ldi, cnt):
 def _class_fill_kernel(zfront, rdepth, st, first, rows):
     # each image row writes its pixels' flat indices from the row's first slot of each class
     # (first[i, c]: the pixels of class c in the rows above), so each list is ascending
-    ri, bi, oi, xi, si = rows.ri, rows.bi, rows.oi, rows.xi, rows.si
+    ri, bi, oi, orow, xi, si = rows.ri, rows.bi, rows.oi, rows.orow, rows.xi, rows.si
     H, W = zfront.shape
     for i0 in nb.prange(H):
         i = np.int64(i0)
@@ -180,13 +159,15 @@ def _class_fill_kernel(zfront, rdepth, st, first, rows):
                 a1 += 1
             else:
                 oi[ao] = p
-                ao += 1
                 if c == 2:
+                    orow[ao] = a2
                     xi[a2] = p
                     a2 += 1
                 else:
+                    orow[ao] = a3
                     si[a3] = p
                     a3 += 1
+                ao += 1
 
 
 def _classify(zfront, rdepth, st):
@@ -203,7 +184,7 @@ def _classify(zfront, rdepth, st):
     first = np.cumsum(cnt, axis=0)  # integers: exact
     n = first[H]
     rows = _Pixels(np.empty(n[0], np.int64), np.empty(n[1], np.int64), np.empty(n[2] + n[3], np.int64),
-                   np.empty(n[2], np.int64), np.empty(n[3], np.int64))
+                   np.empty(n[2] + n[3], np.int64), np.empty(n[2], np.int64), np.empty(n[3], np.int64))
     _class_fill_kernel(zf, rd, st, first, rows)
     return rows, ldi
 
@@ -342,10 +323,7 @@ def _front_ray(p, ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method, delta)
     tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, eta)
     if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
         tx, ty, tz = dvx, dvy, dvz
-    xs = jj + 0.5
-    ys = ii + 0.5
-    px = (xs / W * 2.0 - 1.0) * sx
-    py = (1.0 - ys / H * 2.0) * sy
+    px, py = _pixel_xy(ii, jj, W, H, sx, sy)
     dfront = zfront[p]
     if not ortho:
         px = px * dfront
@@ -610,8 +588,6 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # normal, refraction and front point per object pixel (not the whole image's normals and
     # directions), both written into the rays' rows by one kernel on every thread
     n_full = len(xi)
-    if p["normals"] not in NORMAL_METHODS:
-        raise ValueError(f"normals: unknown method {p['normals']!r}; choose one of {sorted(NORMAL_METHODS)}")
     O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
     Ov, Dv = np.empty_like(O), np.empty_like(D)
     m, t = _world_to_view_args(cam)
@@ -640,7 +616,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     _put32_kernel(np.ascontiguousarray(ri, dtype=np.int64), np.ascontiguousarray(cd, dtype=np.float64), f32f, s32f)
     _put32_kernel(np.ascontiguousarray(bi, dtype=np.int64), np.ascontiguousarray(env_bg, dtype=np.float64), f32f,
                   s32f)
-    _object_pixels_kernel(_ObjectRows(oi, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c), n_full,
-                                      np.ascontiguousarray(env_stuck, dtype=np.float64),
-                                      np.ascontiguousarray(trans, dtype=np.float64), f32f, s32f), _OBJECT_CHUNK)
+    _object_pixels_kernel(_ObjectRows(oi, px.orow, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c),
+                                      n_full, np.ascontiguousarray(env_stuck, dtype=np.float64),
+                                      np.ascontiguousarray(trans, dtype=np.float64), f32f, s32f))
     return f32, s32, shadow_out
