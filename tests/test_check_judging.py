@@ -29,6 +29,8 @@ def test_a_share_never_reads_zero():
     assert fmt_share(13768, 13768) == "13768 of 13768 (100 %)"
     assert fmt_share(12480, 13768) == "12480 of 13768 (91 %)"
     assert fmt_share(9999, 10000) == "9999 of 10000 (99.99 %)"
+    from refraction_ref.golden.tolerances import fmt_percent
+    assert fmt_percent(100.0, whole=True) == "100" and fmt_percent(99.6) == "99.6" and fmt_percent(0.5) == "0.5"
 
 
 def test_index_keys_are_exact_and_each_key_has_its_own_rationale():

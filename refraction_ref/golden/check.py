@@ -48,7 +48,7 @@ import numpy as np
 
 from ..contract import CONTRACT_VERSION
 from ..files import NotNpzError, atomic_open, atomic_path, load_npz, savefig_atomic
-from .tolerances import _elementwise, _fold, finiteness, fmt_share, judge, tolerance_for
+from .tolerances import _elementwise, _fold, finiteness, fmt_percent, fmt_share, judge, tolerance_for
 
 __all__ = ["check", "CheckError", "CheckReport", "CaseReport", "format_report"]
 
@@ -1247,9 +1247,7 @@ def format_report(out):
                 if cn and "located" in cn:
                     frac = f"{fmt_share(cn['located'], cn['informative'])} / {100 * j['allowed']:.3g} %"
                 elif "failing" in j:
-                    pct = 100 * j['failing']
-                    frac = f"{pct:.2g} % / {100 * j['allowed']:.3g} %" if pct < 10 else \
-                        f"{pct:.0f} % / {100 * j['allowed']:.3g} %"     # not 1e+02
+                    frac = f"{fmt_percent(100 * j['failing'], whole=j['failing'] >= 1)} % / {100 * j['allowed']:.3g} %"
                 else:
                     frac = ""
                 links = "".join(f" ([{w}]({j[w]}))" for w in ("panel", "mask") if j.get(w))

@@ -75,7 +75,7 @@ import numpy as np
 __all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
            "FINITENESS", "SNAP_SLOPE", "FLOAT32_SNAP_SLOPE", "FLOAT32_SNAP_FRACTION", "neighbour_step",
            "flux_error", "FLUX", "VOLUME_FLUX", "RADIANCE_FLOOR",
-           "DEFAULT", "DEFAULT_INT", "fmt_share"]
+           "DEFAULT", "DEFAULT_INT", "fmt_share", "fmt_percent"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
         "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
@@ -531,6 +531,30 @@ def _fold(a, shape):
     return np.broadcast_to(a, shape)
 
 
+def fmt_percent(share, whole=False):
+    """A percentage as a report prints it: two significant digits below 10, whole numbers above (never
+    ``1e+02``), and more digits where a share short of all would round to 100.
+
+    Parameters
+    ----------
+    share : float
+        Per cent, >= 0.
+    whole : bool
+        The share is all of it (100 % may be printed).
+
+    Returns
+    -------
+    str
+    """
+    if share < 10:
+        return f"{share:.2g}"
+    pct, digits = f"{share:.0f}", 0
+    while not whole and float(pct) >= 100:
+        digits += 1
+        pct = f"{share:.{digits}f}"
+    return pct
+
+
 def fmt_share(n, total):
     """A count and its share, never rounded to zero: ``"3 of 262144 (0.0011 %)"``.
 
@@ -544,17 +568,7 @@ def fmt_share(n, total):
     str
     """
     n, total = int(n), int(total)
-    share = 100.0 * n / max(total, 1)
-    if n == 0:
-        pct = "0"
-    elif share >= 10:
-        # two significant digits would print 1e+02; and a share short of all must not read 100
-        pct, digits = f"{share:.0f}", 0
-        while n < total and float(pct) >= 100:
-            digits += 1
-            pct = f"{share:.{digits}f}"
-    else:
-        pct = f"{share:.2g}"
+    pct = "0" if n == 0 else fmt_percent(100.0 * n / max(total, 1), whole=n >= total)
     return f"{n} of {total} ({pct} %)"
 
 
