@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numba
 import numpy as np
 import pytest
@@ -42,3 +44,18 @@ def _same_arrays(a, b, keys=None):
 def same_arrays():
     """Assert two dicts of arrays equal bit for bit (determinism and before/after tests)."""
     return _same_arrays
+
+
+#: the test folders that mirror the package, each with its marker (``pytest -m volumetric``
+#: runs one method's tests alone; ``pytest tests/volumetric`` does the same by folder)
+FOLDER_MARKERS = ("imagespace", "caustics", "volumetric", "levelmap", "exact", "golden", "interop",
+                  "tables", "backends")
+
+
+def pytest_collection_modifyitems(config, items):
+    here = os.path.dirname(os.path.abspath(__file__))
+    for item in items:
+        rel = os.path.relpath(str(item.path), here)
+        folder = rel.split(os.sep)[0]
+        if folder in FOLDER_MARKERS:
+            item.add_marker(getattr(pytest.mark, folder))

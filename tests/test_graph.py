@@ -78,7 +78,7 @@ MUTATIONS = {
                    "supersample": 3, "blur": 5, "padding": 3, "bounds": [[-0.8, -0.8, -0.8], [0.8, 0.8, 0.8]],
                    "max_steps": 40, "min_radiance": 0.01, "stop_fraction": 0.01, "stiff": 0.5,
                    "stepping": "robust", "proxy": "box", "proxy_inflate": 3.0},
-    "volume": {},  # the volumetric input block: covered by tests/test_volumetric.py
+    "volume": {},  # the volumetric input block: covered by tests/volumetric/test_volumetric.py
 }
 #: scene keys shared by the methods, mutated on every (method, scene) below
 SHARED = {"camera.eye": [0.1, 1.1, 2.4], "outside_ior": 1.05, "environment.tiles": 8,

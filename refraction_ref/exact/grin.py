@@ -42,7 +42,7 @@ exponent -1/8), the per-component scale ``atol + rtol max(|y|, |y_new|)``,
 written out in Numba so that every ray runs on every thread without
 Python in the loop. :func:`trace_rays_scipy` integrates the same rays with
 ``solve_ivp`` itself (a terminal event at the box) and
-``tests/test_grin_reference.py`` checks that both agree. Steps are also
+``tests/exact/test_grin_reference.py`` checks that both agree. Steps are also
 capped at ``max_step`` voxels, so that the polyline of accepted steps
 resolves what is evaluated along the path (the material level set,
 extinction voxel by voxel, receivers).

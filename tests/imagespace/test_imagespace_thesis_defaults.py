@@ -228,7 +228,7 @@ def test_probe_endpoint_is_the_unprojection_of_the_last_probe(filt, iterations):
 def test_probe_endpoint_of_a_flat_slab_is_on_its_back_face(iterations):
     """Normal incidence through a slab between depths 2 and 3: every probe's texel holds the
     back face at depth 3, so the exit is on it whatever the iterations (the 'bracket'
-    end point is 3 - 2^-(k+1), tests/test_imagespace.py), and the path is exactly 1 long."""
+    end point is 3 - 2^-(k+1), tests/imagespace/test_imagespace.py), and the path is exactly 1 long."""
     cam, ldi, total, zback, thr, bhi, blo = _flat_slab(16)
     dirs = np.zeros((16, 16, 3))
     dirs[..., 2] = -1.0

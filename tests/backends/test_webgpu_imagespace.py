@@ -31,7 +31,7 @@ import pytest
 
 import refraction_ref as rr
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("webgpu_imagespace_backend",
                                                ROOT / "examples" / "webgpu_backend" / "imagespace.py")
 backend = importlib.util.module_from_spec(_spec)

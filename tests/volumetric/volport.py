@@ -1,7 +1,7 @@
 """The volumetric porting rules of docs/oracle.md ("Porting rules: volumetric"), written down as plain
 Python/NumPy from the docs alone: `photons`, `march` (deposits, extinction, receivers), `smooth`, `view`.
 
-Used by tests/test_volumetric_porting.py, which runs it on small scenes and asserts that it
+Used by tests/volumetric/test_volumetric_porting.py, which runs it on small scenes and asserts that it
 reproduces the oracle's stage buffers, so the documented rules are tested. Every function is plain
 Python on float64 scalars and NumPy arrays (a port's shader code, one photon or pixel at a time).
 """

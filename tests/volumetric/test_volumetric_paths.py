@@ -23,7 +23,7 @@ OBLIQUE = [{"type": "directional", "direction": [0.3, -1.0, 0.2], "radiance": [1
 
 
 def luneburg(N, R=0.8):
-    """The Luneburg lens of tests/test_volumetric.py: n = sqrt(2 - r^2 / R^2) inside radius R, 1 outside."""
+    """The Luneburg lens of tests/volumetric/test_volumetric.py: n = sqrt(2 - r^2 / R^2) inside radius R, 1 outside."""
     h = 2.0 / N
     c = -1.0 + (np.arange(N) + 0.5) * h
     X, Y, Z = np.meshgrid(c, c, c, indexing="ij")
@@ -173,7 +173,7 @@ def test_last_recorded_point_is_the_exit_point_on_the_face(integrator):
 @pytest.mark.parametrize("integrator,tol", [("euler", 0.6), ("rk4", 0.1)])
 def test_luneburg_paths_converge_on_the_far_side_focus(integrator, tol):
     """Parallel photons entering a Luneburg lens (n = sqrt(2 - r^2 / R^2)) all pass through the
-    antipodal point of their entry side: the recorded paths converge there (tests/test_volumetric.py)."""
+    antipodal point of their entry side: the recorded paths converge there (tests/volumetric/test_volumetric.py)."""
     N, R = 48, 0.8
     ior = luneburg(N, R)
     field, ext, level, smax = _setup(ior)

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-BACKEND = os.path.join(HERE, "..", "examples", "numpy_backend", "volumetric.py")
+BACKEND = os.path.join(HERE, "..", "..", "examples", "numpy_backend", "volumetric.py")
 CLI = os.path.join(os.path.dirname(sys.executable), "refraction-ref")   # the public CLI
 FAST = ("vol_receivers", "vol_ramp_lost", "vol_entry_split")
 VOLUMES = ("vol_luneburg", "vol_sharp_step")

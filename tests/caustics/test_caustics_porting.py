@@ -30,7 +30,7 @@ import refraction_ref as rr
 from refraction_ref.imagespace.pipeline import layered_trace, scene_geometry
 from refraction_ref.lights import light_camera as oracle_light_camera
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOC = (ROOT / "docs" / "oracle.md").read_text(encoding="utf-8")
 GOLDEN = ROOT / "refraction_ref" / "data" / "golden"
 SMALL = {"camera.width": 48, "camera.height": 40, "imagespace.photons": 40, "caustics.map_size": 32}

@@ -1,6 +1,6 @@
 """The volumetric porting rules of docs/oracle.md reproduce the oracle's stage buffers (issue 29).
 
-tests/volport.py is "Porting rules: volumetric" written down as plain Python (photons, march with
+tests/volumetric/volport.py is "Porting rules: volumetric" written down as plain Python (photons, march with
 its deposits, extinction and receivers, smooth, view). Here it runs on small scenes that exercise
 every branch the rules name (a gradient at the box faces, coloured extinction, phase_g != 0,
 receivers inside and below the volume, rays that enter inside material, a lost viewing ray, status-0

@@ -200,7 +200,7 @@ def test_method_exact_on_a_volume_scene_is_the_reference():
     assert set(vol.arrays) - final == {"radiance", "direction", "photon_steps"}
     assert final <= set(vol.arrays)
     # every stage buffer is in docs/oracle.md: the volumetric method's stages in its table, ours in ours
-    doc = open(os.path.join(os.path.dirname(__file__), "..", "docs", "oracle.md")).read()
+    doc = open(os.path.join(os.path.dirname(__file__), "..", "..", "docs", "oracle.md")).read()
     ours, theirs = _doc_buffers(doc, "### `exact` (volume scenes)"), _doc_buffers(doc, "### `volumetric` (Sun")
     for key in (k for k in ref.arrays if k.startswith("stage.")):
         _, stage, buf = key.split(".", 2)

@@ -25,7 +25,7 @@ import sys
 
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CASES = ["lm_all_planes", "lm_flat", "lm_point_light", "lm_slanted_sun", "lm_steep", "lm_steep_slanted",
          "lm_tir", "lm_two_lights"]
 FAST = ["lm_all_planes", "lm_steep", "lm_two_lights"]

@@ -23,7 +23,7 @@ from refraction_ref.exact import (
     trace_exact,
 )
 
-BUNNY = Path(__file__).resolve().parents[1] / "refraction_ref" / "data" / "bunny.ply"
+BUNNY = Path(__file__).resolve().parents[2] / "refraction_ref" / "data" / "bunny.ply"
 
 
 @functools.lru_cache(maxsize=None)

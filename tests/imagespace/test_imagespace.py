@@ -414,7 +414,7 @@ def _flat_slab(W=16):
 def test_trace_flat_slab_bracket():
     """Normal incidence through a slab between depths 2 and 3: the binary search's
     midpoint after k halvings of [2, 3] is 3 - 2^-(k+1) (``endpoint='bracket'``; the
-    seed's probe end point is on the back face: tests/test_imagespace_seed.py)."""
+    seed's probe end point is on the back face: tests/imagespace/test_imagespace_thesis_defaults.py)."""
     cam, ldi, total, zback, thr, bhi, blo = _flat_slab()
     dirs = np.zeros((16, 16, 3))
     dirs[..., 2] = -1.0
