@@ -79,6 +79,9 @@ class KnobBlock:
     merge : callable or None
         ``merge(data)``: fill a block that is given (``water``) with its
         defaults while the scene is resolved; None for plain blocks.
+    knobs : tuple of Knob
+        The block's declarations (:mod:`refraction_ref.knobs`), from which
+        its defaults, checks and table are derived.
     """
 
     name: str
@@ -87,6 +90,7 @@ class KnobBlock:
     owner: str
     aliases: dict = field(default_factory=dict)
     merge: Callable | None = None
+    knobs: tuple = ()
 
 
 @dataclass(frozen=True)
