@@ -44,7 +44,8 @@ from .validation import SceneError
 
 __all__ = ["Stage", "Method", "KnobBlock", "Context", "UndeclaredRead", "register_method", "register_block",
            "get_method", "method_names", "BLOCKS", "Builtin",
-           "load_builtin_blocks", "load_builtin_methods", "method_blocks", "run_graph", "stage_inputs", "STAGE_PREFIX",
+           "load_builtin_blocks", "load_builtin_methods", "method_blocks", "run_graph", "run_stages", "execute_stage",
+           "stage_inputs", "STAGE_PREFIX",
            "describe", "file_stamp"]
 
 #: prefix of kept stage buffers in a result's arrays: ``stage.<stage>.<buffer>``
@@ -489,6 +490,8 @@ class Context:
         self.stats = {}
         self.timings = {}
         self.progress = progress
+        #: False when the stage found nothing to do (its ``plan`` row then says ``ran: false`` and why)
+        self.ran = True
 
     def note(self, text):
         """Add a remark to the stage's ``plan`` entry.
@@ -517,6 +520,78 @@ def _keep_names(method_name, stages, keep):
         raise SceneError(f"keep: unknown stage {', '.join(repr(b) for b in bad)} for the {method_name} method "
                          f"on this scene; its stages are {', '.join(names)} (or 'stages' for all)")
     return set(asked)
+
+
+def execute_stage(stage, ctx, timings):
+    """Run one stage: time it, record its parts' times and check that it made its buffers.
+
+    What :func:`run_graph` and :func:`run_stages` share, so that a pass
+    sequence inside a stage is timed and checked as the method's own stages are.
+
+    Parameters
+    ----------
+    stage : Stage
+    ctx : Context
+    timings : dict
+        Gets ``timings[stage.name]`` (ms) and ``timings["<stage>.<part>"]``
+        for the parts the stage timed (``ctx.timings``).
+
+    Returns
+    -------
+    dict
+        The stage's buffers.
+    """
+    t0 = time.perf_counter()
+    out = stage.run(ctx)
+    timings[stage.name] = (time.perf_counter() - t0) * 1e3
+    for k, v in ctx.timings.items():
+        timings[f"{stage.name}.{k}"] = v
+    missing = [m for m in stage.makes if m not in out]
+    if missing:
+        raise RuntimeError(f"stage '{stage.name}' did not make {missing}")
+    return out
+
+
+def run_stages(stages, inputs, scene=None, timings=None, plan=None, progress=False):
+    """Run a sequence of passes in order, each on the buffers of the ones it names in ``after``.
+
+    The graph runner for a pass sequence that runs inside one stage on
+    buffers rather than on the scene: the image-space passes in a light's
+    view (the photon pass of Chaudhari 2008 §4.1), the level map's
+    preparation. Each pass is a :class:`Stage`, timed and checked by
+    :func:`execute_stage` as :func:`run_graph` does, and adds one ``plan``
+    row: ``ran`` is the pass's ``ctx.ran``, ``why`` its notes (its ``doc``
+    when it made none).
+
+    Parameters
+    ----------
+    stages : sequence of Stage
+        In the order they run; ``after`` may name ``"input"`` (``inputs``)
+        or an earlier stage.
+    inputs : dict
+        The sequence's input buffers, ``ctx.buf["input"]``.
+    scene : Scene, optional
+        Projected onto each pass's ``reads`` (a pass reading an undeclared
+        key raises :class:`UndeclaredRead`); None for passes that read
+        buffers only.
+    timings, plan : dict, list, optional
+        Filled with each pass's time (ms) and plan row.
+    progress : bool
+
+    Returns
+    -------
+    dict
+        ``{stage name: its buffers}``, ``"input"`` included.
+    """
+    timings = {} if timings is None else timings
+    plan = [] if plan is None else plan
+    bufs = {"input": inputs}
+    for st in stages:
+        view = None if scene is None else _scene_view(scene, st)
+        ctx = Context(view, {u: bufs[u] for u in st.after}, progress)
+        bufs[st.name] = execute_stage(st, ctx, timings)
+        plan.append({"stage": st.name, "ran": ctx.ran, "why": "; ".join(ctx.notes) if ctx.notes else st.doc})
+    return bufs
 
 
 def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
@@ -558,7 +633,6 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
         method.warm(scene)  # the kernels this scene's plan needs, on a tiny copy of it
     timings, plan, stats = {}, [], {}
     bufs, ran = {}, {}
-    tic = time.perf_counter
     for st in stages:
         if st.diagnostic and st.name not in kept:
             plan.append({"stage": st.name, "ran": False,
@@ -583,14 +657,7 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
             if up_ran:
                 why = (why + "; " if why else "") + "upstream re-ran: " + ", ".join(up_ran)
         ctx = Context(_scene_view(scene, st), {u: bufs[u] for u in st.after}, progress)
-        t0 = tic()
-        out = st.run(ctx)
-        timings[st.name] = (tic() - t0) * 1e3
-        for k, v in ctx.timings.items():
-            timings[f"{st.name}.{k}"] = v
-        missing = [m for m in st.makes if m not in out]
-        if missing:
-            raise RuntimeError(f"stage '{st.name}' did not make {missing}")
+        out = execute_stage(st, ctx, timings)
         if not ephemeral:
             cache[ck] = {"inputs": inputs, "out": out, "stats": dict(ctx.stats)}
         bufs[st.name] = out
@@ -598,7 +665,7 @@ def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
         stats.update(ctx.stats)
         parts = [] if (why == "no earlier result" and ctx.notes) else [why]
         text = " | ".join(parts + (["; ".join(ctx.notes)] if ctx.notes else []))
-        plan.append({"stage": st.name, "ran": True, "why": text})
+        plan.append({"stage": st.name, "ran": ctx.ran, "why": text})
         if ephemeral:
             for u in st.after:
                 if last_reader.get(u) == st.name and u not in kept:
