@@ -44,7 +44,7 @@ from .validation import SceneError
 
 __all__ = ["Stage", "Method", "KnobBlock", "Context", "UndeclaredRead", "register_method", "register_block",
            "get_method", "method_names", "BLOCKS", "Builtin",
-           "load_builtin_blocks", "load_builtin_methods", "method_blocks", "run_graph", "run_stages", "execute_stage",
+           "load_builtin_blocks", "load_builtin_methods", "method_blocks", "run_graph", "run_stages", "execute_stage", "method_renderer",
            "stage_inputs", "STAGE_PREFIX",
            "describe", "file_stamp"]
 
@@ -592,6 +592,58 @@ def run_stages(stages, inputs, scene=None, timings=None, plan=None, progress=Fal
         bufs[st.name] = execute_stage(st, ctx, timings)
         plan.append({"stage": st.name, "ran": ctx.ran, "why": "; ".join(ctx.notes) if ctx.notes else st.doc})
     return bufs
+
+
+def method_renderer(method, name, summary):
+    """A method's ``render_<method>(scene, *, cache, keep, warm, progress)``: a thin alias of :func:`run_graph`.
+
+    Every method's render function is this one function bound to its
+    method, with one shared docstring (its first line ``summary``).
+
+    Parameters
+    ----------
+    method : Method or str
+        The method it runs (a name is looked up on each call).
+    name : str
+        The function's name (``"render_imagespace"``).
+    summary : str
+        Its docstring's first line.
+
+    Returns
+    -------
+    callable
+    """
+
+    def render_method(scene, *, cache=None, keep=None, warm=True, progress=False):
+        return run_graph(method, scene, cache=cache, keep=keep, progress=progress, warm=warm)
+
+    render_method.__name__ = render_method.__qualname__ = name
+    render_method.__doc__ = summary + _RENDER_DOC
+    return render_method
+
+
+_RENDER_DOC = """
+
+    Parameters
+    ----------
+    scene : Scene
+        Validated (:func:`~refraction_ref.scene.load_scene`).
+    cache : dict, optional
+        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
+    keep : str or sequence of str, optional
+        Stage buffers to return as ``stage.<stage>.<buffer>`` (``"stages"``: all).
+    warm : bool, default True
+        Compile (or load) the kernels on a tiny copy of the scene first, so
+        that ``timings_ms`` exclude JIT time.
+    progress : bool, default False
+        Show progress bars.
+
+    Returns
+    -------
+    arrays, info : dict, dict
+        The output keys of ``docs/oracle.md`` (Outputs) and ``meta``'s
+        ``timings_ms``, ``plan``, ``stats``.
+    """
 
 
 def run_graph(method, scene, cache=None, keep=None, progress=False, warm=True):
