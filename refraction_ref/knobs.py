@@ -65,6 +65,9 @@ class Knob:
     check : callable, optional
         ``check(value, where, data)``: a rule of this knob beyond its kind
         and range (raising :class:`~refraction_ref.validation.SceneError`).
+    summary : str, optional
+        One line for the README's table of the main knobs (``None``: the
+        knob is in ``docs/oracle.md``'s table only).
     """
 
     name: str
@@ -80,6 +83,7 @@ class Knob:
     nullable: bool = False
     allowed: str | None = None
     check: Callable | None = None
+    summary: str | None = None
 
 
 def _fmt_number(x):
