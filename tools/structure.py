@@ -40,6 +40,11 @@ import sys
 PKG = "refraction_ref"
 MAX_LINES = 150
 MAX_POSITIONAL = 12
+#: issue 35's targets: no Python function over 8 parameters, at most 10 kernels over 10, no module over 800 lines
+MAX_PARAMETERS = 8
+MAX_KERNEL_PARAMETERS = 10
+MAX_WIDE_KERNELS = 10
+MAX_MODULE_LINES = 800
 
 
 def _modules(root):
@@ -195,8 +200,10 @@ def functions(root="."):
                         all_params.append(node.args.vararg.arg)
                     if node.args.kwarg:
                         all_params.append(node.args.kwarg.arg)
+                    deco = " ".join(ast.unparse(d) for d in node.decorator_list)
                     rows.append({
                         "module": m, "name": f"{owner}{node.name}", "line": node.lineno,
+                        "parameters_n": len(all_params), "kernel": "jit" in deco,
                         "lines": node.end_lineno - start + 1, "positional": len(params),
                         "public": public_mod and public_owner and not node.name.startswith("_"),
                         "has_params": bool(all_params), "parameters": "Parameters" in secs,
@@ -221,6 +228,43 @@ def is_pass_module(module):
     return len(parts) == 3 and parts[1] in PASS_PACKAGES and parts[2] not in NOT_PASS_MODULES
 
 
+def _private_imports(root):
+    """``tests/`` files that import a private name of the package (``from refraction_ref.x import _y``,
+    ``refraction_ref.x._y``, or ``m._y`` on a name bound to a package module)."""
+    out = []
+    for dirpath, dirnames, files in os.walk(os.path.join(root, "tests")):
+        dirnames[:] = sorted(d for d in dirnames if d != "__pycache__")
+        for f in sorted(files):
+            if not f.endswith(".py"):
+                continue
+            path = os.path.join(dirpath, f)
+            tree = ast.parse(open(path, encoding="utf-8").read(), path)
+            bound, hits = set(), set()
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == PKG:
+                    for a in node.names:
+                        if a.name.startswith("_") and not a.name.startswith("__"):
+                            hits.add(f"{node.module}.{a.name}")
+                        bound.add(a.asname or a.name)
+                    if any(p.startswith("_") and not p.startswith("__") for p in node.module.split(".")):
+                        hits.add(node.module)
+                elif isinstance(node, ast.Import):
+                    for a in node.names:
+                        if a.name.split(".")[0] == PKG:
+                            bound.add(a.asname or a.name.split(".")[0])
+                            if any(p.startswith("_") and not p.startswith("__") for p in a.name.split(".")):
+                                hits.add(a.name)
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")):
+                    owner = ast.unparse(node.value)
+                    if ((isinstance(node.value, ast.Name) and node.value.id in bound)
+                            or owner.startswith(PKG + ".")):
+                        hits.add(f"{owner}.{node.attr}")
+            if hits:
+                out.append(f"{os.path.relpath(path, root)}: {', '.join(sorted(hits))}")
+    return out
+
+
 def report(root=".", passes=False):
     mods, edges = import_graph(root)
     circles = [c for c in _scc(list(mods), edges) if len(c) > 1]
@@ -236,6 +280,13 @@ def report(root=".", passes=False):
         "long_functions": [f"{f['module']}.{f['name']} ({f['lines']} lines)" for f in fns if f["lines"] > MAX_LINES],
         "many_positional": [f"{f['module']}.{f['name']} ({f['positional']})" for f in fns
                             if f["positional"] > MAX_POSITIONAL],
+        "many_parameters": [f"{f['module']}.{f['name']} ({f['parameters_n']})" for f in fns
+                            if not f["kernel"] and f["parameters_n"] > MAX_PARAMETERS],
+        "wide_kernels": [f"{f['module']}.{f['name']} ({f['parameters_n']})" for f in fns
+                         if f["kernel"] and f["parameters_n"] > MAX_KERNEL_PARAMETERS],
+        "module_lines": sorted(((sum(1 for _ in open(p, encoding="utf-8")), m) for m, p in mods.items()),
+                               reverse=True),
+        "tests_importing_private": _private_imports(root),
         "public_functions": len(public),
         "with_parameters": len(documented),
         "parameters_share": round(len(documented) / max(len(public), 1), 4),
@@ -270,6 +321,21 @@ def main(argv=None):
         print("  " + x)
     print(f"functions over {MAX_POSITIONAL} positional parameters: {len(r['many_positional'])}")
     for x in r["many_positional"]:
+        print("  " + x)
+    print(f"Python functions over {MAX_PARAMETERS} parameters: {len(r['many_parameters'])}")
+    for x in r["many_parameters"]:
+        print("  " + x)
+    print(f"kernels over {MAX_KERNEL_PARAMETERS} parameters: {len(r['wide_kernels'])} "
+          f"(at most {MAX_WIDE_KERNELS})")
+    for x in r["wide_kernels"]:
+        print("  " + x)
+    big = [(n, m) for n, m in r["module_lines"] if n > MAX_MODULE_LINES]
+    n0, m0 = r["module_lines"][0]
+    print(f"modules over {MAX_MODULE_LINES} lines: {len(big)} (largest {m0}, {n0})")
+    for n, m in big:
+        print(f"  {m} ({n})")
+    print(f"test files importing a private name: {len(r['tests_importing_private'])}")
+    for x in r["tests_importing_private"]:
         print("  " + x)
     print(f"public functions with a Parameters section: {r['with_parameters']} of {r['public_functions']} "
           f"({100 * r['parameters_share']:.1f} %)")
