@@ -3,80 +3,123 @@
 The receivers' caustic maps are a service (:mod:`refraction_ref.caustics`)
 that the image-space (Chaudhari 2008, §4.1), volumetric (Sun et al. 2008,
 §6.2.2) and level-map (Tipprasert 2006, ch. 4) methods and the exact
-reference share, so their settings live in one block read by all of them:
+reference share, so their settings live in one block read by all of them.
+Each knob is declared once in :data:`KNOBS` (type, range or choices,
+default, meaning and section: the table of ``docs/oracle.md`` is written
+from them); :func:`caustics_knobs` turns the checked block into the typed
+value the stages read (:class:`CausticsKnobs`).
 
-``map_size``
-    Texels per side of each receiver's caustic map, 1..8192 (was
-    ``imagespace.caustic_map`` and ``levelmap.map_size``, both 512).
-``gather``
-    Gaussian gathering window in texels (Wyman & Davis 2006), odd, 1..63;
-    1 = none (was ``imagespace.gather``; the image-space method's maps).
-``placement``
-    ``component`` | ``thesis`` | ``tight``: the level map's reference box and
-    planes. ``component`` (the default since contract_version 5): eq. 4-3
-    read per axis, extents twice the farthest vertex's component along each
-    box axis, centred on the receiver's origin, planes of eqs. 4-7 to 4-9;
-    ``thesis`` (the default of contract_version 4): the same with eq. 4-3's
-    ``|P_a|`` read as the whole vector's length (a larger box); ``tight``:
-    the tight box with planes at slab centres (was ``levelmap.placement``).
-``shadows``
-    Receivers occlude each other in the level map's position maps (bool;
-    was ``levelmap.shadows``).
-``ambient``
-    Eq. 4-19's ``I_a`` as a fraction of the albedo, >= 0 (was
-    ``levelmap.ambient``; the water scenes' shading).
+The old names (``imagespace.caustic_map``, ``imagespace.gather``,
+``levelmap.map_size``, ...) keep working as aliases (``KnobBlock.aliases``
+of the ``imagespace`` and ``levelmap`` blocks). Importing this module is
+cheap (no kernels): scene loading reads it.
 
-The old names keep working as aliases (``KnobBlock.aliases`` of the
-``imagespace`` and ``levelmap`` blocks). Importing this module is cheap (no
-kernels): scene loading reads it.
+References
+----------
+.. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+   Objects", M.S. thesis, UMBC, 2008, §2.3.2, §4.1.
+.. [2] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+   with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+   University, 2006, §4.2, §4.6.
 """
 
 from __future__ import annotations
 
-from ..graph import KnobBlock, register_block
-from ..validation import SceneError, check_number
+from typing import NamedTuple
 
-__all__ = ["CAUSTICS_DEFAULTS", "PLACEMENTS", "validate_caustics", "BLOCK"]
+from ..knobs import Knob, declare_block
+from ..validation import SceneError
 
-#: Every key is a knob; see the table in ``docs/oracle.md``.
-CAUSTICS_DEFAULTS = {
-    "map_size": 512,          # texels per side of each receiver's caustic map (every method, exact reference too)
-    "gather": 7,              # Gaussian gathering window in texels (Wyman & Davis 2006); 1 = none
-    "placement": "component",  # reference box: 'component' (eq. 4-3 per axis) | 'thesis' (full |P_a|) | 'tight'
-    "shadows": True,          # receivers occlude each other (level map's position maps)
-    "ambient": 0.1,           # eq. 4-19's I_a as a fraction of the albedo
-}
+__all__ = ["KNOBS", "CAUSTICS_DEFAULTS", "PLACEMENTS", "CausticsKnobs", "caustics_knobs", "BLOCK"]
 
-PLACEMENTS = ("component", "thesis", "tight")  # as caustics.boxes.PLACEMENTS (this module imports no kernels)
+#: the level map's reference-box placements (as :data:`refraction_ref.caustics.boxes.PLACEMENTS`;
+#: this module imports no kernels)
+PLACEMENTS = ("component", "thesis", "tight")
 
 
-def validate_caustics(data, base_dir="."):
-    """Check ``data['caustics']``; raise :class:`~refraction_ref.validation.SceneError` naming the key.
+def _odd_window(value, where, data=None):
+    """A gathering window is a centred square of texels: an odd side."""
+    if value % 2 == 0:
+        raise SceneError(f"scene: {where} is {value}; the gathering window must be odd "
+                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
+
+
+#: the block's knobs, in the order of the table in ``docs/oracle.md``
+KNOBS = (
+    Knob("map_size", 512,
+         "texels per side of each receiver's caustic map (and of the level map's position, diffuse and caustics "
+         "maps), so every method's maps of a receiver have one size; was `imagespace.caustic_map` and "
+         "`levelmap.map_size`",
+         "Chaudhari §4.1; Tipprasert §4.2.2", kind="int", lo=1, hi=8192),
+    Knob("gather", 7,
+         "Gaussian gathering window in texels (Wyman and Davis 2006); 1 = none; was `imagespace.gather`",
+         "Chaudhari §2.3.2", kind="int", lo=1, hi=63, allowed="odd integer 1..63", check=_odd_window),
+    Knob("placement", "component",
+         "the level map's reference box and planes: \"component\" (the default from contract_version 5) the box "
+         "of eqs. 4-2/4-3 centred on the receiver's origin `P_0` (its `transform.translate`), each extent twice "
+         "the **component along that axis** of the vertex farthest along it (`w = 2 max |(P - P_0) . U|`, ...: "
+         "the smallest box about `P_0` that encloses the receiver along U, V, W, the box's stated purpose; the "
+         "tight box when `P_0` is the receiver's middle), planes by eqs. 4-7 to 4-9; \"thesis\" (the default of "
+         "contract_version 4) the same box with eq. 4-3's `|P_a|` read as the whole vector's length "
+         "(`w = 2 |P_x - P_0|`, ...; a flat floor is as deep as it is wide); \"tight\" the tight box of the "
+         "vertices with planes at slab centres (before contract_version 4); was `levelmap.placement`",
+         "Tipprasert §4.2.1, eqs. 4-2, 4-3, 4-7 to 4-9", kind="choice", choices=PLACEMENTS),
+    Knob("shadows", True,
+         "receivers occlude each other in the level map's maps (the first surface along the light wins); was "
+         "`levelmap.shadows`",
+         "Tipprasert §4.2.2", kind="bool"),
+    Knob("ambient", 0.1,
+         "`I_a` of eq. 4-19 as a fraction of the albedo; was `levelmap.ambient`",
+         "Tipprasert §4.6, eq. 4-19", kind="float", lo=0.0),
+)
+
+BLOCK = declare_block("caustics", KNOBS, owner="caustics")
+
+#: every knob's default (the block's, derived from :data:`KNOBS`)
+CAUSTICS_DEFAULTS = BLOCK.defaults
+
+
+class CausticsKnobs(NamedTuple):
+    """The ``caustics`` block as the stages read it: one typed value, built once from the checked block.
+
+    Attributes
+    ----------
+    map_size : int
+        Texels per side of each receiver's caustic map (Chaudhari §4.1).
+    gather : int
+        Gaussian gathering window in texels, odd; 1 = none (Wyman and Davis 2006).
+    placement : str
+        The level map's reference box, one of :data:`PLACEMENTS` (Tipprasert §4.2.1).
+    shadows : bool
+        Receivers occlude each other in the level map's maps (Tipprasert §4.2.2).
+    ambient : float
+        Eq. 4-19's ``I_a`` as a fraction of the albedo (Tipprasert §4.6).
+    """
+
+    map_size: int
+    gather: int
+    placement: str
+    shadows: bool
+    ambient: float
+
+
+def caustics_knobs(data):
+    """The typed value of a scene's ``caustics`` block (:class:`CausticsKnobs`).
 
     Parameters
     ----------
     data : dict
-        The merged scene (every block filled with its defaults).
-    base_dir : str
-        The scene file's folder (unused: no key names a file).
+        The merged, checked scene (``scene.data``).
 
     Returns
     -------
-    dict
-        ``data``, unchanged.
+    CausticsKnobs
+
+    References
+    ----------
+    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
+       Objects", M.S. thesis, UMBC, 2008, §4.1.
     """
     p = data["caustics"]
-    check_number(p["map_size"], "caustics.map_size", 1, 8192, integer=True)
-    check_number(p["gather"], "caustics.gather", 1, 63, integer=True)
-    if p["gather"] % 2 == 0:
-        raise SceneError(f"scene: caustics.gather is {p['gather']}; the gathering window must be odd "
-                         "(a centred square of texels, e.g. 7), or 1 for no gathering")
-    if p["placement"] not in PLACEMENTS:
-        raise SceneError(f"scene: 'caustics.placement' is {p['placement']!r}; choose one of {', '.join(PLACEMENTS)}")
-    if not isinstance(p["shadows"], bool):
-        raise SceneError(f"scene: caustics.shadows must be true or false, got {p['shadows']!r}")
-    check_number(p["ambient"], "caustics.ambient", 0.0)
-    return data
-
-
-BLOCK = register_block(KnobBlock("caustics", CAUSTICS_DEFAULTS, validate_caustics, owner="caustics"))
+    return CausticsKnobs(int(p["map_size"]), int(p["gather"]), str(p["placement"]), bool(p["shadows"]),
+                         float(p["ambient"]))
