@@ -34,7 +34,8 @@ import time
 from .graph import Method, get_method, method_blocks, run_graph
 from .scene import load_scene
 
-__all__ = ["warm", "warmer", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report"]
+__all__ = ["warm", "warmer", "tiny_scene", "kernels_cached", "expected_kernels", "compile_report", "dispatcher",
+           "plan_key"]
 
 _done = set()
 
@@ -76,8 +77,21 @@ def _kind(v):
     return v if isinstance(v, (str, bool)) or v is None else type(v).__name__
 
 
-def _key(method, scene):
-    """What decides which kernels a render runs and their argument types (not sizes, positions or counts)."""
+def plan_key(method, scene):
+    """What decides which kernels a render runs and their argument types (not sizes, positions or counts).
+
+    Two scenes with equal keys compile the same kernels: :func:`warm` warms once per key.
+
+    Parameters
+    ----------
+    method : str or Method
+    scene : Scene
+
+    Returns
+    -------
+    str
+        A JSON text of the method, its knob blocks and the kinds of the scene's inputs.
+    """
     d = scene.data
     name = _method(method).name
     return json.dumps([name, {b: d.get(b) for b in method_blocks()}, _kind({k: d.get(k) for k in _INPUTS}),
@@ -102,7 +116,7 @@ def warm(method, scene=None):
     m = _method(method)
     if scene is None:
         scene = load_scene(m.default_scene)
-    key = _key(m, scene)
+    key = plan_key(m, scene)
     if key in _done:
         return False
     run_graph(m, tiny_scene(m, scene), warm=False)
@@ -158,7 +172,17 @@ def expected_kernels(method):
     return list(_manifest().get(method, []))
 
 
-def _dispatcher(qualname):
+def dispatcher(qualname):
+    """The Numba kernel named ``module.function`` (``data/kernels.json``'s names), or None.
+
+    Parameters
+    ----------
+    qualname : str
+
+    Returns
+    -------
+    CPUDispatcher or None
+    """
     mod, _, name = qualname.rpartition(".")
     try:
         return getattr(importlib.import_module(mod), name)
@@ -199,7 +223,7 @@ def kernels_cached(method):
     if not names:
         return False
     for q in names:
-        d = _dispatcher(q)
+        d = dispatcher(q)
         if d is None or not _has_cache_entry(d):
             return False
     return True
