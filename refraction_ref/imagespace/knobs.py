@@ -1,4 +1,4 @@
-"""The ``imagespace`` knob block (Chaudhari 2008): defaults and validation side by side.
+"""The ``imagespace`` knob block (Chaudhari 2008), declared once, and :class:`TraceKnobs`.
 
 Defaults are the thesis's own settings where it states one (5 binary-search
 iterations, §3.6; 256 slices, §3.3; 32 layers, §3.4.2; a 256x256 MIP level
@@ -12,102 +12,250 @@ be easily applied while sampling these textures"). The caustic knobs (``photons`
 are read by the caustic stages (§4.1) that the image-space method adds when
 a scene has lights and receivers; the caustic maps' size and gathering window
 are the ``caustics`` block's (:mod:`refraction_ref.caustics.knobs`), and the
-old names ``imagespace.caustic_map`` and ``imagespace.gather`` are aliases of
+names ``imagespace.caustic_map`` and ``imagespace.gather`` are aliases of
 ``caustics.map_size`` and ``caustics.gather``.
 
+Each knob is declared once (:class:`~refraction_ref.knobs.Knob`): the block's
+defaults (:data:`IMAGESPACE_DEFAULTS`), its checks and its table in
+docs/oracle.md derive from :data:`KNOBS`. The trace takes the checked block
+as one typed value, :class:`TraceKnobs` (:func:`trace_knobs`), its choices
+resolved here to the kernels' codes (:data:`CODES`).
+
 Importing this module is cheap (no kernels): scene loading reads it.
+
+References
+----------
+.. [1] docs/oracle.md, "### ``imagespace`` block" (the table generated from :data:`KNOBS`).
 """
 
 from __future__ import annotations
 
-from ..graph import KnobBlock, register_block
+from typing import NamedTuple
 
-__all__ = ["IMAGESPACE_DEFAULTS", "CHOICES", "validate_imagespace", "check_memory", "BLOCK"]
+from ..knobs import Knob, declare_block
 
-#: Every key is a knob; see the table in ``docs/oracle.md``.
-IMAGESPACE_DEFAULTS = {
-    "iterations": 5,          # binary-search iterations per interface (§3.6)
-    "layers": 32,             # depth layers peeled (§3.4.2)
-    "slices": 256,            # bitmask slices S (§3.3)
-    "bounds": "mip",          # search bound: 'mip' (256x256 MIP + margin, §3.7) | 'global' (exact max)
-    "mip_size": 256,          # MIP level used for the reduction (§3.7)
-    "bound_margin": 0.01,     # the "small constant", as a fraction of the object's depth range
-    "blend": "add",           # 'add' (the thesis's additive blending with carry, §3.3) | 'or'
-    "endpoint": "probe",      # 'probe': the surface point at the last probe's texel (§3.6) | 'bracket'
-    "filter": "bilinear",     # depth-image sampling: 'bilinear' (hardware filtering, §3.2, §3.4.2) | 'nearest'
-    "peel_all": False,        # peel all `layers` whatever the depth complexity (the thesis's fixed passes)
-    "depth": "bitmask",       # 'bitmask' | 'float' (A-buffer of exact fragment depths)
-    "slicing": "local",       # 'local' per-pixel Zmin/Zmax | 'global' object bounds (§3.3)
-    "peeling": "separate",    # 'separate' pass (§3.4.2) | 'lut' on-the-fly look-up tables (§3.4.1)
-    "normals": "central",     # 'forward' (eq. 3.1) | 'central' (eq. 3.2) | 'mesh3x3' (Fig. 3.4) | 'cross'
-    "delta": 2,               # pixel step of the central differences (eq. 3.2; smoother than 1, Fig. 3.4)
-    "exit_threshold": 1.0,    # early termination near the backmost depth, in slices (§3.7)
-    "tir": False,             # follow total internal reflection back to preceding layers
-    "max_interfaces": 64,     # bounce limit of one ray (TIR reflections included)
-    "record": 0,              # interfaces per path kept as stage buffers (stage.trace.path_pos/path_dir)
-    "grid": None,             # the voxel grid's x-y size [width, height]; null: the image's (§3.3, §4.1-4.2)
-    # caustics (§4.1; see refraction_ref.caustics), used when the scene has lights and receivers
-    "photons": 512,           # photon texture per side: one photon per texel of the light's LDI
-    "receiver_hit": "eyespace",  # 'eyespace' march in the camera's depth image (Krueger 2006) | 'exact' (Embree)
-}
-
-CHOICES = {
-    "bounds": ("mip", "global"),
-    "blend": ("add", "or"),
-    "endpoint": ("probe", "bracket"),
-    "filter": ("bilinear", "nearest"),
-    "depth": ("bitmask", "float"),
-    "slicing": ("local", "global"),
-    "peeling": ("separate", "lut"),
-    "normals": ("forward", "central", "mesh3x3", "cross"),
-    "receiver_hit": ("eyespace", "exact"),
-}
+__all__ = ["KNOBS", "IMAGESPACE_DEFAULTS", "CHOICES", "CODES", "TRACE_KNOBS", "validate_imagespace", "check_memory",
+           "BLOCK", "TraceKnobs", "trace_knobs"]
 
 
-def validate_imagespace(data, base_dir="."):
-    """Check ``data['imagespace']``; raise :class:`~refraction_ref.scene.SceneError` naming the key."""
-    from ..validation import SceneError, check_number
+def _check_slices(value, where, data):
+    """``imagespace.slices``: a multiple of 32 (the bitmask's 32-bit words)."""
+    from ..validation import SceneError
 
-    im = data["imagespace"]
-    for key, choices in CHOICES.items():
-        if im[key] not in choices:
-            raise SceneError(f"scene: 'imagespace.{key}' is {im[key]!r}; choose one of {', '.join(choices)}")
-    check_number(im["iterations"], "imagespace.iterations", 0, 64, integer=True)
-    check_number(im["layers"], "imagespace.layers", 1, 32, integer=True)
-    check_number(im["slices"], "imagespace.slices", 32, 4096, integer=True)
-    if im["slices"] % 32:
-        raise SceneError(f"scene: imagespace.slices is {im['slices']}; it must be a multiple of 32 "
+    if int(value) % 32:
+        raise SceneError(f"scene: {where} is {value}; it must be a multiple of 32 "
                          "(slices are stored in 32-bit words)")
-    check_number(im["mip_size"], "imagespace.mip_size", 1, integer=True)
-    check_number(im["bound_margin"], "imagespace.bound_margin", 0.0)
-    check_number(im["delta"], "imagespace.delta", 1, 8, integer=True)
-    check_number(im["exit_threshold"], "imagespace.exit_threshold", 0.0)
-    check_number(im["max_interfaces"], "imagespace.max_interfaces", 1, 4096, integer=True)
-    check_number(im["record"], "imagespace.record", 0, 64, integer=True)
-    for key in ("tir", "peel_all"):
-        if not isinstance(im[key], bool):
-            raise SceneError(f"scene: imagespace.{key} must be true or false, got {im[key]!r}")
-    check_number(im["photons"], "imagespace.photons", 1, 8192, integer=True)
-    _check_grid(im["grid"], data["camera"])
-    return data
 
 
-def _check_grid(grid, camera):
+def _check_grid(grid, where, data):
     """``imagespace.grid``: null, or [width, height] of integers 1..16384 with the image's aspect."""
     from ..validation import SceneError, check_number
 
     if grid is None:
         return
     if not isinstance(grid, (list, tuple)) or len(grid) != 2:
-        raise SceneError(f"scene: 'imagespace.grid' is {grid!r}; give [width, height] (integers) or null "
+        raise SceneError(f"scene: '{where}' is {grid!r}; give [width, height] (integers) or null "
                          "(the image's size)")
     for k, v in zip(("width", "height"), grid):
-        check_number(v, f"imagespace.grid ({k})", 1, 16384, integer=True)
+        check_number(v, f"{where} ({k})", 1, 16384, integer=True)
+    camera = data["camera"]
     W, H = int(camera["width"]), int(camera["height"])  # checked before the method blocks
     if int(grid[0]) * H != int(grid[1]) * W:
-        raise SceneError(f"scene: 'imagespace.grid' is {list(grid)}, aspect {grid[0]}:{grid[1]}, but the image is "
+        raise SceneError(f"scene: '{where}' is {list(grid)}, aspect {grid[0]}:{grid[1]}, but the image is "
                          f"{W}x{H}; the grid must keep the image's aspect (same view): give a grid "
                          f"[w, h] with w * {H} == h * {W}, or null for the image's size")
+
+
+GRID_ALLOWED = "null, or [width, height] of integers 1..16384 with the image's aspect (`width * camera.height == height * camera.width`)"
+
+#: the block's knobs, in the order of its table (docs/oracle.md)
+KNOBS = (
+    Knob("iterations", 5,
+         "binary-search iterations per interface", "§3.6",
+         kind="int", lo=0, hi=64),
+    Knob("layers", 32,
+         "layer limit; never more are peeled than the depth complexity (unless `peel_all`)", "§3.4.2",
+         kind="int", lo=1, hi=32),
+    Knob("slices", 256,
+         "bitmask slices S per pixel", "§3.3",
+         kind="int", lo=32, hi=4096, allowed="integer 32..4096, multiple of 32", check=_check_slices),
+    Knob("bounds", "mip",
+         "search bound: max over a MIP level + margin, or exact global maxima", "§3.7",
+         kind="choice", choices=("mip", "global")),
+    Knob("mip_size", 256,
+         "MIP level (texels per side) of the reduction", "§3.7",
+         kind="int", lo=1),
+    Knob("bound_margin", 0.01,
+         "the \"small constant\" added to the bound, as a fraction of the object's depth range", "§3.7",
+         kind="float", lo=0.0),
+    Knob("blend", "add",
+         "bitmask blending: \"add\" the thesis's additive blending, a 32-bit add per word, so two fragments in "
+         "one slice carry into the next bit and a carry out of bit 31 is lost (\"Since current Direct3D version"
+         " does not support logical OR blending, we employ additive blending\", §3.3); \"or\" a logical OR", "§3.3",
+         kind="choice", choices=("add", "or")),
+    Knob("endpoint", "probe",
+         "where each interface's binary search ends: \"probe\" the thesis's R_n, the surface point at the last "
+         "probe's texel (the line of sight through the last probe P_n at the layer's sampled depth there; "
+         "\"Surface normal of the point R3 is then calculated using the texture coordinate t_P3 of the point "
+         "P3\", §3.6), the search failing only where that texel lacks the layer; \"bracket\" the midpoint of the "
+         "final bracket (an untested point), testing E when no probe crossed the layer and moving to the "
+         "bracket's far end where the midpoint's texel lacks it", "§3.6",
+         kind="choice", choices=("probe", "bracket")),
+    Knob("filter", "bilinear",
+         "depth-image sampling in the search, at the hit and for its normal: \"bilinear\" the hardware filtering"
+         " of §3.4.2 (\"hardware filtering can be easily applied while sampling these textures\"), over the four"
+         " texels around the position when all four hold the layer, the nearest texel where any of them lacks "
+         "it; the normal is the bilinear blend of those four texels' normals (each by the `normals` rule), "
+         "renormalised; \"nearest\" the texel under the position and its normal", "§3.2, §3.4.2",
+         kind="choice", choices=("bilinear", "nearest")),
+    Knob("peel_all", False,
+         "peel all `layers` layers whatever the scene's depth complexity (the layers beyond it are `+inf` "
+         "everywhere), as the thesis's single pass writes all 32 channels of its render targets: the thesis's "
+         "cost (Table 4.1's 16- and 32-layer columns); no output changes, only `stage.peel.ldi` (and "
+         "`stage.reduce`'s bounds, `-inf`/`+inf` for the absent layers)", "§3.4.2",
+         kind="bool"),
+    Knob("depth", "bitmask",
+         "layer depths from the bitmask, or exact fragment depths (A-buffer; beyond the thesis)", "§3.3",
+         kind="choice", choices=("bitmask", "float")),
+    Knob("slicing", "local",
+         "slices span each pixel's Zmin..Zmax, or the object's global bounds", "§3.3",
+         kind="choice", choices=("local", "global")),
+    Knob("peeling", "separate",
+         "separate peeling pass, or on the fly with 8-bit look-up tables", "§3.4.2, §3.4.1",
+         kind="choice", choices=("separate", "lut")),
+    Knob("normals", "central",
+         "normal estimate from the depth image: eq. 3.1, eq. 3.2, Fig. 3.4, or the cross product of the same "
+         "four unprojected neighbours (beyond the thesis)", "§3.5",
+         kind="choice", choices=("forward", "central", "mesh3x3", "cross")),
+    Knob("delta", 2,
+         "pixel step of the central differences", "eq. 3.2",
+         kind="int", lo=1, hi=8),
+    Knob("exit_threshold", 1.0,
+         "early termination within this many slices of the backmost depth", "§3.7",
+         kind="float", lo=0.0),
+    Knob("tir", False,
+         "follow total internal reflection with backward searches (beyond the thesis; sketched in §4.3)", "§4.3",
+         kind="bool"),
+    Knob("max_interfaces", 64,
+         "event limit per ray (refractions + reflections)",
+         kind="int", lo=1, hi=4096),
+    Knob("photons", 512,
+         "photon texture side per light: one photon per texel of the light's layered depth images", "§4.1",
+         kind="int", lo=1, hi=8192),
+    Knob("receiver_hit", "eyespace",
+         "photon-receiver intersection: march in the camera's depth image (Krüger 2006), or Embree", "§4.1",
+         kind="choice", choices=("eyespace", "exact")),
+    Knob("record", 0,
+         "interfaces per path recorded as the `trace` stage buffers `path_pos`, `path_dir` (H, W, K, 3) with K"
+         " = `record` (Stage buffers; kept with `--keep trace`); 0 records none. No other output changes",
+         kind="int", lo=0, hi=64),
+    Knob("grid", None,
+         "the voxel grid's x-y size: the size of the bitmask and layered-depth textures, apart from the "
+         "image's (the thesis renders a 512x512 viewport with 256x256 or 512x512 textures); null is the "
+         "image's size. The `minmax`, `voxelize`, `peel`, `reduce` and `normals` passes run on a camera with "
+         "the image's view (same field of view and aspect) and the grid's pixel count; the trace still casts "
+         "one ray per image pixel and samples the layers and bounds at the ray's position in grid coordinates "
+         "(the projection of Conventions with the grid's W, H): a primary ray's first hit is layer 0 sampled "
+         "(`filter`) at its pixel centre's grid position `((i + 0.5) Hg / H, (j + 0.5) Wg / W)`. "
+         "`depth_complexity` (and the caustic final pass's front depth) reads the grid texel under each pixel "
+         "centre. Another aspect is refused", "§3.3, §4.1, §4.2",
+         nullable=True, allowed=GRID_ALLOWED, check=_check_grid),
+)
+
+#: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)
+ALIASES = {"caustic_map": "caustics.map_size", "gather": "caustics.gather"}
+
+BLOCK = declare_block("imagespace", KNOBS, owner="imagespace", aliases=ALIASES)
+
+#: the block's defaults, from :data:`KNOBS`
+IMAGESPACE_DEFAULTS = BLOCK.defaults
+
+#: the block's checks, from :data:`KNOBS`: ``validate_imagespace(data, base_dir=".")`` returns ``data``
+#: or raises :class:`~refraction_ref.validation.SceneError` naming the first key out of range
+validate_imagespace = BLOCK.validate
+
+#: the accepted values of each choice knob, from :data:`KNOBS`
+CHOICES = {k.name: k.choices for k in KNOBS if k.kind == "choice"}
+
+#: the kernels' integer code of each choice the trace reads
+CODES = {
+    "normals": {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3},  # eq. 3.1, eq. 3.2, Fig. 3.4, cross
+    "filter": {"nearest": 0, "bilinear": 1},  # the texel under a position, or hardware filtering (§3.4.2)
+    "endpoint": {"probe": 0, "bracket": 1},  # the last probe's surface point (§3.6), or the final bracket's midpoint
+}
+
+#: the knobs the trace reads (:func:`trace_knobs`), besides ``record``
+TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layers", "exit_threshold", "slices",
+               "endpoint", "filter")
+
+
+class TraceKnobs(NamedTuple):
+    """The ``imagespace`` knobs of one trace as the kernels take them (:func:`trace_knobs`).
+
+    Attributes
+    ----------
+    iterations : int
+        Binary-search iterations per interface (§3.6).
+    normals : int
+        The normal rule, a :data:`CODES` ``["normals"]`` code (§3.5).
+    delta : int
+        Pixel step of the differences (eq. 3.2).
+    tir : bool
+        Follow total internal reflection with backward searches (§4.3).
+    max_interfaces : int
+        Event limit per ray (refractions plus reflections).
+    layer_limit : int
+        ``imagespace.layers``: a search for a layer at or beyond it stops the ray (``LIMIT``).
+    record : int
+        Events kept per path in ``path_pos``, ``path_dir`` (0: none).
+    endpoint : int
+        Where a search ends, a :data:`CODES` ``["endpoint"]`` code (§3.6).
+    filter : int
+        Depth-image sampling, a :data:`CODES` ``["filter"]`` code (§3.4.2).
+    exit_threshold : float
+        Early termination within this many slices of the backmost depth (§3.7).
+    slices : int
+        Slices S of each pixel's depth range, the unit of ``exit_threshold`` (§3.3).
+    """
+
+    iterations: int
+    normals: int
+    delta: int
+    tir: bool
+    max_interfaces: int
+    layer_limit: int
+    record: int
+    endpoint: int
+    filter: int
+    exit_threshold: float
+    slices: int
+
+
+def trace_knobs(block, record=0):
+    """The trace's knobs of a checked ``imagespace`` block as one :class:`TraceKnobs`.
+
+    Parameters
+    ----------
+    block : mapping
+        The ``imagespace`` block (``Scene.data["imagespace"]``, or any mapping
+        holding :data:`TRACE_KNOBS`); only those keys are read.
+    record : int, default 0
+        Events kept per path (``imagespace.record`` for the eye's trace; a
+        light's photon trace keeps none).
+
+    Returns
+    -------
+    TraceKnobs
+        Numbers as the kernels take them, choices as :data:`CODES`.
+
+    References
+    ----------
+    .. [1] docs/oracle.md, "### ``imagespace`` block".
+    """
+    return TraceKnobs(int(block["iterations"]), CODES["normals"][block["normals"]], int(block["delta"]),
+                      bool(block["tir"]), int(block["max_interfaces"]), int(block["layers"]), int(record),
+                      CODES["endpoint"][block["endpoint"]], CODES["filter"][block["filter"]],
+                      float(block["exit_threshold"]), int(block["slices"]))
 
 
 def check_memory(scene):
@@ -116,6 +264,16 @@ def check_memory(scene):
     Per grid texel (``imagespace.grid``, the image's size by default): S/8
     bytes of bitmask and 8 bytes per layer of the LDI; per image pixel the
     trace's outputs and temporaries (about 24 8-byte words).
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene.
+
+    Raises
+    ------
+    SceneError
+        When the buffers would need more than 16 GiB.
     """
     from ..validation import SceneError
 
@@ -131,10 +289,3 @@ def check_memory(scene):
         raise SceneError(f"imagespace: {W}x{H} pixels (a {gw}x{gh} grid) with {im['slices']} slices and "
                          f"{im['layers']} layers need about {need / 2**30:.1f} GiB; lower camera.width and "
                          "camera.height, imagespace.grid, imagespace.slices or imagespace.layers")
-
-
-#: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)
-ALIASES = {"caustic_map": "caustics.map_size", "gather": "caustics.gather"}
-
-BLOCK = register_block(KnobBlock("imagespace", IMAGESPACE_DEFAULTS, validate_imagespace, owner="imagespace",
-                                 aliases=ALIASES))
