@@ -1,7 +1,7 @@
 """The separable Gaussian filters of the three methods and of the quality metric, in one place.
 
 Three filters, not one, because three sources ask for three different
-Gaussians, and each keeps the bits its callers have always had:
+Gaussians, each with its own taps and edge rule:
 
 ========================= ======================== ======================= =====================================
 filter                    taps                     edge rule               asked for by
@@ -284,6 +284,17 @@ def gaussian_blur(a, window):
 # mirror folding: photon gathering (Wyman & Davis 2006; Chaudhari 2008 §4.1)
 # ---------------------------------------------------------------------------
 
+@nb.njit(cache=True, inline="always")
+def _fold_sources(k, t, n):
+    """The texels tap ``t`` of texel ``k`` reads along an axis of length ``n``, in summation order.
+
+    The direct source ``k - t``, then the mass that left through the first
+    edge, mirrored back (``-1 - k - t``), then through the last edge
+    (``2 n - 1 - k - t``); only those inside ``[0, n)`` count.
+    """
+    return k - t, -1 - k - t, 2 * n - 1 - k - t
+
+
 @nb.njit(cache=True, parallel=True)
 def _fold_rows(a, w, out):
     """out[i, j] = sum_k w[k] a[i, j - k + r] with mirror folding at the ends of each row."""
@@ -296,15 +307,9 @@ def _fold_rows(a, w, out):
                 s = 0.0
                 for t in range(-r, r + 1):
                     wt = w[t + r]
-                    src = j - t
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = -1 - j - t  # mass that left through the first edge, mirrored back
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
-                    src = 2 * N - 1 - j - t  # ... through the last edge
-                    if 0 <= src < N:
-                        s += wt * a[i, src, c]
+                    for src in _fold_sources(j, t, N):
+                        if 0 <= src < N:
+                            s += wt * a[i, src, c]
                 out[i, j, c] = s
 
 
@@ -327,7 +332,7 @@ def _fold_cols(a, w, out):
                 out[i, j, c] = 0.0
         for t in range(-r, r + 1):
             wt = w[t + r]
-            for src in (i - t, -1 - i - t, 2 * N - 1 - i - t):
+            for src in _fold_sources(i, t, N):
                 if 0 <= src < N:
                     for j in range(Wc):
                         for c in range(C):

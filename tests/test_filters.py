@@ -1,9 +1,8 @@
 """refraction_ref.filters: the three separable Gaussians (voxel blur, photon gather, the metric's blur).
 
 Numerical truths of each (unit-sum taps, what a constant field and a delta become, the edge
-rule) and bit-for-bit equality with what each call site computed before the filters moved here
-(SciPy for the blur and the metric, which the old kernels equalled; the old gather's loops,
-written out below in plain Python, for the fold).
+rule) and bit-for-bit equality with a reference: SciPy for the blur and the metric, and for the
+fold the gather's loops written out below in plain Python (IEEE doubles, the same order).
 """
 
 from __future__ import annotations
@@ -15,21 +14,20 @@ from scipy import ndimage
 from refraction_ref import filters
 from refraction_ref.caustics.splat import gather_gaussian as splat_gather, gaussian_weights
 from refraction_ref.metrics import relative_l1
-from refraction_ref.volumetric.march import sym_tap
 from refraction_ref.volumetric.voxelize import gaussian_blur as voxel_blur, separable_correlate
 
 
-def test_old_names_are_the_filters():
+def test_names_elsewhere_are_the_filters():
+    # the public names other modules re-export are these very functions, not copies
     assert voxel_blur is filters.gaussian_blur and separable_correlate is filters.separable_correlate
-    assert sym_tap is filters.sym_tap
     assert splat_gather is filters.gather_gaussian and gaussian_weights is filters.gather_taps
 
 
 # ---- taps -------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("window", [1, 2, 3, 5, 7, 9, 11])
-def test_window_taps_are_the_old_formulas_and_sum_to_one(window):
-    # the voxel blur's (sigma = window / 6) and the gather's (sigma = (window - 1) / 6), as written before
+def test_window_taps_are_the_gaussian_formulas_and_sum_to_one(window):
+    # the voxel blur's (sigma = window / 6) and the gather's (sigma = (window - 1) / 6), written out
     r = window // 2
     x = np.arange(-r, r + 1, dtype=np.float64)
     if window > 1:
@@ -93,8 +91,8 @@ def test_blur_equals_scipy_nearest_bit_for_bit(shape):
 
 # ---- gather (Wyman & Davis 2006 via Chaudhari §2.3.2 / §4.1): mirror folding -------------------
 
-def _old_gather(E, window):
-    """The gather as caustics.splat computed it, loop for loop in plain Python (IEEE doubles, the same order)."""
+def reference_gather(E, window):
+    """The gather, loop for loop in plain Python (IEEE doubles, the kernels' order of terms)."""
     a = np.asarray(E, dtype=np.float64)
     w = filters.gather_taps(window)
     r = min((len(w) - 1) // 2, min(a.shape[0], a.shape[1]) - 1)
@@ -126,10 +124,10 @@ def _old_gather(E, window):
 
 
 @pytest.mark.parametrize("shape,window", [((9, 11, 2), 7), ((5, 4, 1), 7), ((12, 10, 3), 3)])
-def test_gather_equals_the_old_loops_bit_for_bit(shape, window):
+def test_gather_equals_the_reference_loops_bit_for_bit(shape, window):
     E = np.random.default_rng(2).random(shape)
-    assert np.array_equal(filters.gather_gaussian(E, window), _old_gather(E, window))
-    assert np.array_equal(filters.gather_gaussian(E[..., 0], window), _old_gather(E[..., :1], window)[..., 0])
+    assert np.array_equal(filters.gather_gaussian(E, window), reference_gather(E, window))
+    assert np.array_equal(filters.gather_gaussian(E[..., 0], window), reference_gather(E[..., :1], window)[..., 0])
 
 
 def test_gather_keeps_a_constant_map_and_the_flux():
