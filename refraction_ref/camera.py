@@ -41,6 +41,36 @@ from .vec3 import affine
 __all__ = ["Camera", "project_point", "unproject_pixel"]
 
 
+_FRAME_DOC = """{verb} {src}-space {what} (..., 3) into {dst} space{note}.
+
+Parameters
+----------
+p : (..., 3) array_like
+    {Src}-space {what}{trans}.
+
+Returns
+-------
+(..., 3) float64 ndarray
+    {Dst}-space {what}.
+"""
+
+
+def _frame_method(to_world, points, note):
+    """One of the camera's four frame maps (points or directions, view to world or back), documented."""
+    src, dst = ("view", "world") if to_world else ("world", "view")
+    what = "points" if points else "directions"
+
+    def frame_map(self, p):
+        return self._frame_map(p, to_world, points)
+
+    frame_map.__name__ = f"{'' if points else 'dir_'}{src}_to_{dst}"
+    frame_map.__qualname__ = "Camera." + frame_map.__name__
+    frame_map.__doc__ = _FRAME_DOC.format(
+        verb="Transform" if points else "Rotate", src=src, dst=dst, Src=src.capitalize(), Dst=dst.capitalize(),
+        what=what, note=note, trans="" if points else " (no translation applied)")
+    return frame_map
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole (perspective) or orthographic camera.
@@ -141,66 +171,18 @@ class Camera:
     def shape(self):
         return (self.height, self.width)
 
-    def world_to_view(self, p):
-        """Transform world points (..., 3) into view space.
-
-        Parameters
-        ----------
-        p : (..., 3) array_like
-            World-space points.
-
-        Returns
-        -------
-        (..., 3) float64 ndarray
-            View-space points (right-handed, looking down -z).
-        """
+    def _frame_map(self, p, to_world, points):
+        """``p`` (..., 3) from view to world space (``to_world``) or back; translated when ``points``."""
         b = self.basis
-        return _affine(p, b.T, -np.asarray(self.eye, dtype=np.float64) @ b.T)
+        eye = np.asarray(self.eye, dtype=np.float64)
+        if not points:
+            return affine(p, b if to_world else b.T, np.zeros(3))
+        return affine(p, b, eye) if to_world else affine(p, b.T, -eye @ b.T)
 
-    def view_to_world(self, p):
-        """Transform view-space points (..., 3) into world space (NaN stays NaN).
-
-        Parameters
-        ----------
-        p : (..., 3) array_like
-            View-space points.
-
-        Returns
-        -------
-        (..., 3) float64 ndarray
-            World-space points.
-        """
-        return _affine(p, self.basis, np.asarray(self.eye, dtype=np.float64))
-
-    def dir_view_to_world(self, v):
-        """Rotate view-space directions (..., 3) into world space.
-
-        Parameters
-        ----------
-        v : (..., 3) array_like
-            View-space directions (no translation applied).
-
-        Returns
-        -------
-        (..., 3) float64 ndarray
-            World-space directions.
-        """
-        return _affine(v, self.basis, np.zeros(3))
-
-    def dir_world_to_view(self, v):
-        """Rotate world-space directions (..., 3) into view space.
-
-        Parameters
-        ----------
-        v : (..., 3) array_like
-            World-space directions (no translation applied).
-
-        Returns
-        -------
-        (..., 3) float64 ndarray
-            View-space directions.
-        """
-        return _affine(v, self.basis.T, np.zeros(3))
+    world_to_view = _frame_method(False, True, "")
+    view_to_world = _frame_method(True, True, " (NaN stays NaN)")
+    dir_world_to_view = _frame_method(False, False, "")
+    dir_view_to_world = _frame_method(True, False, "")
 
     def projection_matrix(self):
         """The OpenGL projection matrix M_p (view to clip space), perspective or orthographic."""
@@ -269,13 +251,17 @@ class Camera:
         return col, row, d
 
     def kernel_args(self):
-        """Scalars the Numba kernels need: (W, H, sx, sy); pass ``ortho`` along with them."""
+        """Scalars the Numba kernels need: (W, H, sx, sy); pass ``ortho`` along with them.
+
+        Returns
+        -------
+        W, H : int
+            Image width and height in pixels.
+        sx, sy : float
+            Half extents of the image plane at unit depth (:attr:`sx`,
+            :attr:`sy`), or of the orthographic window.
+        """
         return self.width, self.height, self.sx, self.sy
-
-
-def _affine(p, m, t):
-    """``p @ m + t`` for points (..., 3) in one pass (:func:`refraction_ref.vec3.affine`: no BLAS)."""
-    return affine(p, m, t)
 
 
 @nb.njit(cache=True, inline="always")
@@ -347,12 +333,8 @@ def project_point(x, y, z, W, H, sx, sy, ortho=False):
     ----------
     x, y, z : float
         View-space point (``z < 0`` in front of the camera).
-    W, H : int
-        Image width and height in pixels.
-    sx, sy : float
-        Half extents of the image plane at unit depth, or of the orthographic window.
-    ortho : bool
-        Orthographic camera.
+    W, H, sx, sy, ortho : int, int, float, float, bool
+        The camera's :meth:`Camera.kernel_args` and :attr:`Camera.ortho`.
 
     Returns
     -------
@@ -391,12 +373,8 @@ def unproject_pixel(col, row, d, W, H, sx, sy, ortho=False):
         Continuous screen position in pixels (pixel centres at ``j + 0.5``, ``i + 0.5``).
     d : float
         View-space depth (distance along the view axis, > 0).
-    W, H : int
-        Image width and height in pixels.
-    sx, sy : float
-        Half extents of the image plane at unit depth, or of the orthographic window.
-    ortho : bool
-        Orthographic camera.
+    W, H, sx, sy, ortho : int, int, float, float, bool
+        The camera's :meth:`Camera.kernel_args` and :attr:`Camera.ortho`.
 
     Returns
     -------
