@@ -11,12 +11,18 @@ stage (``timings_ms``)     pass (module)                                   secti
 ``photons``                one photon per light texel covered by the        §4.3
                            proxy geometry (:mod:`.photons`)
 ``receivers``              diffuse receivers the photons stop on (only      Fig. 9
-                           with lights and receivers)
-``march``                  adaptive marching + deposition (:mod:`.march`)   §4.4, eqs 4-6
-``smooth``                 3x3x3 smoothing of the radiance (:mod:`.march`)  §4.4
+                           with lights and receivers; :mod:`.receivers`)
+``march``                  adaptive marching (:mod:`.march`), deposition    §4.4, eqs 4-6
+                           (:mod:`.deposit`), eq. 6 (:mod:`.extinction`)
+``smooth``                 3x3x3 smoothing of the radiance (:mod:`.smooth`) §4.4
 ``view``                   curved viewing rays, HG phase (:mod:`.view`)     §4.5
 ``caustics``               receivers' caustic maps (only with receivers)    Fig. 9
 =========================  ==============================================  ===========
+
+The knobs are declared once in :mod:`.knobs`, which builds the typed values
+the passes take (:class:`~.knobs.MarchKnobs`, :class:`~.knobs.ViewKnobs`);
+:mod:`.grid` places the voxel grid and samples n and its gradient there,
+:mod:`.integrate` steps eqs. 4-5 (or RK4) for photons and viewing rays alike.
 
 :func:`render_volumetric` in :mod:`.pipeline` puts the passes together;
 :class:`refraction_ref.session.Session` caches them between renders.

@@ -40,6 +40,13 @@ import math
 import numba as nb
 import numpy as np
 
+from .knobs import VOLUMETRIC_DEFAULTS, octree_dilations
+
+#: the knobs' defaults: a function's default is the scene's (Sun et al. 2008's own settings)
+_D = VOLUMETRIC_DEFAULTS
+#: level-0 dilation of the default stepping ('paper': none)
+_DILATE = octree_dilations(_D["stepping"])[0]
+
 __all__ = ["minmax_pyramid", "leaf_levels", "build_octree"]
 
 
@@ -96,7 +103,7 @@ def _reduce_minmax(mn, mx, omn, omx):
                 omx[a, b, c] = hi
 
 
-def _pyramid_flat(n, dilate=True):
+def _pyramid_flat(n, dilate):
     """The pyramid in two flat buffers (min, max), with per-level offsets and shapes."""
     K = max(1, math.ceil(math.log2(max(n.shape))))
     shapes = [tuple(n.shape)]
@@ -118,8 +125,8 @@ def _pyramid_flat(n, dilate=True):
     return lv, fmn, fmx, off, np.array(shapes, np.int64)
 
 
-def minmax_pyramid(ior, dilate=True):
-    """Min and max of n per node, for levels 0 (voxels, dilated by default) to K (one node).
+def minmax_pyramid(ior, dilate=_DILATE):
+    """Min and max of n per node, for levels 0 (voxels) to K (one node).
 
     Parameters
     ----------
@@ -127,7 +134,8 @@ def minmax_pyramid(ior, dilate=True):
         Index of refraction at voxel centres.
     dilate : bool
         Level 0 spans each voxel's 3x3x3 neighbourhood (``stepping =
-        'robust'``); without it a voxel's range is its own value.
+        'robust'``); without it (the default stepping, 'paper') a voxel's
+        range is its own value.
 
     Returns
     -------
@@ -143,7 +151,7 @@ def minmax_pyramid(ior, dilate=True):
 
 
 @nb.njit(cache=True, parallel=True)
-def _leaf_kernel(fmn, fmx, off, shapes, eps, eps2, ds_max, level, smax):
+def _leaf_kernel(fmn, fmx, off, shapes, eps, eps2, ds_max, level, step_max):
     """Per voxel: the coarsest level whose node range is < eps2, and inf step if < eps (parallel over x)."""
     nx, ny, nz = level.shape
     K = shapes.shape[0] - 1
@@ -161,7 +169,7 @@ def _leaf_kernel(fmn, fmx, off, shapes, eps, eps2, ds_max, level, smax):
                             sm = np.float32(np.inf)
                         break
                 level[i, j, k] = lev
-                smax[i, j, k] = sm
+                step_max[i, j, k] = sm
 
 
 def leaf_levels(pyr, shape, eps, eps2, ds_max):
@@ -180,7 +188,7 @@ def leaf_levels(pyr, shape, eps, eps2, ds_max):
     Returns
     -------
     level : (nx, ny, nz) int8
-    smax : (nx, ny, nz) float32
+    step_max : (nx, ny, nz) float32
         Maximum step in voxels (``inf`` inside constant nodes).
 
     References
@@ -197,12 +205,12 @@ def leaf_levels(pyr, shape, eps, eps2, ds_max):
 
 def _leaf_flat(fmn, fmx, off, shapes, shape, eps, eps2, ds_max):
     level = np.empty(tuple(int(s) for s in shape), np.int8)
-    smax = np.empty(level.shape, np.float32)
-    _leaf_kernel(fmn, fmx, off, shapes, float(eps), float(eps2), float(ds_max), level, smax)
-    return level, smax
+    step_max = np.empty(level.shape, np.float32)
+    _leaf_kernel(fmn, fmx, off, shapes, float(eps), float(eps2), float(ds_max), level, step_max)
+    return level, step_max
 
 
-def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0, dilate=True):
+def build_octree(ior, eps=_D["eps"], eps2=_D["eps2"], ds_max=_D["ds_max"], dilate=_DILATE):
     """Dense leaf-level octree of an index volume.
 
     Parameters
@@ -212,12 +220,13 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0, dilate=True):
         Tolerances and step limit (§5.3).
     dilate : bool
         Level-0 ranges over each voxel's 3x3x3 neighbourhood (the 'robust'
-        stepping; default, as before), or each voxel's own value (the
-        paper's §4.2, ``stepping = 'paper'``).
+        stepping), or each voxel's own value (the paper's §4.2, ``stepping =
+        'paper'``, the default); :func:`~refraction_ref.volumetric.knobs.octree_dilations`
+        says which each pass reads.
 
     Returns
     -------
-    level, smax : see :func:`leaf_levels`
+    level, step_max : see :func:`leaf_levels`
     stats : dict
         ``constant_fraction`` (voxels in constant nodes), ``limited_fraction``
         (eps <= range < eps2), ``levels`` histogram, ``constant_index`` (the
@@ -230,8 +239,8 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0, dilate=True):
     """
     n = np.ascontiguousarray(ior, dtype=np.float64)
     pyr, fmn, fmx, off, shapes = _pyramid_flat(n, bool(dilate))  # parallel kernels; min / max are exact in any order
-    level, smax = _leaf_flat(fmn, fmx, off, shapes, n.shape, float(eps), float(eps2), float(ds_max))
-    const = np.isinf(smax)
+    level, step_max = _leaf_flat(fmn, fmx, off, shapes, n.shape, float(eps), float(eps2), float(ds_max))
+    const = np.isinf(step_max)
     top_mn, top_mx = pyr[-1]
     stats = {
         "constant_fraction": float(np.count_nonzero(const)) / const.size,
@@ -240,4 +249,4 @@ def build_octree(ior, eps=0.005, eps2=0.02, ds_max=8.0, dilate=True):
         "constant_index": bool(float(top_mx.max() - top_mn.min()) < eps),
         "n_min": float(top_mn.min()), "n_max": float(top_mx.max()),
     }
-    return level, smax, stats
+    return level, step_max, stats

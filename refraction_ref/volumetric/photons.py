@@ -49,9 +49,11 @@ import numba as nb
 import numpy as np
 
 from ..camera import Camera
+from ..kernels import copy_rows
 from ..validation import SceneError
 
-__all__ = ["generate_photons", "box_entry", "inflate_mesh", "occupied_box"]
+__all__ = ["generate_photons", "box_entry", "slab_entry", "slab_both", "entry_points", "inflate_mesh",
+           "occupied_box"]
 
 
 def box_entry(origins, dirs, bounds):
@@ -96,15 +98,56 @@ def _np_max(a, b):
     return a if (a > b or a != a) else b
 
 
-def _slab_entry(org, dirs, b, t_in):
-    """:func:`box_entry`'s ``t_in`` per ray, the same operations in the same order; parallel over rays."""
-    _slab_both(org, dirs, b, t_in, t_in, False)
+def slab_entry(org, dirs, b, t_in):
+    """:func:`box_entry`'s ``t_in`` per ray, the same operations in the same order; parallel over rays.
+
+    Parameters
+    ----------
+    org, dirs : (P, 3) float64
+        Ray origins and directions.
+    b : (2, 3) float64
+        The box.
+    t_in : (P,) float64
+        Written: the entry parameter (``inf`` where the ray misses).
+
+    Returns
+    -------
+    None
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (where each texel's ray enters the volume's box).
+    """
+    slab_both(org, dirs, b, t_in, t_in, False)
 
 
 @nb.njit(cache=True, parallel=True)
-def _slab_both(org, dirs, b, t_in, t_out, want_out):
-    """:func:`box_entry`'s ``t_in`` and (``want_out``) ``t_out`` per ray, the same operations in the same
-    order (``np.min`` over the axes is a left fold of ``np.minimum``); parallel over rays."""
+def slab_both(org, dirs, b, t_in, t_out, want_out):
+    """:func:`box_entry`'s ``t_in`` and (``want_out``) ``t_out`` per ray; parallel over rays.
+
+    The same operations in the same order as :func:`box_entry` (``np.min``
+    over the axes is a left fold of ``np.minimum``).
+
+    Parameters
+    ----------
+    org, dirs : (P, 3) float64
+        Ray origins and directions.
+    b : (2, 3) float64
+        The box.
+    t_in, t_out : (P,) float64
+        Written: entry (``inf`` where the ray misses) and, with
+        ``want_out``, exit parameters.
+    want_out : bool
+        Write ``t_out``.
+
+    Returns
+    -------
+    None
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 (where each texel's ray enters the volume's box).
+    """
     for p in nb.prange(org.shape[0]):
         lo = 0.0
         hi = 0.0
@@ -394,20 +437,12 @@ def _proxy_entry(org, dirs, tris, prim, t_box, t_out):
             t_box[p] = t
 
 
-@nb.njit(cache=True, parallel=True)
-def _copy_rows(src, out):
-    """``out[...] = src`` for (P, 3) arrays (any strides; the cast of ``out``'s dtype); parallel over rows."""
-    for p in nb.prange(src.shape[0]):
-        for c in range(3):
-            out[p, c] = src[p, c]
-
-
 def _contiguous(a, dtype):
     """``np.ascontiguousarray(a, dtype)`` of a (P, 3) float64 array, copied (or rounded) in parallel."""
     if a.dtype == dtype and a.flags.c_contiguous:
         return a
     out = np.empty(a.shape, dtype)
-    _copy_rows(a, out)
+    copy_rows(a, out)
     return out
 
 
@@ -415,16 +450,16 @@ def _proxy_t(org, dirs, b, proxy):
     """Start parameters of the texel rays with the proxy (inf: no photon)."""
     t_in = np.empty(len(org))
     if proxy is None:
-        _slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
+        slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
         return t_in
     kind, data = proxy
     if kind == "box":
-        _slab_entry(org, dirs, np.asarray(data, dtype=np.float64), t_in)
+        slab_entry(org, dirs, np.asarray(data, dtype=np.float64), t_in)
         return t_in
     from ..embree import mesh_scene, nearest_hits, soup_scene
 
     t_out = np.empty(len(org))
-    _slab_both(org, dirs, b, t_in, t_out, True)  # = box_entry's (t_in, t_out), in parallel
+    slab_both(org, dirs, b, t_in, t_out, True)  # = box_entry's (t_in, t_out), in parallel
     if isinstance(data, tuple):  # (tris, points, welded): the same triangles, indexed
         tris, pts, welded = data
     else:

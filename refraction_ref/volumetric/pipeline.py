@@ -52,14 +52,17 @@ import numpy as np
 
 from ..camera import Camera
 from ..environment import environment_lookup
-from ..graph import Method, Stage, describe, register_method, run_graph
+from ..graph import Method, Stage, describe, method_renderer, register_method
 from ..validation import SceneError
 from ..warm import warmer
 from .gradient import gradient_field
-from .march import march_photons, receiver_tuple, smooth_radiance
+from .knobs import march_knobs, octree_dilations, view_knobs
+from .march import march_grid, march_photons
 from .octree import build_octree
-from .photons import generate_photons, inflate_mesh, occupied_box
-from .view import source_volume, view_volume
+from .photons import entry_points, generate_photons, inflate_mesh, occupied_box
+from .receivers import receiver_tuple
+from .smooth import smooth_radiance
+from .view import source_volume, view_grid, view_volume
 
 __all__ = ["render_volumetric", "load_volume", "STAGES", "METHOD"]
 
@@ -136,21 +139,21 @@ def load_volume(scene):
 
 
 # --------------------------------------------------------------------- media
-def _media(vox, v):
-    """Scattering sigma and extinction kappa volumes (float32, (nx, ny, nz, 3))."""
-    shape = vox["ior"].shape
+def _media(voxels, v):
+    """Scattering sigma and extinction kappa volumes (float32, (nx, ny, nz, 3)) from the ``voxelize`` buffers."""
+    shape = voxels["ior"].shape
     sig_k = np.broadcast_to(np.asarray(v["scattering"], dtype=np.float64), (3,))
     abs_k = np.broadcast_to(np.asarray(v["absorption"], dtype=np.float64), (3,))
-    if vox["scattering"] is not None:
-        sigma = vox["scattering"].astype(np.float32)
+    if voxels["scattering"] is not None:
+        sigma = voxels["scattering"].astype(np.float32)
     else:
         sigma = np.broadcast_to(sig_k.astype(np.float32), shape + (3,))
-    if vox["extinction"] is not None:
-        kappa = vox["extinction"].astype(np.float32)
+    if voxels["extinction"] is not None:
+        kappa = voxels["extinction"].astype(np.float32)
     else:
         # = (sigma + abs_k).astype(float32), then += absorption.astype(float32), in parallel
         kappa = np.empty(shape + (3,), np.float32)
-        absn = vox["absorption"]
+        absn = voxels["absorption"]
         _kappa(np.broadcast_to(sigma, shape + (3,)), abs_k.copy(),
                np.zeros((1, 1, 1, 3)) if absn is None else np.ascontiguousarray(absn, dtype=np.float64),
                absn is not None, kappa)
@@ -191,7 +194,8 @@ def _run_voxelize(scene):
     ior, absn, b, notes = voxelize_objects(geom, float(d["outside_ior"]), int(v["resolution"]),
                                            int(v["padding"]), int(v["supersample"]), int(v["blur"]),
                                            v["bounds"])
-    notes.append(f"coverage -> IOR, {'Gaussian ' + str(v['blur']) + '^3, sigma = ' + format(v['blur'] / 6, 'g') if v['blur'] > 1 else 'no blur'}")
+    blur = f"Gaussian {v['blur']}^3, sigma = {format(v['blur'] / 6, 'g')}" if v["blur"] > 1 else "no blur"
+    notes.append(f"coverage -> IOR, {blur}")
     return {"ior": ior, "extinction": None, "scattering": None,
             "absorption": absn if np.any(absn > 0) else None, "bounds": b,
             "triangles": int(len(geom.faces)), "notes": notes, "ran": True,
@@ -209,53 +213,56 @@ _V = "volumetric."
 
 
 def _st_voxelize(ctx):
-    vox = _run_voxelize(ctx.scene)
-    for n in vox["notes"]:
+    voxels = _run_voxelize(ctx.scene)
+    for n in voxels["notes"]:
         ctx.note(n)
-    ctx.stats["triangles"] = vox["triangles"]
-    return dict(vox, ior_volume=vox["ior"])
+    ctx.stats["triangles"] = voxels["triangles"]
+    return dict(voxels, ior_volume=voxels["ior"])
 
 
 def _st_gradient(ctx):
-    vox = ctx.buf["voxelize"]
-    return {"field": gradient_field(vox["ior"], vox["bounds"])}
+    voxels = ctx.buf["voxelize"]
+    return {"field": gradient_field(voxels["ior"], voxels["bounds"])}
 
 
 def _st_octree(ctx):
+    """The octrees the march and the viewing pass read, each built once (:func:`~.knobs.octree_dilations`)."""
     v = ctx.scene.data["volumetric"]
-    paper = v["stepping"] == "paper"
-    level, smax, ost = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"], dilate=not paper)
-    # the viewing pass crosses nodes whose gradient is exactly zero in straight steps (an exact shortcut of
-    # §4.5's fixed step): it needs the dilated octree's constant nodes whatever the photons' stepping
-    view_smax = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"])[1] if paper else smax
-    msg = (f"{100 * ost['constant_fraction']:.1f}% of voxels in constant nodes ("
-           + ("stepped to their boundary" if paper else "crossed in one straight step") + "), "
-           f"{100 * ost['limited_fraction']:.1f}% limited to ds_max = {v['ds_max']} voxels")
-    if ost["constant_index"]:
+    march_dilate, view_dilate = octree_dilations(v["stepping"])
+    octrees = {}
+    for dilate in (march_dilate, view_dilate):
+        if dilate not in octrees:
+            octrees[dilate] = build_octree(ctx.buf["voxelize"]["ior"], v["eps"], v["eps2"], v["ds_max"],
+                                           dilate=dilate)
+    level, step_max, stats = octrees[march_dilate]
+    msg = (f"{100 * stats['constant_fraction']:.1f}% of voxels in constant nodes ("
+           + ("crossed in one straight step" if march_dilate else "stepped to their boundary") + "), "
+           f"{100 * stats['limited_fraction']:.1f}% limited to ds_max = {v['ds_max']} voxels")
+    if stats["constant_index"]:
         msg += "; the index is constant everywhere: photons and rays go straight"
-    msg += ("; stepping 'paper': level-0 ranges are single voxels (§4.2), no stiffness cap or halving"
-            if paper else "; stepping 'robust': level-0 ranges dilated over 26 neighbours")
+    msg += ("; stepping 'robust': level-0 ranges dilated over 26 neighbours" if march_dilate
+            else "; stepping 'paper': level-0 ranges are single voxels (§4.2), no stiffness cap or halving")
     ctx.note(msg)
-    ctx.stats["octree"] = {k: ost[k] for k in ("constant_fraction", "limited_fraction", "levels", "constant_index")}
-    return {"level": level, "step_max": smax, "view_step_max": view_smax, "info": ost}
+    ctx.stats["octree"] = {k: stats[k] for k in ("constant_fraction", "limited_fraction", "levels", "constant_index")}
+    return {"level": level, "step_max": step_max, "view_step_max": octrees[view_dilate][1], "info": stats}
 
 
 def _proxy(ctx):
     """The proxy geometry of §4.3 (None: the volume's box) and a sentence saying what it is."""
     d = ctx.scene.data
     v = d["volumetric"]
-    vox = ctx.buf["voxelize"]
+    voxels = ctx.buf["voxelize"]
     if v["proxy"] == "box":
         return None, "proxy 'box': photons start on the volume's bounding box"
-    b = np.asarray(vox["bounds"], dtype=np.float64)
-    shape = vox["ior"].shape
+    b = np.asarray(voxels["bounds"], dtype=np.float64)
+    shape = voxels["ior"].shape
     hmin = float(np.min((b[1] - b[0]) / np.asarray(shape, dtype=np.float64)))
     grow = float(v["proxy_inflate"])
-    if vox["mesh"] is not None:
-        tris, pts, welded = inflate_mesh(vox["mesh"][0], vox["mesh"][1], grow * hmin, indexed=True)
+    if voxels["mesh"] is not None:
+        tris, pts, welded = inflate_mesh(voxels["mesh"][0], voxels["mesh"][1], grow * hmin, indexed=True)
         return ("mesh", (tris, pts, welded)), (f"proxy 'inflated': the objects' meshes inflated by {grow:g} voxels "
                                 f"({len(tris)} triangles), nearest front face per texel (§4.3)")
-    box = occupied_box(vox["ior"], b, float(d["outside_ior"]), 1e-6, grow)
+    box = occupied_box(voxels["ior"], b, float(d["outside_ior"]), 1e-6, grow)
     if box is None:
         return None, ("proxy 'inflated' on volume input: no voxel differs from outside_ior, so photons start "
                       "on the volume's bounding box")
@@ -265,7 +272,7 @@ def _proxy(ctx):
 
 def _st_photons(ctx):
     d = ctx.scene.data
-    vox = ctx.buf["voxelize"]
+    voxels = ctx.buf["voxelize"]
     M = int(d["volumetric"]["photons"])
     if not d["lights"]:
         z = np.zeros((0, 3))
@@ -273,7 +280,7 @@ def _st_photons(ctx):
     else:
         proxy, what = _proxy(ctx)
         ctx.note(what)
-        ph = generate_photons(d["lights"], vox["bounds"], vox["ior"].shape, M, proxy=proxy)
+        ph = generate_photons(d["lights"], voxels["bounds"], voxels["ior"].shape, M, proxy=proxy)
     for n in ph[4]:
         ctx.note(n)
     ctx.stats["photons"] = {"photons_initial": M * M * len(d["lights"]), "photons_generated": int(len(ph[0])),
@@ -282,11 +289,9 @@ def _st_photons(ctx):
     if d["volumetric"]["proxy"] != "box" and len(ph[0]):
         # where each texel ray entered the volume: the march attenuates the photon over the skipped segment
         # (= ph[0] - where(isfinite(t), max(t, 0), 0) ph[1], t = box_entry(ph[0], -ph[1])'s exit, in parallel)
-        from .photons import entry_points
-
         entry = np.empty_like(ph[0])
         entry_points(np.ascontiguousarray(ph[0]), np.ascontiguousarray(ph[1]),
-                     np.ascontiguousarray(vox["bounds"], dtype=np.float64), entry)
+                     np.ascontiguousarray(voxels["bounds"], dtype=np.float64), entry)
     return {"ph": ph, "start_pos": ph[0], "start_dir": ph[1], "start_radiance": ph[2], "entry": entry}
 
 
@@ -306,33 +311,29 @@ MARCH_KNOBS = ("ds_min", "stiff", "integrator", "max_steps", "min_radiance", "st
                "absorption", "stepping")
 
 
-def _march_volume(ctx):
-    """What the march reads beside the photons: (field, kappa, level, step_max, bounds)."""
-    b = ctx.buf
-    vox, octv = b["voxelize"], b["octree"]
-    kappa = _media(vox, ctx.scene.data["volumetric"])[1]
-    return b["gradient"]["field"], kappa, octv["level"], octv["step_max"], vox["bounds"]
+def _march_grid(ctx):
+    """The volume the march reads (:func:`~.march.march_grid`): field, kappa, the march's octree, bounds."""
+    voxels, octree = ctx.buf["voxelize"], ctx.buf["octree"]
+    kappa = _media(voxels, ctx.scene.data["volumetric"])[1]
+    return march_grid(ctx.buf["gradient"]["field"], kappa, octree["level"], octree["step_max"], voxels["bounds"])
 
 
-def _march_settings(ctx, idx=None):
-    """The march's keyword arguments from the scene (``stop_fraction`` apart), for photons ``idx`` (None: all)."""
-    d = ctx.scene.data
-    v = d["volumetric"]
-    rc = ctx.buf.get("receivers")
+def _march_inputs(ctx, idx=None):
+    """The march's keyword arguments beside the knobs (entry points, receivers, outside index), for photons
+    ``idx`` (None: all)."""
+    receivers = ctx.buf.get("receivers")
     entry = ctx.buf["photons"].get("entry")
     if entry is not None and idx is not None:
         entry = entry[idx]
-    return dict(ds_min=float(v["ds_min"]), stiff=float(v["stiff"]), integrator=v["integrator"],
-                max_steps=int(v["max_steps"]), min_radiance=float(v["min_radiance"]), stepping=v["stepping"],
-                receivers=rc["recv"] if rc is not None else None, outside_ior=float(d["outside_ior"]), entry=entry)
+    return dict(entry=entry, receivers=receivers["recv"] if receivers is not None else None,
+                outside_ior=float(ctx.scene.data["outside_ior"]))
 
 
 def _st_march(ctx):
     v = ctx.scene.data["volumetric"]
     ph = ctx.buf["photons"]["ph"]
-    pos, dirs, rad = ph[0], ph[1], ph[2]
-    sums, minfo = march_photons(*_march_volume(ctx), pos, dirs, rad, **_march_settings(ctx),
-                                stop_fraction=float(v["stop_fraction"]))
+    pos = ph[0]
+    sums, minfo = march_photons(_march_grid(ctx), ph[:3], march_knobs(v), **_march_inputs(ctx))
     ctx.note(f"{len(pos)} photons, {minfo['total_steps']} steps ({v['integrator']}), "
              f"{minfo['truncated']} cut by the 1/{round(1 / v['stop_fraction']) if v['stop_fraction'] else 'inf'} "
              f"stopping rule, |v| = n drift max {minfo['drift_max']:.3g} (p99 {minfo['drift_p99']:.3g})")
@@ -381,8 +382,9 @@ def _st_photon_paths(ctx):
     """
     ph = ctx.buf["photons"]["ph"]
     idx = path_sample(len(ph[0]))
-    _, info = march_photons(*_march_volume(ctx), ph[0][idx], ph[1][idx], ph[2][idx], **_march_settings(ctx, idx),
-                            stop_fraction=None, record=PATH_STEPS)
+    knobs = march_knobs(ctx.scene.data["volumetric"])._replace(stop_fraction=0.0)  # marched alone: no stopping rule
+    _, info = march_photons(_march_grid(ctx), (ph[0][idx], ph[1][idx], ph[2][idx]), knobs,
+                            **_march_inputs(ctx, idx), record=PATH_STEPS)
     longer = int(np.count_nonzero(info["steps"] > PATH_STEPS))
     ctx.note(f"{len(idx)} of {len(ph[0])} photons, their first {PATH_STEPS} steps ({longer} take more), "
              "marched alone (no stopping rule), deposits discarded")
@@ -408,9 +410,9 @@ def _st_caustics(ctx):
     rs = ctx.buf["receivers"]["rs"]
     ph = ctx.buf["photons"]["ph"]
     minfo = ctx.buf["march"]["minfo"]
-    vox = ctx.buf["voxelize"]
-    b = np.asarray(vox["bounds"], dtype=np.float64)
-    h = (b[1] - b[0]) / np.asarray(vox["ior"].shape, dtype=np.float64)
+    voxels = ctx.buf["voxelize"]
+    b = np.asarray(voxels["bounds"], dtype=np.float64)
+    h = (b[1] - b[0]) / np.asarray(voxels["ior"].shape, dtype=np.float64)
     h2 = float(np.prod(h)) ** (2.0 / 3.0)
     size = int(d["caustics"]["map_size"])
     light = ph[3]
@@ -445,26 +447,25 @@ def _st_smooth(ctx):
 
 def _st_view(ctx):
     d = ctx.scene.data
-    v = d["volumetric"]
-    b = ctx.buf
-    ost = b["octree"]["info"]
+    buf = ctx.buf
+    octree_stats = buf["octree"]["info"]
     cam = Camera.from_dict(d["camera"])
     H, W = cam.shape
     origin, rdir = cam.primary_rays()
-    vw = view_volume(b["gradient"]["field"], b["smooth"]["source"], b["octree"]["view_step_max"], b["voxelize"]["bounds"],
-                     origin.reshape(-1, 3), rdir.reshape(-1, 3), integrator=v["integrator"],
-                     phase_g=float(v["phase_g"]), outside_ior=float(d["outside_ior"]),
-                     n_range=(ost["n_min"], ost["n_max"]))
-    env = environment_lookup(d["environment"], vw["last_dir"], ctx.scene.base_dir).astype(np.float64)
-    img = vw["inscatter"] + vw["transmittance"] * env
+    volume = view_grid(buf["gradient"]["field"], buf["smooth"]["source"], buf["octree"]["view_step_max"],
+                       buf["voxelize"]["bounds"])
+    rays = view_volume(volume, origin.reshape(-1, 3), rdir.reshape(-1, 3), view_knobs(d["volumetric"]),
+                       outside_ior=float(d["outside_ior"]), n_range=(octree_stats["n_min"], octree_stats["n_max"]))
+    env = environment_lookup(d["environment"], rays["last_dir"], ctx.scene.base_dir).astype(np.float64)
+    img = rays["inscatter"] + rays["transmittance"] * env
     return {
         "ray_origin": origin, "ray_dir": rdir,
-        "hit": vw["hit"].reshape(H, W),
-        "exit_pos": vw["exit_pos"].reshape(H, W, 3),
-        "exit_dir": vw["exit_dir"].reshape(H, W, 3),
-        "interfaces": vw["interfaces"].reshape(H, W),
-        "path_length": vw["path_length"].reshape(H, W),
-        "status": vw["status"].reshape(H, W),
+        "hit": rays["hit"].reshape(H, W),
+        "exit_pos": rays["exit_pos"].reshape(H, W, 3),
+        "exit_dir": rays["exit_dir"].reshape(H, W, 3),
+        "interfaces": rays["interfaces"].reshape(H, W),
+        "path_length": rays["path_length"].reshape(H, W),
+        "status": rays["status"].reshape(H, W),
         "image": img.reshape(H, W, 3).astype(np.float32),
     }
 
@@ -482,16 +483,19 @@ def _skipped(scene):
 
 
 def _stages(scene):
-    rc = _has_receivers(scene)
-    nr = len(scene.data["receivers"] or []) if rc else 0
-    recv_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "caustics.map_size"),
-                        makes=tuple(f"frame_{r}" for r in range(nr)),
-                        doc="diffuse receivers the photons stop on, and their caustic-map frames (Fig. 9)"),) if rc else ()
-    caus_stage = (Stage("caustics", _st_caustics, reads=("lights", "caustics.map_size"), after=("voxelize", "photons", "march", "receivers"),
-                        makes=tuple(f"{k}_{r}" for k in ("caustic_map", "caustic_frame", "caustic_rgb")
-                                    for r in range(nr)),
-                        doc="irradiance of the refracted photons on each receiver (Fig. 9)"),) if rc else ()
-    after_march = ("voxelize", "gradient", "octree", "photons") + (("receivers",) if rc else ())
+    with_receivers = _has_receivers(scene)
+    nr = len(scene.data["receivers"] or []) if with_receivers else 0
+    receivers_stage = (Stage("receivers", _st_receivers, reads=("receivers", "lights", "caustics.map_size"),
+                             makes=tuple(f"frame_{r}" for r in range(nr)),
+                             doc="diffuse receivers the photons stop on, and their caustic-map frames (Fig. 9)"),)
+    caustics_stage = (Stage("caustics", _st_caustics, reads=("lights", "caustics.map_size"),
+                            after=("voxelize", "photons", "march", "receivers"),
+                            makes=tuple(f"{k}_{r}" for k in ("caustic_map", "caustic_frame", "caustic_rgb")
+                                        for r in range(nr)),
+                            doc="irradiance of the refracted photons on each receiver (Fig. 9)"),)
+    if not with_receivers:
+        receivers_stage = caustics_stage = ()
+    after_march = ("voxelize", "gradient", "octree", "photons") + (("receivers",) if with_receivers else ())
     return (
         Stage("voxelize", _st_voxelize, reads=("objects", "outside_ior", "volume", _V + "resolution", _V + "padding",
                                                 _V + "supersample", _V + "blur", _V + "bounds"),
@@ -505,7 +509,7 @@ def _stages(scene):
                                              _V + "proxy_inflate"), after=("voxelize",),
               makes=("start_pos", "start_dir", "start_radiance"),
               doc="one photon per light texel covered by the proxy geometry (§4.3)"),
-    ) + recv_stage + (
+    ) + receivers_stage + (
         Stage("march", _st_march, reads=("outside_ior",) + tuple(_V + k for k in MARCH_KNOBS),
               after=after_march, makes=("exit_pos", "exit_dir", "photon_status", "hit_pos", "hit_receiver", "deposit"),
               doc="adaptive marching and deposition (§4.4, eqs. 4-6)"),
@@ -519,29 +523,30 @@ def _stages(scene):
             _V + k for k in ("phase_g", "integrator")), after=("voxelize", "gradient", "octree", "smooth"),
               makes=("hit", "exit_pos", "exit_dir", "status", "image"),
               doc="curved viewing rays, Henyey-Greenstein in-scattering (§4.5)"),
-    ) + caus_stage
+    ) + caustics_stage
 
 
 def _assemble(scene, bufs, stats):
     d = scene.data
-    vox, march = bufs["voxelize"], bufs["march"]
+    voxels, march = bufs["voxelize"], bufs["march"]
     minfo = march["minfo"]
-    ior = vox["ior"]
+    ior = voxels["ior"]
     arrays = {
         "ior": ior, "radiance": bufs["smooth"]["radiance"], "direction": bufs["smooth"]["direction"],
-        "volume_bounds": np.asarray(vox["bounds"], np.float64),
+        "volume_bounds": np.asarray(voxels["bounds"], np.float64),
         "photon_exit_pos": minfo["exit_pos"], "photon_exit_dir": minfo["exit_dir"],
         "photon_steps": np.asarray(minfo["total_steps"], np.int64), "photon_status": minfo["status"],
     }
     arrays.update(bufs["view"])
     if "caustics" in bufs:
         arrays.update(bufs["caustics"]["arrays"])
-    st = {"volume_shape": list(ior.shape), "triangles": vox["triangles"], **stats.get("photons", {}), **stats["march"],
+    st = {"volume_shape": list(ior.shape), "triangles": voxels["triangles"], **stats.get("photons", {}),
+          **stats["march"],
           "occupied_voxels": int(np.count_nonzero(np.abs(ior - float(d["outside_ior"])) > 1e-6)),
           "octree": stats["octree"]}
     if "caustics" in stats:
         st["caustics"] = stats["caustics"]
-    return arrays, {"triangles": vox["triangles"], "stats": st, "scene": _summary(d)}
+    return arrays, {"triangles": voxels["triangles"], "stats": st, "scene": _summary(d)}
 
 
 METHOD = register_method(Method(
@@ -553,42 +558,10 @@ METHOD = register_method(Method(
     doc="Sun et al. (2008): index volume, octree, curved photon paths with adaptive steps, curved viewing"))
 
 
-def render_volumetric(scene, *, cache=None, keep=None, warm=True, progress=False):
-    """Render a scene with the volumetric method of Sun et al. (2008) (runs :data:`METHOD`'s graph).
-
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene.
-    cache : dict, optional
-        Stage outputs of an earlier render (filled in by this call). Stages
-        whose inputs did not change are reused from it
-        (:class:`refraction_ref.session.Session` keeps one).
-    keep : str or list, optional
-        Stages whose buffers to return as ``stage.<stage>.<buffer>``.
-    warm : bool
-        Compile every kernel first so that ``timings_ms`` exclude JIT time.
-    progress : bool
-        Show a progress bar on long work.
-
-    Returns
-    -------
-    arrays : dict
-        ``docs/oracle.md`` keys: ``ior``, ``radiance``, ``direction``,
-        ``volume_bounds``, ``photon_exit_pos``, ``photon_exit_dir``,
-        ``photon_steps`` (total), plus ``photon_status`` and the per-pixel
-        keys ``ray_origin``, ``ray_dir``, ``hit``, ``exit_pos``,
-        ``exit_dir``, ``interfaces``, ``path_length``, ``status``,
-        ``image``.
-    info : dict
-        ``timings_ms`` per stage, ``plan`` (ran or reused, and why), and
-        statistics (photons, steps, drift, octree).
-
-    References
-    ----------
-    Sun et al. (2008), §3-§5.
-    """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
+render_volumetric = method_renderer(
+    METHOD, "render_volumetric",
+    "Render a scene with the volumetric method of Sun et al. (2008), §3-§5: index volume, octree, curved photon "
+    "paths, curved viewing rays.")
 
 
 def _summary(d):

@@ -46,9 +46,13 @@ import numba as nb
 import numpy as np
 
 from ..status import EXITED, LIMIT, LOST, MISSED
-from .march import _geometry, _integ_code, advance, sample_field, segment_exit
+from .extinction import transmit
+from .grid import cell, sample_field, segment_exit, volume_box
+from .integrate import advance, euler_step
+from .knobs import view_knobs
 
-__all__ = ["view_volume", "hg_phase", "source_volume"]
+__all__ = ["view_volume", "view_grid", "hg_phase", "source_volume", "box_entry_one", "ViewVolume", "ViewRays",
+           "ViewControl", "ViewResults"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -123,16 +127,6 @@ def _pack_source(rad, dirn, sig, kap, out):
 
 
 @nb.njit(cache=True, inline="always")
-def _cell(lo, ih, na, xa):
-    """``min(max(floor((xa - lo) ih), 0), na - 1)`` without the floor (truncation is floor for u >= 0)."""
-    u = (xa - lo) * ih
-    if not u > 0.0:
-        return 0
-    c = int(u)
-    return c if c < na - 1 else na - 1
-
-
-@nb.njit(cache=True, inline="always")
 def _slab(o, d, lo, hi):
     """One axis of the slab test, as :func:`~refraction_ref.volumetric.photons.box_entry` (NaN: a miss)."""
     inv = 1.0 / d if d != 0.0 else math.copysign(np.inf, d)
@@ -177,36 +171,36 @@ def box_entry_one(lo, hi, ox, oy, oz, dx, dy, dz):
     return t_in
 
 
-class _Volume(NamedTuple):
-    """What a viewing ray reads: the index field, the source volume, the octree steps, the box."""
+class ViewVolume(NamedTuple):
+    """What a viewing ray reads: the index field, the source volume, the octree steps, the box (:func:`view_grid`)."""
 
     field: np.ndarray  # (nx, ny, nz, 4) float32: n and grad n
     src: np.ndarray  # (nx, ny, nz, 9) float32: :func:`source_volume`
-    smax: np.ndarray  # (nx, ny, nz) float32: maximum step in voxels (inf: constant node)
-    lo: np.ndarray  # (3,) the box (march._Box)
+    step_max: np.ndarray  # (nx, ny, nz) float32: maximum step in voxels (inf: constant node)
+    lo: np.ndarray  # (3,) the box (grid.VolumeBox)
     hi: np.ndarray  # (3,)
     ih: np.ndarray  # (3,) 1 / voxel size
     hmin: float  # smallest voxel side: the step
 
 
-class _Rays(NamedTuple):
+class ViewRays(NamedTuple):
     """Primary rays, (R, 3) float64 each."""
 
     org: np.ndarray
     dirs: np.ndarray
 
 
-class _Knobs(NamedTuple):
+class ViewControl(NamedTuple):
     """Integration, phase function and the material level set of one viewing pass."""
 
-    integ: int  # INTEG_EULER or INTEG_RK4
+    integrator: int  # knobs.EULER or knobs.RK4
     g: float  # Henyey-Greenstein asymmetry
     n_half: float  # the half-contrast index level that counts as material (module docstring)
     side: float  # +1: material has n above n_half, -1: below
     max_steps: int
 
 
-class _Outputs(NamedTuple):
+class ViewResults(NamedTuple):
     """Per-ray arrays the kernel fills (see :func:`view_volume`, Returns)."""
 
     color: np.ndarray  # (R, 3) in-scattered radiance
@@ -215,7 +209,7 @@ class _Outputs(NamedTuple):
     exit_dir: np.ndarray  # (R, 3)
     hit: np.ndarray  # (R,) bool
     interfaces: np.ndarray  # (R,) int16
-    path_len: np.ndarray  # (R,)
+    path_length: np.ndarray  # (R,)
     status: np.ndarray  # (R,) int8
 
 
@@ -242,36 +236,8 @@ def _in_scatter(src, i, j, k, u, g, seg, t, c):
     return cr, cg, cb
 
 
-@nb.njit(cache=True, inline="always")
-def _extinguish(src, i, j, k, seg, t, ek, eseg, ea):
-    """Transmittance ``t`` (RGB) after ``seg`` in voxel (i, j, k): Beer-Lambert (Sun et al. 2008, eq. 6).
-
-    ``ek``, ``eseg``, ``ea``: kappa, seg and exp(-kappa seg) of the last
-    grey voxel, reused while kappa and seg do not change (grey, uniform
-    media). Returns ``(tr, tg, tb, ek, eseg, ea)``.
-    """
-    tr, tg, tb = t
-    kr, kg, kb = src[i, j, k, 6], src[i, j, k, 7], src[i, j, k, 8]
-    if kr == kg and kg == kb:
-        if kr != 0.0:
-            if kr != ek or seg != eseg:
-                ek, eseg = kr, seg
-                ea = math.exp(-kr * seg)
-            tr *= ea
-            tg *= ea
-            tb *= ea
-    else:
-        if kr != 0.0:
-            tr *= math.exp(-kr * seg)
-        if kg != 0.0:
-            tg *= math.exp(-kg * seg)
-        if kb != 0.0:
-            tb *= math.exp(-kb * seg)
-    return tr, tg, tb, ek, eseg, ea
-
-
 @nb.njit(cache=True, parallel=True)
-def _view_kernel(vol, rays, knobs, out):
+def _view_kernel(vol, rays, control, out):
     # the named tuples unpacked by name (a reordered field cannot swap two arguments), one field per
     # statement: numba's alias analysis follows ``a = out.a`` to the argument, but not
     # ``a, b, c, d = out.a, out.b, out.c, out.d`` (a tuple built and unpacked), and its dead-code
@@ -279,25 +245,25 @@ def _view_kernel(vol, rays, knobs, out):
     # names also keep the parallel loop's arguments as they were with positional arguments
     field = vol.field
     src = vol.src
-    smax = vol.smax
+    step_max = vol.step_max
     lo = vol.lo
     hi = vol.hi
     ih = vol.ih
     hmin = vol.hmin
     org = rays.org
     dirs = rays.dirs
-    integ = knobs.integ
-    g = knobs.g
-    n_half = knobs.n_half
-    side = knobs.side
-    max_steps = knobs.max_steps
+    integrator = control.integrator
+    g = control.g
+    n_half = control.n_half
+    side = control.side
+    max_steps = control.max_steps
     color = out.color
     trans = out.trans
     exit_pos = out.exit_pos
     exit_dir = out.exit_dir
     hit = out.hit
     interfaces = out.interfaces
-    path_len = out.path_len
+    path_length = out.path_length
     status = out.status
     nx, ny, nz = field.shape[0], field.shape[1], field.shape[2]
     lo0, lo1, lo2 = lo[0], lo[1], lo[2]
@@ -319,7 +285,7 @@ def _view_kernel(vol, rays, knobs, out):
         tb = 1.0
         inside = side * (n - n_half) > 0.0
         crossings = 0
-        plen = 0.0
+        travelled = 0.0
         met = inside
         st = LIMIT  # unless the ray exits or is lost within max_steps
         ds = hmin
@@ -329,10 +295,10 @@ def _view_kernel(vol, rays, knobs, out):
         # exp(-kappa seg) is reused while kappa and seg do not change (grey, uniform media)
         ek, eseg, ea = -1.0, -1.0, 1.0
         for _ in range(max_steps):
-            i = _cell(lo0, ih0, nx, x)
-            j = _cell(lo1, ih1, ny, y)
-            k = _cell(lo2, ih2, nz, z)
-            const = smax[i, j, k] == np.inf
+            i = cell((x - lo0) * ih0, nx)
+            j = cell((y - lo1) * ih1, ny)
+            k = cell((z - lo2) * ih2, nz)
+            const = step_max[i, j, k] == np.inf
             if const:
                 n = np.float64(field[i, j, k, 0])
                 gx, gy, gz = 0.0, 0.0, 0.0
@@ -352,13 +318,12 @@ def _view_kernel(vol, rays, knobs, out):
                 u_ok = True
             if const:
                 x1, y1, z1, vx1, vy1, vz1 = x + ds * ux, y + ds * uy, z + ds * uz, vx, vy, vz
-            elif integ == 0:  # eqs. 4-5, written out (a call passing arrays costs reference counting)
-                sn = ds / n
-                x1, y1, z1 = x + sn * vx, y + sn * vy, z + sn * vz
-                vx1, vy1, vz1 = vx + ds * gx, vy + ds * gy, vz + ds * gz
+            elif integrator == 0:  # eqs. 4-5 inlined (a call passing arrays costs reference counting)
+                x1, y1, z1, vx1, vy1, vz1 = euler_step((x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
                 u_ok = False
             else:
-                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz), ds)
+                x1, y1, z1, vx1, vy1, vz1 = advance(field, lo, ih, integrator, (x, y, z), (vx, vy, vz),
+                                                    (n, gx, gy, gz), ds)
                 u_ok = False
                 if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1)
                         and math.isfinite(vx1) and math.isfinite(vy1) and math.isfinite(vz1)):
@@ -371,13 +336,13 @@ def _view_kernel(vol, rays, knobs, out):
                 seg = s * math.sqrt((x1 - x) ** 2 + (y1 - y) ** 2 + (z1 - z) ** 2)
             # in-scattering of the voxel towards the camera (-u), attenuated so far
             cr, cg, cb = _in_scatter(src, i, j, k, (ux, uy, uz), g, seg, (tr, tg, tb), (cr, cg, cb))
-            tr, tg, tb, ek, eseg, ea = _extinguish(src, i, j, k, seg, (tr, tg, tb), ek, eseg, ea)
+            tr, tg, tb, ek, eseg, ea = transmit(src, i, j, k, seg, (tr, tg, tb), ek, eseg, ea)
             if inside:
-                plen += seg
+                travelled += seg
             if s < 1.0:
                 st = EXITED
                 if not const and s > 0.0:  # the direction at the exit: redo the step over the part inside
-                    vx1, vy1, vz1 = advance(field, lo, ih, integ, (x, y, z), (vx, vy, vz), (n, gx, gy, gz),
+                    vx1, vy1, vz1 = advance(field, lo, ih, integrator, (x, y, z), (vx, vy, vz), (n, gx, gy, gz),
                                             s * ds)[3:]
                 v1 = math.sqrt(vx1 * vx1 + vy1 * vy1 + vz1 * vz1)
                 exit_pos[r, 0] = x + s * (x1 - x)
@@ -396,34 +361,58 @@ def _view_kernel(vol, rays, knobs, out):
         trans[r, 2] = tb
         hit[r] = met
         interfaces[r] = crossings
-        path_len[r] = plen
+        path_length[r] = travelled
         status[r] = st if met or st != EXITED else MISSED
 
 
-def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", phase_g=0.0,
-                outside_ior=1.0, max_steps=0, n_range=None):
-    """Trace viewing rays through the volume (§4.5).
+def view_grid(field, source, step_max, bounds):
+    """The :class:`ViewVolume` the viewing kernel reads, from the passes' volumes.
 
     Parameters
     ----------
     field : (nx, ny, nz, 4) float32
-        n and grad n.
-    src : (nx, ny, nz, 9) float32
+        n and grad n (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
+    source : (nx, ny, nz, 9) float32
         :func:`source_volume`.
-    smax : (nx, ny, nz) float32
-        Octree maximum steps (``inf`` marks constant nodes).
-    bounds : (2, 3)
+    step_max : (nx, ny, nz) float32
+        Octree maximum steps of the dilated octree (``inf`` marks constant
+        nodes; :func:`~refraction_ref.volumetric.knobs.octree_dilations`).
+    bounds : (2, 3) array_like
+        World-space corners of the volume.
+
+    Returns
+    -------
+    ViewVolume
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (the viewing pass reads the radiance volume).
+    """
+    box = volume_box(bounds, field.shape)
+    return ViewVolume(np.ascontiguousarray(field), np.ascontiguousarray(source), np.ascontiguousarray(step_max),
+                      box.lo, box.hi, box.ih, box.hmin)
+
+
+def view_volume(volume, origins, dirs, knobs=None, *, outside_ior=1.0, n_range=None, max_steps=0):
+    """Trace viewing rays through the volume (§4.5).
+
+    Parameters
+    ----------
+    volume : ViewVolume
+        The index field, source volume and octree steps (:func:`view_grid`).
     origins, dirs : (R, 3) float64
         Primary rays.
-    integrator : {'euler', 'rk4'}
-    phase_g : float
-        Henyey-Greenstein asymmetry.
+    knobs : ViewKnobs, optional
+        Integrator and phase asymmetry
+        (:func:`~refraction_ref.volumetric.knobs.view_knobs`; default: the
+        declared defaults).
     outside_ior : float
-    max_steps : int
-        0 = ``4 * (nx + ny + nz)``.
+        Index outside the objects (the material level set).
     n_range : (float, float), optional
         Minimum and maximum of the index (e.g. the octree's ``n_min``,
         ``n_max``), to save a pass over the volume.
+    max_steps : int
+        Step limit per ray; 0 = ``4 * (nx + ny + nz)``.
 
     Returns
     -------
@@ -437,7 +426,8 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     ----------
     Sun et al. (2008), §4.5, eqs. 4-6.
     """
-    box = _geometry(bounds, field.shape)
+    knobs = view_knobs() if knobs is None else knobs
+    field = volume.field
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     R = len(org)
@@ -455,13 +445,12 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     exit_pos = np.full((R, 3), np.nan)
     exit_dir = d.copy()
     hit = np.zeros(R, np.bool_)
-    inter = np.zeros(R, np.int16)
-    plen = np.zeros(R)
+    interfaces = np.zeros(R, np.int16)
+    path_length = np.zeros(R)
     status = np.full(R, MISSED, np.int8)  # rays that miss the box keep it
-    _view_kernel(_Volume(np.ascontiguousarray(field), np.ascontiguousarray(src), np.ascontiguousarray(smax),
-                         box.lo, box.hi, box.ih, box.hmin),
-                 _Rays(org, d), _Knobs(_integ_code(integrator), float(phase_g), float(n_half), side, int(max_steps)),
-                 _Outputs(color, trans, exit_pos, exit_dir, hit, inter, plen, status))
+    control = ViewControl(int(knobs.integrator), float(knobs.phase_g), float(n_half), side, int(max_steps))
+    _view_kernel(volume, ViewRays(org, d), control,
+                 ViewResults(color, trans, exit_pos, exit_dir, hit, interfaces, path_length, status))
     # the direction the environment is seen along (NaN, i.e. black, where the ray did not get out)
     last_dir = exit_dir.copy()
     stuck = (status == LIMIT) | (status == LOST)
@@ -472,4 +461,5 @@ def view_volume(field, src, smax, bounds, origins, dirs, *, integrator="euler", 
     exit_pos[miss] = np.nan
     exit_dir[miss] = d[miss]
     return {"inscatter": color, "transmittance": trans, "exit_pos": exit_pos, "exit_dir": exit_dir,
-            "last_dir": last_dir, "hit": hit, "interfaces": inter, "path_length": plen, "status": status}
+            "last_dir": last_dir, "hit": hit, "interfaces": interfaces, "path_length": path_length,
+            "status": status}

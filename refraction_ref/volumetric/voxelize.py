@@ -194,16 +194,29 @@ class _Columns(NamedTuple):
     cum: np.ndarray  # running winding number after each crossing
 
 
+class _ColumnAxes(NamedTuple):
+    """How a column set lies in the volume: columns along p and q, rays along r; ``both``: the vote also
+    reads the winding number from +infinity (open meshes)."""
+
+    p: int
+    q: int
+    r: int
+    both: bool
+
+
 @nb.njit(cache=True, parallel=True)
-def _vote_centres(cols, ncol, nrow, z0, dz, nz, p, q, r, both, votes):
+def _vote_centres(cols, axes, ncol, nrow, z0, dz, nz, votes):
     """``votes += (w_minus != 0)`` (+ ``(w_plus != 0)`` with ``both``) at every voxel centre, in (x, y, z)
     order: :func:`_read_centres` and :func:`winding_at_centres`' difference and transpose in one pass.
     Each voxel belongs to one column, so the parallel rows write disjoint voxels (integer adds).
-    ``cols`` is a :class:`_Columns`."""
-    # the named tuple unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
+    ``cols`` is a :class:`_Columns`, ``axes`` its :class:`_ColumnAxes`."""
+    # the named tuples unpacked before the parallel loop, one field per statement (DEVELOPERS.md)
     off = cols.off
     depth = cols.depth
     cum = cols.cum
+    p = axes.p
+    q = axes.q
+    both = axes.both
     for i0 in nb.prange(nrow):
         i = np.int64(i0)
         for j in range(ncol):
@@ -275,11 +288,16 @@ def winding_at_centres(tri, axis, lo, h, n):
 
 
 @nb.njit(cache=True, parallel=True)
-def _read_subsamples(cols, ncol, S, vox, p, q, r, z0, dz, both, votes):
-    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis (``cols``: :class:`_Columns`)."""
+def _read_subsamples(cols, axes, ncol, S, vox, z0, dz, votes):
+    """Add the in/out votes of the S^3 sub-samples of listed voxels along one axis (``cols``: :class:`_Columns`,
+    ``axes``: :class:`_ColumnAxes`)."""
     off = cols.off
     depth = cols.depth
     cum = cols.cum
+    p = axes.p
+    q = axes.q
+    r = axes.r
+    both = axes.both
     for m in nb.prange(vox.shape[0]):
         vp = vox[m, p]
         vq = vox[m, q]
@@ -404,7 +422,7 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
     for ax in axes:  # winding_at_centres' w_minus (and w_plus) != 0, added up in parallel
         p, q = (ax + 1) % 3, (ax + 2) % 3
         cols = _Columns(*column_crossings(tri, ax, lo, h, (n[p], n[q])))
-        _vote_centres(cols, n[p], n[q], lo[ax], h[ax], n[ax], p, q, ax, not closed, votes_c)
+        _vote_centres(cols, _ColumnAxes(p, q, ax, not closed), n[p], n[q], lo[ax], h[ax], n[ax], votes_c)
     need = 1 if closed else 4
     inside = np.empty(n, np.bool_)
     cov = np.empty(n)
@@ -418,7 +436,7 @@ def solid_coverage(vertices, faces, lo, h, n, supersample=4, closed=True):
         for ax in axes:
             p, q = (ax + 1) % 3, (ax + 2) % 3
             cols = _Columns(*column_crossings(tri, ax, lo, hs, (n[p] * S, n[q] * S)))
-            _read_subsamples(cols, n[p] * S, S, vox, p, q, ax, lo[ax], hs[ax], not closed, votes)
+            _read_subsamples(cols, _ColumnAxes(p, q, ax, not closed), n[p] * S, S, vox, lo[ax], hs[ax], votes)
         _subsample_coverage(votes, need, vox, cov)  # argwhere order = boolean-mask order
     return cov, {"boundary_voxels": int(len(vox)), "rays": len(axes) * (1 if closed else 2)}
 
