@@ -1,5 +1,6 @@
-"""Water caustics with the level-map method (Tipprasert 2006), its volumetric
-baseline (Iwasaki et al.) and a per-ray variant, one module per pass.
+"""Water caustics with the level-map method (Tipprasert 2006), the thesis's
+slice-image baseline (Iwasaki et al. 2003, :mod:`.slice_image_baseline`,
+``levelmap.variant = "volumetric"``) and a per-ray variant, one module per pass.
 
 >>> from refraction_ref.levelmap import default_scene, render_levelmap
 >>> arrays, info = render_levelmap(default_scene())          # doctest: +SKIP

@@ -1,4 +1,4 @@
-"""Caustics casting (eqs. 4-19, 4-20): project the caustics maps onto the receivers.
+"""Caustics casting (eq. 4-20): several lights' caustics maps cast into one per receiver.
 
 Several lights each have their own reference planes and caustics map
 (Fig. 4-17); ``caustic_map_r`` is given in the frame of the first light's
@@ -10,11 +10,9 @@ over lights of eq. 4-20.
 
 The camera image applies eq. 4-19, ``I_o = I_c I_d + I_a``, with ``I_c`` the
 irradiance looked up (nearest texel) in the receiver's caustics map, ``I_d``
-its albedo (the diffuse map) and ``I_a = ambient * albedo``. :func:`shade_image`
-sees the receivers directly (the water surface itself is not drawn; the
-background is black): the level map's ``image`` before contract_version 4. The
-render's ``image`` is now the view through the water and ``image_direct`` this
-direct view, both drawn by :mod:`.view`.
+its albedo (the diffuse map) and ``I_a = ambient * albedo``: the view through
+the water (``image``) and the direct view (``image_direct``), both drawn by
+:mod:`.view` (:func:`~.view.shade_point`).
 
 References
 ----------
@@ -27,11 +25,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raster import rasterize
 from .planes import from_map, to_map
 from ..vec3 import dot
 
-__all__ = ["cast_between", "shade_image"]
+__all__ = ["cast_between"]
 
 
 def cast_between(E_l, box_l, lm_l, box_0, lm_0, out):
@@ -77,57 +74,3 @@ def cast_between(E_l, box_l, lm_l, box_0, lm_0, out):
     ok = inside & lm_l.own[i, j] & (np.abs(q[:, 2] - lm_l.depth[i, j]) <= tol)
     out[ii[ok], jj[ok]] += E_l[i[ok], j[ok]]
     return int(np.count_nonzero(ok))
-
-
-def shade_image(camera, receivers, boxes, maps, albedo, ambient):
-    """Camera view of the receivers with their caustics (eq. 4-19).
-
-    Parameters
-    ----------
-    camera : Camera
-    receivers : Receivers
-    boxes : list of Box
-        Frame (first light's box) of each receiver.
-    maps : list of (Hc, Wc) arrays
-        ``caustic_map_r`` of each receiver.
-    albedo : (R, 3)
-    ambient : float
-
-    Returns
-    -------
-    image : (H, W, 3) float32
-    mask : (H, W) bool
-        Pixels showing a receiver (the object pixels of eq. 2-9).
-
-    References
-    ----------
-    Tipprasert (2006), §4.6, eq. 4-19.
-    """
-    H, W = camera.shape
-    best = np.full((H, W), np.inf)
-    who = np.full((H, W), -1, np.int64)
-    for r in range(len(boxes)):
-        tv = camera.world_to_view(receivers.tris[receivers.owner == r])
-        d = rasterize(tv, camera, "min")
-        closer = d < best
-        best[closer] = d[closer]
-        who[closer] = r
-    image = np.zeros((H, W, 3), np.float32)
-    mask = who >= 0
-    if not mask.any():
-        return image, mask
-    _, rd = camera.primary_rays()
-    fwd = -camera.basis[2]
-    for r in range(len(boxes)):
-        sel = who == r
-        if not sel.any():
-            continue
-        dirs = rd[sel]
-        pts = np.asarray(camera.eye) + dirs * (best[sel] / dot(dirs, fwd))[:, None]
-        q = to_map(boxes[r], pts)
-        Hc, Wc = boxes[r].size
-        j = np.clip(np.floor(q[:, 0]).astype(np.int64), 0, Wc - 1)
-        i = np.clip(np.floor(q[:, 1]).astype(np.int64), 0, Hc - 1)
-        e = maps[r][i, j].astype(np.float64)
-        image[sel] = (np.asarray(albedo[r])[None, :] * (e[:, None] + ambient)).astype(np.float32)
-    return image, mask

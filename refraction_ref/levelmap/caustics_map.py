@@ -50,7 +50,8 @@ import numpy as np
 
 from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, pixel_span, row_span
 
-__all__ = ["BeamSet", "beams_in_map", "cull_beams", "splat_plane", "splat_planes", "GROUP_SECTIONS"]
+__all__ = ["BeamSet", "PlaneSet", "ReceiverTexels", "beams_in_map", "cull_beams", "splat_plane", "splat_planes",
+           "section_texels", "section_irradiance", "receiver_cosine", "GROUP_SECTIONS"]
 
 
 class _Beams(NamedTuple):
@@ -64,7 +65,7 @@ class _Beams(NamedTuple):
     tdz: np.ndarray  # (F,) T . T0
 
 
-class _Grid(NamedTuple):
+class _CausticsGrid(NamedTuple):
     """The caustics map drawn into: size, rows per band."""
 
     W: int
@@ -72,14 +73,51 @@ class _Grid(NamedTuple):
     band: int
 
 
-class _Planes(NamedTuple):
-    """The reference planes drawn in one pass, the water's absorption and the texel size."""
+class _SplatPlanes(NamedTuple):
+    """The reference planes drawn in one kernel launch, the water's absorption and the texel size."""
 
-    zp: np.ndarray  # (G,) plane depths
+    zeta: np.ndarray  # (G,) plane depths
     key: np.ndarray  # (G,) int64: a fragment of plane g is kept where accept == key[g]
     rect: np.ndarray  # (G, 4) int64 scissor rectangles (row0, row1, col0, col1)
     K: float  # absorption coefficient
     texel_area: float
+
+
+class PlaneSet(NamedTuple):
+    """Reference planes to draw: their depths, depth-test keys and scissor rectangles.
+
+    Attributes
+    ----------
+    zeta : (G,) float64
+        Plane depths along ``T0`` (map depth).
+    key : (G,) int64
+        A fragment of plane ``g`` is kept where the receiver's ``accept == key[g]``.
+    rect : (G, 4) int64
+        Scissor rectangle (row0, row1, col0, col1) of each plane; ``row0 > row1`` draws nothing.
+    """
+
+    zeta: np.ndarray
+    key: np.ndarray
+    rect: np.ndarray
+
+
+class ReceiverTexels(NamedTuple):
+    """Where fragments land: the depth test and the receiving surface, texel by texel.
+
+    Attributes
+    ----------
+    accept : (Hc, Wc) int32
+        A fragment of plane ``g`` is kept where ``accept == key[g]``: the plane
+        index map (level map, eq. 4-15) or a slice mask (slice-image baseline).
+    depth : (Hc, Wc) float64
+        The receiver's depth ``zeta`` (position map).
+    normal : (Hc, Wc, 3) float64
+        The receiver's unit normal.
+    """
+
+    accept: np.ndarray
+    depth: np.ndarray
+    normal: np.ndarray
 
 
 class _Sections(NamedTuple):
@@ -101,14 +139,6 @@ class _Bins(NamedTuple):
 
     counts: np.ndarray
     tris: np.ndarray
-
-
-class _Receiver(NamedTuple):
-    """Where fragments land: the depth test and the receiving surface."""
-
-    accept: np.ndarray  # (Hc, Wc) int32: a fragment of plane g is kept where accept == planes.key[g]
-    zeta: np.ndarray  # (Hc, Wc) receiver depth
-    normal: np.ndarray  # (Hc, Wc, 3) receiver unit normal
 
 
 class BeamSet:
@@ -238,16 +268,98 @@ def cull_beams(beams, box, zmin, zmax):
     return np.flatnonzero(ok & inside & top).astype(np.int64)
 
 
+@nb.njit(cache=True, inline="always")
+def section_texels(c0, r0, c1, r1, c2, r2):
+    """Area of an intersection triangle in texels, at least one texel.
+
+    The (unsnapped) triangle's vertices are ``(c_k, r_k)`` in texel units; a
+    beam focused (or folded) to less than a texel counts one texel, so a
+    caustic singularity deposits at most its flux over one texel's area.
+
+    Parameters
+    ----------
+    c0, r0, c1, r1, c2, r2 : float
+        Columns and rows of the three vertices.
+
+    Returns
+    -------
+    float
+        ``max(|A_p|, 1)``, texels.
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eq. 4-18 (``A_d``, the intersection area), Fig. 4-14.
+    """
+    af = (c1 - c0) * (r2 - r0) - (r1 - r0) * (c2 - c0)
+    return max(0.5 * abs(af), 1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def section_irradiance(flux, inv_tv, area_texels, texel_area):
+    """Eq. 4-18 on a reference plane: a beam's flux over its cross-section perpendicular to its axis.
+
+    ``I_c = I_i A_w cos(theta_i) / (A_d cos(theta_t))`` with the flux
+    ``Phi = I_i A_w cos(theta_i)`` (:func:`~.illumination.illumination_volumes`)
+    and the perpendicular cross-section ``A_p |T . V|``; the receiver's
+    cosine (:func:`receiver_cosine`) and the absorption ``exp(-K d)``
+    (eq. 4-17) multiply it texel by texel.
+
+    Parameters
+    ----------
+    flux : float
+        ``Phi`` of the beam.
+    inv_tv : float
+        ``1 / |T . V|`` of its axis.
+    area_texels : float
+        The intersection triangle's area in texels (:func:`section_texels`).
+    texel_area : float
+        One texel's area on the plane, scene units.
+
+    Returns
+    -------
+    float
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eq. 4-18.
+    """
+    return flux * inv_tv / (area_texels * texel_area)
+
+
+@nb.njit(cache=True, inline="always")
+def receiver_cosine(tx, ty, tz, normal, i, j):
+    """``|T . n|``: eq. 4-18's intensity as irradiance on the receiver of texel ``(i, j)``.
+
+    Parameters
+    ----------
+    tx, ty, tz : float
+        The beam axis ``T`` (world).
+    normal : (Hc, Wc, 3) float64
+        The receiver's unit normals.
+    i, j : int
+        The texel.
+
+    Returns
+    -------
+    float
+
+    References
+    ----------
+    Tipprasert (2006), §4.5, eq. 4-18 (``cos theta`` at the receiver).
+    """
+    return abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
+
+
 @nb.njit(cache=True, parallel=True)
 def _sections(beams, planes, grid, sec):
-    """Intersection triangles of the candidate beams ``sec.cand`` with every plane ``zeta = planes.zp[g]``."""
+    """Intersection triangles of the candidate beams ``sec.cand`` with every plane ``zeta = planes.zeta[g]``."""
     # the named tuples unpacked by name, one field per statement, outside the prange loop (inside it,
     # Numba drops stores into arrays taken from a tuple: numba#7135)
     O = beams.O
     D = beams.D
     flux = beams.flux
     inv_tv = beams.inv_tv
-    zps = planes.zp
+    zetas = planes.zeta
     rects = planes.rect
     texel_area = planes.texel_area
     cand = sec.cand
@@ -260,7 +372,7 @@ def _sections(beams, planes, grid, sec):
     for s in nb.prange(X.shape[0]):
         g = s // M
         t = cand[s - g * M]
-        zp = zps[g]
+        zp = zetas[g]
         ok = flux[t] > 0.0
         lam0 = 0.0
         lam1 = 0.0
@@ -301,10 +413,7 @@ def _sections(beams, planes, grid, sec):
                 r2 = r
         i0, i1 = 1, 0
         if ok:
-            # area of the (unsnapped) intersection triangle in texels, at least one texel
-            af = (c1 - c0) * (r2 - r0) - (r1 - r0) * (c2 - c0)
-            a_tex = max(0.5 * abs(af), 1.0)
-            B[s] = flux[t] * inv_tv[t] / (a_tex * texel_area)
+            B[s] = section_irradiance(flux[t], inv_tv[t], section_texels(c0, r0, c1, r1, c2, r2), texel_area)
             C[s, 0] = lam0
             C[s, 1] = lam1
             C[s, 2] = lam2
@@ -321,9 +430,9 @@ def _sections(beams, planes, grid, sec):
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat(beams, sec, bins, grid, recv, planes, out):
+def _splat(beams, sec, bins, grid, texels, planes, out):
     """Additive blending of intersection triangles, plane after plane; fragments pass where
-    ``recv.accept == planes.key[g]`` (the depth test of eq. 4-15)."""
+    ``texels.accept == planes.key[g]`` (the depth test of eq. 4-15)."""
     # unpacked by name, one field per statement, outside the prange loop (see _sections)
     tbar = beams.tbar
     tdz = beams.tdz
@@ -337,10 +446,10 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
     tris = bins.tris
     H = grid.H
     band = grid.band
-    accept = recv.accept
-    zeta = recv.zeta
-    normal = recv.normal
-    zps = planes.zp
+    accept = texels.accept
+    depth = texels.depth
+    normal = texels.normal
+    zetas = planes.zeta
     keys = planes.key
     rects = planes.rect
     K = planes.K
@@ -354,7 +463,7 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
             g = s // M
             t = cand[s - g * M]
             key = keys[g]
-            zp = zps[g]
+            zp = zetas[g]
             # a folded beam (negative area): same coverage, re-oriented
             x0, y0, x1, y1, x2, y2, c0, c1, c2, area, _ = oriented_triangle(X, Y, C, s)
             if area == 0:
@@ -383,10 +492,10 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
                         w2 -= 256 * a2
                     if accept[i, j] != key:  # depth test against the position map (eq. 4-15)
                         continue
-                    g_ = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
+                    g_ = receiver_cosine(tx, ty, tz, normal, i, j)
                     if K > 0.0:
                         lam = (w0 * c0 + w1 * c1 + w2 * c2) * inv_area
-                        g_ *= math.exp(-K * lam - kk * (zeta[i, j] - zp))
+                        g_ *= math.exp(-K * lam - kk * (depth[i, j] - zp))
                     out[i, j] += base * g_
 
 
@@ -396,8 +505,8 @@ def _splat(beams, sec, bins, grid, recv, planes, out):
 GROUP_SECTIONS = 1 << 18
 
 
-def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, out):
-    """Draw every candidate beam's intersection triangle with each plane ``zps[g]`` into ``out``.
+def splat_planes(beams, cand, box, planes, texels, K, out):
+    """Draw every candidate beam's intersection triangle with each plane of ``planes`` into ``out``.
 
     Planes are drawn in order, in groups of about :data:`GROUP_SECTIONS`
     sections per kernel launch; a texel receives its additions plane by plane,
@@ -410,17 +519,12 @@ def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, ou
     cand : (M,) int64
         Candidate beams (:func:`cull_beams`, or every beam with flux).
     box : Box
-    zps : (G,) float
-        Plane depths.
+    planes : PlaneSet
+        Plane depths, depth-test keys and scissor rectangles.
+    texels : ReceiverTexels
+        The depth-test map, depth and unit normal of the receiver at each texel.
     K : float
-        Absorption coefficient of the water.
-    rects : (G, 4) int64
-        Scissor rectangle (row0, row1, col0, col1) of each plane; ``row0 > row1`` draws nothing.
-    accept : (Hc, Wc) int32 and keys : (G,) int
-        A fragment of plane g is kept where ``accept == keys[g]``: the plane
-        index map (level map, eq. 4-15) or a slice mask (volumetric baseline).
-    zeta, normal : (Hc, Wc), (Hc, Wc, 3)
-        Depth and unit normal of the receiver surface at each texel.
+        Absorption coefficient of the water (``water.absorption``).
     out : (Hc, Wc) float64
         Accumulated irradiance (additive blending).
 
@@ -435,33 +539,32 @@ def splat_planes(beams, cand, box, zps, K, rects, accept, keys, zeta, normal, ou
     """
     Hc, Wc = box.size
     M = len(cand)
-    zps = np.asarray(zps, np.float64).reshape(-1)
-    keys = np.asarray(keys, np.int64).reshape(-1)
-    rects = np.ascontiguousarray(np.asarray(rects, np.int64).reshape(-1, 4))
+    zetas = np.asarray(planes.zeta, np.float64).reshape(-1)
+    keys = np.asarray(planes.key, np.int64).reshape(-1)
+    rects = np.ascontiguousarray(np.asarray(planes.rect, np.int64).reshape(-1, 4))
     live = np.flatnonzero(rects[:, 0] <= rects[:, 1])
     if M == 0 or len(live) == 0:
         return 0
-    grid = _Grid(Wc, Hc, BAND)
+    grid = _CausticsGrid(Wc, Hc, BAND)
     arrays = beams.arrays
-    recv = _Receiver(accept, zeta, normal)
     G = max(1, GROUP_SECTIONS // M)
     drawn = 0
     for a in range(0, len(live), G):
         idx = live[a:a + G]
         S = len(idx) * M
-        planes = _Planes(np.ascontiguousarray(zps[idx]), np.ascontiguousarray(keys[idx]),
-                         np.ascontiguousarray(rects[idx]), float(K), float(box.texel_area))
+        group = _SplatPlanes(np.ascontiguousarray(zetas[idx]), np.ascontiguousarray(keys[idx]),
+                             np.ascontiguousarray(rects[idx]), float(K), float(box.texel_area))
         sec = _Sections(cand, np.empty((S, 3), np.int64), np.empty((S, 3), np.int64), np.empty((S, 3), np.float64),
                         np.zeros(S, np.float64), np.empty((S, 2), np.int64))
-        _sections(arrays, planes, grid, sec)
+        _sections(arrays, group, grid, sec)
         bins = _Bins(*bin_bands(sec.rows, Hc, BAND))
-        _splat(arrays, sec, bins, grid, recv, planes, out)
+        _splat(arrays, sec, bins, grid, texels, group, out)
         drawn += int(np.count_nonzero(sec.rows[:, 0] <= sec.rows[:, 1]))
     return drawn
 
 
-def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
-    """:func:`splat_planes` for one plane ``zp`` with scissor ``rect`` and depth-test key ``key``.
+def splat_plane(beams, cand, box, plane, texels, K, out):
+    """:func:`splat_planes` for one plane.
 
     Parameters
     ----------
@@ -469,17 +572,13 @@ def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
     cand : (M,) int64
         Candidate beams.
     box : Box
-    zp : float
-        Plane depth.
+    plane : PlaneSet
+        One plane: ``zeta`` a float, ``key`` an int, ``rect`` (4,) int64.
+    texels : ReceiverTexels
+        Depth-test map (a fragment is kept where ``accept == plane.key``),
+        depth and unit normal of the receiver at each texel.
     K : float
         Absorption coefficient of the water.
-    rect : (4,) int64
-        Scissor rectangle (row0, row1, col0, col1).
-    accept : (Hc, Wc) int32
-        Depth-test map: a fragment is kept where ``accept == key``.
-    key : int
-    zeta, normal : (Hc, Wc), (Hc, Wc, 3)
-        Depth and unit normal of the receiver at each texel.
     out : (Hc, Wc) float64
         Accumulated irradiance (additive blending).
 
@@ -492,5 +591,5 @@ def splat_plane(beams, cand, box, zp, K, rect, accept, key, zeta, normal, out):
     ----------
     Tipprasert (2006), §4.5, eqs. 4-15 to 4-18, Fig. 4-15.
     """
-    return splat_planes(beams, cand, box, [zp], K, np.asarray(rect, np.int64).reshape(1, 4), accept, [key], zeta,
-                        normal, out)
+    one = PlaneSet([plane.zeta], [plane.key], np.asarray(plane.rect, np.int64).reshape(1, 4))
+    return splat_planes(beams, cand, box, one, texels, K, out)

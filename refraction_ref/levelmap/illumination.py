@@ -64,13 +64,17 @@ class _Light(NamedTuple):
     weight: float  # mean radiance (:func:`~.water.light_weight`)
 
 
-class _Mesh(NamedTuple):
+class _WaterArrays(NamedTuple):
+    """The water mesh as the kernels take it."""
+
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray
 
 
-class _Out(NamedTuple):
+class _VolumeArrays(NamedTuple):
+    """The kernel's outputs: :class:`IlluminationVolumes`' arrays."""
+
     origins: np.ndarray
     dirs: np.ndarray
     flux: np.ndarray
@@ -192,12 +196,12 @@ def illumination_volumes(light, mesh, eta):
     d = d / np.linalg.norm(d)
     pos = np.asarray(light["position"] if point else [0.0, 0.0, 0.0], dtype=np.float64)
     lt = _Light(point, d, pos, light_weight(light))
-    m = _Mesh(np.ascontiguousarray(mesh.vertices, np.float64), np.ascontiguousarray(mesh.faces, np.int64),
+    m = _WaterArrays(np.ascontiguousarray(mesh.vertices, np.float64), np.ascontiguousarray(mesh.faces, np.int64),
               np.ascontiguousarray(mesh.normals, np.float64))
     nv, nf = len(m.vertices), len(m.faces)
     T = np.empty((nv, 3))
     ok = np.empty(nv, np.bool_)
     _refract_vertices(m, lt, float(eta), T, ok)
-    out = _Out(np.empty((nf, 3, 3)), np.empty((nf, 3, 3)), np.empty(nf), np.empty((nf, 3)))
+    out = _VolumeArrays(np.empty((nf, 3, 3)), np.empty((nf, 3, 3)), np.empty(nf), np.empty((nf, 3)))
     _volumes(m, lt, T, ok, out)
     return IlluminationVolumes(out.origins, out.dirs, out.flux, out.mean_dir)

@@ -29,18 +29,19 @@ __all__ = ["plane_index_map", "plane_rects", "section_points"]
 
 
 @nb.njit(cache=True, parallel=True)
-def _plane_index(depth, own, ztop, s, n, out):
+def _plane_index(depth, own, zlo, s, n, out):
+    """out[i, j]: plane ``floor((zeta - zlo) / s)`` accepting the texel (eq. 4-15), -1 for none."""
     H, W = depth.shape
     for i in nb.prange(H):
         for j in range(W):
             out[i, j] = -1
             if own[i, j]:
-                k = np.int64(np.floor((depth[i, j] - ztop) / s))
+                k = np.int64(np.floor((depth[i, j] - zlo) / s))
                 if k >= 0 and k < n:
                     out[i, j] = k
 
 
-def plane_index_map(lm, box, n, placement="tight"):
+def plane_index_map(lm, box, n, placement):
     """Plane accepting each texel: ``|zeta - zeta_i| < eps`` (eq. 4-15), ``-1`` for none.
 
     Parameters
@@ -50,8 +51,8 @@ def plane_index_map(lm, box, n, placement="tight"):
     n : int
         Number of planes of the normal slicing (smart slicing only removes
         planes of this lattice, see :mod:`.smart_slicing`).
-    placement : {"tight", "thesis"}
-        The lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
+    placement : {"component", "thesis", "tight"}
+        ``caustics.placement``: the lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
 
     Returns
     -------

@@ -1,55 +1,155 @@
-"""The ``levelmap`` and ``water`` knob blocks (Tipprasert 2006): defaults and validation side by side.
+"""The ``levelmap`` and ``water`` knob blocks (Tipprasert 2006), each knob declared once.
 
 Importing this module is cheap (no kernels): scene loading reads it. The
 lights of a water scene are checked by :func:`refraction_ref.lights.validate_lights`.
 
-Water fields: ``size`` [sx, sz] (> 0, centred on the origin in x and z),
-``height``, ``resolution`` (quads per side), ``ior`` (> 0; above the
-outside's for light to enter), ``absorption`` K (>= 0, per unit length),
-``waves``: a list of {``amplitude``, ``wavelength`` (> 0), ``direction``
-[x, z] (non-zero, normalised on use), ``phase``}.
-
-Level-map knobs: ``planes`` (1..4096), ``smart_slicing`` (bool),
-``depth_levels`` (1..65536), ``variant`` (``levelmap`` | ``volumetric`` |
-``per_ray``), ``smart_spacing`` (``respace`` | ``lattice``: smart slicing re-spaces
-``n_i`` planes in each sub-box by eq. 4-22, the thesis's and the default since
-contract_version 5, or drops the normal slicing's empty planes), ``culling`` (``none`` | ``bounds``: every intersection triangle over
-the whole map on every plane, the thesis's cost, or §6.1's bounding-volume
-test and a scissor per plane; the same maps).
+The ``water`` block is absent unless a scene gives it (``"water": null`` is no
+water); a given block, and each of its waves, is filled with the declared
+defaults by :func:`merge_water`. The height field is
+``h(x, z) = height + sum_k a_k sin(2 pi/lambda_k (d_k . (x, z)) + phi_k)``
+(:mod:`.water`).
 
 Moved keys (old names keep working as aliases): ``map_size``, ``placement``,
 ``shadows`` and ``ambient`` are the ``caustics`` block's
 (:mod:`refraction_ref.caustics.knobs`: ``caustics.map_size``, ...);
 ``exact_samples`` and ``exact_seed`` the exact reference's
 (``exact.water_samples``, ``exact.photon_seed``).
+
+:func:`levelmap_knobs` builds the one typed value (:class:`LevelMapKnobs`)
+the caustics passes take, with the choices resolved here.
+
+References
+----------
+.. [1] N. Tipprasert, "An Interactive Rendering Method for Water-Side Scene
+   with Caustics Using Level Map Method", M.Eng. thesis, Chulalongkorn
+   University, 2006, §4.2.1, §4.3, §4.5, §4.7.2, §5.2.1, §6.1, §6.3.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from ..graph import KnobBlock, register_block
+from ..knobs import Knob, declare_block
 
-__all__ = ["merge_water", "validate_levelmap", "VARIANTS", "LEVELMAP_DEFAULTS", "WATER_DEFAULTS",
-           "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE"]
+__all__ = ["merge_water", "LEVELMAP_KNOBS", "WATER_KNOBS", "WAVE_KNOBS", "VARIANTS", "SPACINGS", "CULLINGS",
+           "LEVELMAP_DEFAULTS", "WATER_DEFAULTS", "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE",
+           "LevelMapKnobs", "levelmap_knobs", "BLOCK", "WATER_BLOCK"]
 
 VARIANTS = ("levelmap", "volumetric", "per_ray")
 SPACINGS = ("lattice", "respace")
 CULLINGS = ("none", "bounds")
 
-LEVELMAP_DEFAULTS = {
-    "planes": 50, "smart_slicing": True, "depth_levels": 32, "variant": "levelmap",
-    "smart_spacing": "respace", "culling": "none",
-}
+LEVELMAP_KNOBS = (
+    Knob("planes", 50,
+         "reference **planes** per (receiver, light), the thesis's \"Num Plane\" (Tables 5-1 to 5-5): with "
+         "`caustics.placement = component` (or `thesis`) they slice the box into `planes - 1` slices (eq. 4-6: n "
+         "slices, n + 1 planes), `D_i = h/2 - s (i - 1)`, `s = h / (planes - 1)` (eqs. 4-7 to 4-9), the first and "
+         "last on the box's faces (one plane: at the centre, accepting the whole box); with `tight` at the centres "
+         "of `planes` equal slabs. Plane i accepts `[zeta_i - s/2, zeta_i + s/2)` (eq. 4-15)",
+         "§4.2.1, eqs. 4-6 to 4-9", kind="int", lo=1, hi=4096),
+    Knob("smart_spacing", "respace",
+         "smart slicing's planes: \"respace\" (the thesis's, the default from contract_version 5) slices each "
+         "sub-box anew with `n_i = max(round(hr_i / (2 eps)), 1)` **planes** by eq. 4-22 and §4.2.1's slicing "
+         "(texels change; `n_i` counts planes as Table 5-4 does: sphere 3 -> 1, 101 -> 50); \"lattice\" (the "
+         "default of contract_version 4) keeps the normal slicing's planes that meet a sub-box and drops the rest "
+         "(no texel changes: Table 5-5's zero by construction)",
+         "§4.7.2, eqs. 4-21, 4-22; Table 5-4", kind="choice", choices=SPACINGS, allowed='"respace", "lattice"'),
+    Knob("culling", "none",
+         "the per-plane work: \"none\" every beam's intersection triangle drawn over the whole map on every plane "
+         "drawn, each fragment depth-tested (the thesis's cost, Figs. 4-15, 5-7); \"bounds\" §6.1's bounding-volume "
+         "test (beams that cannot reach the box culled, each plane scissored to the texels it accepts). The maps "
+         "are identical bit for bit",
+         "§4.5, §6.1", kind="choice", choices=CULLINGS),
+    Knob("smart_slicing", True, "keep only the planes where light can meet the receiver",
+         "§4.7.2, eqs. 4-21, 4-22", kind="bool"),
+    Knob("depth_levels", 32, "depth levels of the smart-slicing depth profile", "§4.7.2", kind="int", lo=1,
+         hi=65536),
+    Knob("variant", "levelmap",
+         "the level map (ch. 4); the volumetric slice baseline of Iwasaki et al. 2003 (§5.2.1; unrelated to "
+         "`--method volumetric`); or each beam drawn where it hits (§6.3)",
+         "ch. 4, §5.2.1, §6.3", kind="choice", choices=VARIANTS),
+)
 
-#: Water block (merged only when a scene has one; "water": null means no water).
-WATER_DEFAULTS = {"size": [4.0, 4.0], "height": 0.0, "resolution": 128, "ior": 1.33, "absorption": 0.0,
-                  "waves": []}
-WAVE_DEFAULTS = {"amplitude": 0.02, "wavelength": 0.5, "direction": [1.0, 0.0], "phase": 0.0}
+#: the ``levelmap`` block's defaults, in the scene's key order
+LEVELMAP_DEFAULTS = {k.name: k.default for k in LEVELMAP_KNOBS}
+
+
+def _check_size(value, where, data):
+    from ..validation import SceneError, check_vector
+
+    size = check_vector(value, 2, where)
+    if np.any(size <= 0):
+        raise SceneError(f"scene: '{where}' is {value}; both extents must be > 0")
+
+
+def _check_direction(value, where, data):
+    from ..validation import SceneError, check_vector
+
+    d = check_vector(value, 2, where)
+    if not np.any(d != 0):
+        raise SceneError(f"scene: '{where}' is [0, 0]; give a non-zero [x, z] direction")
+
+
+WAVE_KNOBS = (
+    Knob("amplitude", 0.02, "a_k", "", kind="float"),
+    Knob("wavelength", 0.5, "lambda_k, scene units", "", kind="float", lo=0.0, lo_open=True),
+    Knob("direction", [1.0, 0.0], "d_k, normalised on use", "", allowed="non-zero [x, z]", check=_check_direction),
+    Knob("phase", 0.0, "phi_k, radians", "", kind="float"),
+)
+
+#: one wave's defaults (each wave of ``water.waves`` is merged over them)
+WAVE_DEFAULTS = {k.name: k.default for k in WAVE_KNOBS}
+
+
+def _check_waves(waves, where, data):
+    """Each wave by :data:`WAVE_KNOBS`, then the waves' summed slope (a height field does not fold)."""
+    from ..knobs import check_knob
+    from ..validation import SceneError
+
+    for k, wave in enumerate(waves):
+        for knob in WAVE_KNOBS:
+            check_knob(knob, wave[knob.name], f"{where}[{k}].{knob.name}", data)
+    slope = max_slope(data["water"])
+    if slope >= 1.0:
+        raise SceneError(f"scene: the water's waves are too steep: the sum of 2 pi amplitude / wavelength is "
+                         f"{slope:.3g} >= 1, where the surface folds over itself and is no height field; "
+                         "lower water.waves[k].amplitude or raise the wavelengths")
+
+
+WATER_KNOBS = (
+    Knob("size", [4.0, 4.0], "extents [sx, sz], centred on the origin in x and z", "§4.3",
+         allowed="two numbers > 0", check=_check_size),
+    Knob("height", 0.0, "mean surface height (world y)", "§4.3", kind="float"),
+    Knob("resolution", 128, "quads per side of the water mesh (two triangles each)", "§4.3", kind="int", lo=1,
+         hi=4096),
+    Knob("ior", 1.33, "index of the water; light enters from `outside_ior`", "§2.6, eq. 2-8", kind="float",
+         lo=0.0, lo_open=True),
+    Knob("absorption", 0.0, "K, per scene unit: `exp(-K d)` over the distance d in water", "eq. 4-17",
+         kind="float", lo=0.0),
+    Knob("waves", [], "summed sine waves; [] is a flat surface", "§4.3", allowed="list", check=_check_waves),
+)
+
+#: the ``water`` block's defaults (merged only when a scene has one; "water": null means no water)
+WATER_DEFAULTS = {k.name: k.default for k in WATER_KNOBS}
 
 
 def merge_water(data, water_defaults=WATER_DEFAULTS, wave_defaults=WAVE_DEFAULTS):
-    """Fill a present ``water`` block (and each wave) with the defaults; idempotent."""
+    """Fill a present ``water`` block (and each wave) with the defaults; idempotent.
+
+    Parameters
+    ----------
+    data : dict
+        The scene being resolved; its ``water`` is replaced by the merged block.
+    water_defaults, wave_defaults : dict
+        The block's and one wave's defaults.
+
+    Returns
+    -------
+    dict
+        ``data``.
+    """
     from ..validation import SceneError, merge_defaults
 
     w = data.get("water")
@@ -66,51 +166,17 @@ def merge_water(data, water_defaults=WATER_DEFAULTS, wave_defaults=WAVE_DEFAULTS
     return data
 
 
-def validate_levelmap(data, base_dir="."):
-    """Check the ``levelmap`` knobs and the ``water`` block (merged with its defaults first)."""
-    from ..validation import SceneError, check_number, check_vector
+def _check_camera_above_water(data, base_dir="."):
+    """The water methods render a camera above the surface: above the highest crest."""
+    from ..validation import SceneError
 
-    merge_water(data)
-    p = data["levelmap"]
-    check_number(p["planes"], "levelmap.planes", 1, 4096, integer=True)
-    check_number(p["depth_levels"], "levelmap.depth_levels", 1, 65536, integer=True)
-    if not isinstance(p["smart_slicing"], bool):
-        raise SceneError(f"scene: levelmap.smart_slicing must be true or false, got {p['smart_slicing']!r}")
-    if p["variant"] not in VARIANTS:
-        raise SceneError(f"scene: 'levelmap.variant' is {p['variant']!r}; choose one of {', '.join(VARIANTS)}")
-    for k, allowed in (("smart_spacing", SPACINGS), ("culling", CULLINGS)):
-        if p[k] not in allowed:
-            raise SceneError(f"scene: 'levelmap.{k}' is {p[k]!r}; choose one of {', '.join(allowed)}")
-    w = data.get("water")
-    if w is None:
-        return data
-    size = check_vector(w["size"], 2, "water.size")
-    if np.any(size <= 0):
-        raise SceneError(f"scene: 'water.size' is {w['size']}; both extents must be > 0")
-    check_number(w["height"], "water.height")
-    check_number(w["resolution"], "water.resolution", 1, 4096, integer=True)
-    check_number(w["ior"], "water.ior", 0.0, lo_open=True)
-    check_number(w["absorption"], "water.absorption", 0.0)
-    amp = 0.0
-    for k, wave in enumerate(w["waves"]):
-        amp += abs(check_number(wave["amplitude"], f"water.waves[{k}].amplitude"))
-        check_number(wave["wavelength"], f"water.waves[{k}].wavelength", 0.0, lo_open=True)
-        d = check_vector(wave["direction"], 2, f"water.waves[{k}].direction")
-        if not np.any(d != 0):
-            raise SceneError(f"scene: 'water.waves[{k}].direction' is [0, 0]; give a non-zero [x, z] direction")
-        check_number(wave["phase"], f"water.waves[{k}].phase")
-    slope = max_slope(w)
-    if slope >= 1.0:
-        raise SceneError(f"scene: the water's waves are too steep: the sum of 2 pi amplitude / wavelength is "
-                         f"{slope:.3g} >= 1, where the surface folds over itself and is no height field; "
-                         "lower water.waves[k].amplitude or raise the wavelengths")
-    top = float(w["height"]) + amp
+    w = data["water"]
+    top = float(w["height"]) + sum(abs(float(x["amplitude"])) for x in w["waves"])
     eye_y = float(data["camera"]["eye"][1])
     if eye_y <= top:
         raise SceneError(f"scene: camera.eye is at y = {eye_y:g}, not above the water (its crests reach "
                          f"y = {top:g}); the water methods render a camera above the surface: raise camera.eye "
                          "or lower water.height")
-    return data
 
 
 #: above this slope (sum of 2 pi a / lambda) the level map's assumptions start to break: beams
@@ -120,12 +186,33 @@ STEEP_SLOPE = 0.3
 
 
 def max_slope(water):
-    """The steepest slope the water's waves can reach together: sum of ``2 pi a / lambda`` (eq. 2-1)."""
+    """The steepest slope the water's waves can reach together: sum of ``2 pi a / lambda``.
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block.
+
+    Returns
+    -------
+    float
+
+    References
+    ----------
+    Tipprasert (2006), §4.3 (the water surface), §4.2.1 (gentle waves).
+    """
     return float(sum(2.0 * np.pi * abs(float(x["amplitude"])) / float(x["wavelength"]) for x in water["waves"]))
 
 
 def check_water_depth(water, receiver_vertices):
     """Refuse waves that reach a receiver below the water plane (the beams would start inside it).
+
+    Parameters
+    ----------
+    water : dict
+        The resolved ``water`` block.
+    receiver_vertices : list of (V, 3) arrays
+        Each receiver's world vertices.
 
     Raises
     ------
@@ -144,12 +231,70 @@ def check_water_depth(water, receiver_vertices):
                          f"= {h:g}); lower water.waves[k].amplitude or the receivers")
 
 
+class LevelMapKnobs(NamedTuple):
+    """The knobs the caustics passes of one scene take, with their choices resolved.
+
+    Attributes
+    ----------
+    planes : int
+        ``levelmap.planes``.
+    smart_slicing : bool
+        ``levelmap.smart_slicing``.
+    depth_levels : int
+        ``levelmap.depth_levels``.
+    variant : str
+        ``levelmap.variant`` (the scene's value: ``"volumetric"`` is the
+        thesis's slice-image baseline).
+    respace : bool
+        ``levelmap.smart_spacing == "respace"``.
+    cull : bool
+        ``levelmap.culling == "bounds"``.
+    placement : str
+        ``caustics.placement`` (the plane lattice).
+    K : float
+        ``water.absorption``.
+    """
+
+    planes: int
+    smart_slicing: bool
+    depth_levels: int
+    variant: str
+    respace: bool
+    cull: bool
+    placement: str
+    K: float
+
+
+def levelmap_knobs(levelmap, placement, absorption):
+    """The :class:`LevelMapKnobs` of a resolved scene.
+
+    Parameters
+    ----------
+    levelmap : dict
+        The resolved ``levelmap`` block.
+    placement : str
+        ``caustics.placement``.
+    absorption : float
+        ``water.absorption``, as the ``water`` stage read it.
+
+    Returns
+    -------
+    LevelMapKnobs
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, §4.5, §4.7.2, §5.2.1, §6.1, §6.3.
+    """
+    return LevelMapKnobs(int(levelmap["planes"]), bool(levelmap["smart_slicing"]), int(levelmap["depth_levels"]),
+                         levelmap["variant"], levelmap["smart_spacing"] == "respace", levelmap["culling"] == "bounds",
+                         placement, float(absorption))
+
+
 #: keys that moved: the receivers' caustic maps' settings to the ``caustics`` block, the exact water
 #: reference's to the ``exact`` block
 ALIASES = {"map_size": "caustics.map_size", "placement": "caustics.placement", "shadows": "caustics.shadows",
            "ambient": "caustics.ambient", "exact_samples": "exact.water_samples", "exact_seed": "exact.photon_seed"}
 
-BLOCK = register_block(KnobBlock("levelmap", LEVELMAP_DEFAULTS, validate_levelmap, owner="levelmap",
-                                 aliases=ALIASES))
-WATER_BLOCK = register_block(KnobBlock("water", None, lambda data, base_dir=".": data, owner="levelmap",
-                                       merge=merge_water))
+BLOCK = declare_block("levelmap", LEVELMAP_KNOBS, owner="levelmap", aliases=ALIASES)
+WATER_BLOCK = declare_block("water", WATER_KNOBS, owner="levelmap", extra=_check_camera_above_water,
+                            merge=merge_water, present=False)

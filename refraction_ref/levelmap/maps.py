@@ -31,7 +31,7 @@ import numpy as np
 from ..raster import ortho_setup, rasterize_ortho
 from ..caustics.receivers import Receivers  # the receivers' triangle soup, shared with the caustics
 
-__all__ = ["Receivers", "LevelMap", "level_map", "receiver_selection", "map_setup"]
+__all__ = ["Receivers", "LevelMap", "LevelMapPair", "level_map", "receiver_selection", "map_setup"]
 
 
 class LevelMap(NamedTuple):
@@ -53,7 +53,32 @@ class LevelMap(NamedTuple):
     diffuse: np.ndarray
 
 
-class _Source(NamedTuple):
+class LevelMapPair(NamedTuple):
+    """One (receiver, light) pair's reference box, the receiver triangles drawn and its level map.
+
+    Attributes
+    ----------
+    box : Box
+        The reference box (eqs. 4-1 to 4-3).
+    sel : (T',) int64
+        The receiver triangles drawn into its maps (:func:`receiver_selection`).
+    setup : RasterSetup
+        Their map-space triangles (:func:`map_setup`), reused by the slices
+        of the slice-image baseline.
+    lm : LevelMap
+        Position and diffuse maps (eqs. 4-10 to 4-13).
+    receiver : int
+        The receiver whose box this is.
+    """
+
+    box: object
+    sel: np.ndarray
+    setup: object
+    lm: LevelMap
+    receiver: int
+
+
+class _MapSource(NamedTuple):
     """The visibility buffer and what each triangle id resolves to."""
 
     ids: np.ndarray  # (Hc, Wc) index into sel, -1 where none
@@ -114,7 +139,7 @@ def level_map(receivers, r, box, shadows=True, setup=None):
         The receiver triangles drawn (indices into ``receivers.tris``).
     setup : RasterSetup
         Their snapped, binned map-space triangles (reused by the slices of
-        the volumetric baseline).
+        the slice-image baseline).
 
     References
     ----------
@@ -129,7 +154,7 @@ def level_map(receivers, r, box, shadows=True, setup=None):
     own = np.empty((Hc, Wc), np.bool_)
     normal = np.empty((Hc, Wc, 3), np.float64)
     diffuse = np.empty((Hc, Wc, 3), np.float32)
-    src = _Source(np.ascontiguousarray(ids), np.ascontiguousarray(sel, np.int64), receivers.owner, receivers.normals,
+    src = _MapSource(np.ascontiguousarray(ids), np.ascontiguousarray(sel, np.int64), receivers.owner, receivers.normals,
                   np.ascontiguousarray(receivers.albedo[r], np.float64), int(r))
     _fill(src, tri, own, normal, diffuse)
     return LevelMap(depth, tri, own, normal, diffuse), sel, setup

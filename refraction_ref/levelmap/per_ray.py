@@ -35,6 +35,7 @@ import numba as nb
 import numpy as np
 
 from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, row_span
+from .caustics_map import receiver_cosine, section_irradiance, section_texels
 
 __all__ = ["search_hits", "per_ray_caustics"]
 
@@ -49,7 +50,7 @@ class _Regions(NamedTuple):
     tris: np.ndarray
 
 
-class _Grid(NamedTuple):
+class _PerRayGrid(NamedTuple):
     """The caustics map: size and rows per band."""
 
     W: int
@@ -57,7 +58,7 @@ class _Grid(NamedTuple):
     band: int
 
 
-class _Receiver(NamedTuple):
+class _PerRayTexels(NamedTuple):
     """The receiving surface, texel by texel."""
 
     accept: np.ndarray  # (Hc, Wc) bool: texels of this receiver inside the box
@@ -65,8 +66,8 @@ class _Receiver(NamedTuple):
     normal: np.ndarray  # (Hc, Wc, 3) unit normal
 
 
-class _Knobs(NamedTuple):
-    """Absorption and texel size."""
+class _PerRayScale(NamedTuple):
+    """Absorption (``water.absorption``) and texel size."""
 
     K: float
     texel_area: float
@@ -153,7 +154,7 @@ def _regions(O, D, cand, hit, zlo_own, zhi_own, W, H, rows, cols):
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat_own_depth(beams, reg, grid, recv, knobs, out):
+def _splat_own_depth(beams, reg, grid, texels, scale, out):
     """Each beam drawn over its region, every texel at its own depth (step 2)."""
     # the named tuples unpacked by name, outside the prange loop (inside it, Numba
     # drops stores into arrays taken from a tuple: numba#7135)
@@ -169,11 +170,11 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
     tris = reg.tris
     H = grid.H
     band = grid.band
-    accept = recv.accept
-    depth = recv.depth
-    normal = recv.normal
-    K = knobs.K
-    texel_area = knobs.texel_area
+    accept = texels.accept
+    depth = texels.depth
+    normal = texels.normal
+    K = scale.K
+    texel_area = scale.texel_area
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         # this texel's triangle as triangle 0 of (1, 3) arrays, the rasterizer's layout
@@ -223,10 +224,9 @@ def _splat_own_depth(beams, reg, grid, recv, knobs, out):
                                                   i, j, j)
                     if ja > jb:
                         continue
-                    af = (FC[1] - FC[0]) * (FR[2] - FR[0]) - (FR[1] - FR[0]) * (FC[2] - FC[0])
-                    a_tex = max(0.5 * abs(af), 1.0)  # unsnapped area in texels, >= one texel
-                    base = flux[t] * inv_tv[t] / (a_tex * texel_area)
-                    g = abs(tx * normal[i, j, 0] + ty * normal[i, j, 1] + tz * normal[i, j, 2])
+                    a_tex = section_texels(FC[0], FR[0], FC[1], FR[1], FC[2], FR[2])  # unsnapped, >= one texel
+                    base = section_irradiance(flux[t], inv_tv[t], a_tex, texel_area)
+                    g = receiver_cosine(tx, ty, tz, normal, i, j)
                     if K > 0.0:
                         g *= math.exp(-K * (w0 * l0 + w1 * l1 + w2 * l2) / area)
                     out[i, j] += base * g
@@ -304,7 +304,7 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
     _regions(beams.O, beams.D, cand, hit, zlo, zhi, Wc, Hc, rows, cols)
     counts, tris = bin_bands(rows, Hc, BAND)
     accept = lm.own & (lm.depth >= -box.h / 2.0) & (lm.depth <= box.h / 2.0)
-    _splat_own_depth(beams.arrays, _Regions(cand, rows, cols, counts, tris), _Grid(Wc, Hc, BAND),
-                     _Receiver(accept, lm.depth, lm.normal), _Knobs(float(K), float(box.texel_area)), out)
+    _splat_own_depth(beams.arrays, _Regions(cand, rows, cols, counts, tris), _PerRayGrid(Wc, Hc, BAND),
+                     _PerRayTexels(accept, lm.depth, lm.normal), _PerRayScale(float(K), float(box.texel_area)), out)
     return {"rays_hit": int(np.count_nonzero(np.isfinite(hit))),
             "beams_drawn": int(np.count_nonzero(rows[:, 0] <= rows[:, 1]))}

@@ -18,10 +18,10 @@ Frames used by every pass of the level-map method:
   the depth ``zeta = (p - c).T0`` along the light, from ``-h/2`` (the box face
   nearest the light) to ``+h/2``.
 
-Placement (``levelmap.placement``; ``levelmap.planes`` counts **planes**, the
+Placement (``caustics.placement``; ``levelmap.planes`` counts **planes**, the
 thesis's "Num Plane" of Tables 5-1 to 5-5):
 
-* ``"component"`` (the default since contract_version 5) and ``"thesis"``:
+* ``"component"`` (the default) and ``"thesis"``:
   the box of eqs. 4-2/4-3 is centred on the receiver's own origin ``P_0``
   (its ``transform.translate``: the point the mesh's local origin is placed
   at; a fitted mesh is centred on its bounding box first), and each extent is
@@ -39,7 +39,7 @@ thesis's "Num Plane" of Tables 5-1 to 5-5):
   the first and last planes on the box's faces; one plane (``n = 0``) sits
   at the centre with ``s = h``. Plane ``i`` accepts ``[zeta_i - s/2,
   zeta_i + s/2)`` (eq. 4-15, ``eps = s / 2``).
-* ``"tight"`` (before contract_version 4): the tight bounding box of the
+* ``"tight"``: the tight bounding box of the
   vertices, centred on its middle; the ``planes`` planes sit at the centres
   of ``planes`` equal slabs, ``zeta_i = -h/2 + s (i + 1/2)``, ``s = h /
   planes`` (``D_max = h/2 - s/2``), so that the acceptance ranges tile the box
@@ -159,7 +159,7 @@ class Lattice(NamedTuple):
     zlo: float
 
 
-def plane_lattice(box, n, placement="tight"):
+def plane_lattice(box, n, placement):
     """The ``n`` reference planes of ``box`` (eqs. 4-6 to 4-9; module docstring).
 
     Parameters
@@ -168,9 +168,10 @@ def plane_lattice(box, n, placement="tight"):
         The reference box (its extent ``h`` along ``V``).
     n : int
         Number of planes.
-    placement : {"tight", "thesis"}
-        Planes at slab centres of the tight box, or the thesis's ``n - 1``
-        slices with planes on the box faces (module docstring).
+    placement : {"component", "thesis", "tight"}
+        ``caustics.placement``: the thesis's ``n - 1`` slices with planes on
+        the box faces, or planes at slab centres of the tight box (module
+        docstring).
 
     Returns
     -------
@@ -192,7 +193,7 @@ def plane_lattice(box, n, placement="tight"):
     return Lattice(-box.h / 2.0 + s * (np.arange(n) + 0.5), s, -box.h / 2.0)
 
 
-def slice_planes(box, n, placement="tight"):
+def slice_planes(box, n, placement):
     """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
 
     Parameters
@@ -201,8 +202,8 @@ def slice_planes(box, n, placement="tight"):
         The reference box.
     n : int
         Number of planes.
-    placement : {"tight", "thesis"}
-        The lattice (:func:`plane_lattice`).
+    placement : {"component", "thesis", "tight"}
+        ``caustics.placement``: the lattice (:func:`plane_lattice`).
 
     Returns
     -------

@@ -11,7 +11,7 @@
 
 Two ways to place the sub-boxes' planes (``levelmap.smart_spacing``):
 
-* ``"respace"`` (the default since contract_version 5): eq. 4-22 as the
+* ``"respace"`` (the default): eq. 4-22 as the
   thesis means it: each sub-box ``i`` is sliced anew by the plane slicing of
   §4.2.1 (eqs. 4-6 to 4-9 on the sub-box) with ``n_i = round(hr_i / (2
   eps))`` **planes** (at least one), ``eps = s / (2 h)`` the normal slicing's
@@ -19,8 +19,8 @@ Two ways to place the sub-boxes' planes (``levelmap.smart_spacing``):
   normal slicing's slice count (``planes - 1`` on the thesis's lattice).
   ``n_i`` counts planes, as the thesis's Table 5-4 does: a sphere lit from
   above fills about half of its box's depth levels (``hr = 1/2``) and the
-  table gives 3 -> 1 and 101 -> 50 planes, i.e. ``hr (planes - 1)``; read as
-  a slice count (``n_i + 1`` planes, contract_version 4) it gave 2 and 51.
+  table gives 3 -> 1 and 101 -> 50 planes, i.e. ``hr (planes - 1)`` (read
+  as a slice count, ``n_i + 1`` planes, it would give 2 and 51).
   On the thesis's lattice (placement ``component`` or ``thesis``) the
   ``n_i`` planes run from the sub-box's top face to its bottom face,
   spacing ``h_i / (n_i - 1)`` (one plane at its centre when ``n_i = 1``);
@@ -33,7 +33,7 @@ Two ways to place the sub-boxes' planes (``levelmap.smart_spacing``):
   that accepts it under normal slicing, and smart slicing provably changes
   no texel (what the thesis's Table 5-5 reports, intensity difference 0,
   "the development of smart slicing is intended for eliminating unnecessary
-  plane", §5.2.4; the default of contract_version 4).
+  plane", §5.2.4).
 
 References
 ----------
@@ -44,19 +44,69 @@ References
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
+from .knobs import SPACINGS
 from .planes import CENTRED, plane_lattice
 
-__all__ = ["depth_profile", "sub_boxes", "smart_planes", "respaced_planes", "SPACINGS"]
+__all__ = ["DepthLevels", "SubBoxPlanes", "depth_profile", "sub_boxes", "sub_box_bounds", "sub_box_planes", "normal_slices",
+           "smart_planes", "respaced_planes", "SPACINGS"]
 
-SPACINGS = ("lattice", "respace")
+
+class DepthLevels(NamedTuple):
+    """The depth profile's levels: level ``floor((zeta - zlo) / h * count)`` (Fig. 5-9).
+
+    Attributes
+    ----------
+    zlo : float
+        The box's face nearest the light, ``-h/2``.
+    h : float
+        The box's extent along ``T0``.
+    count : int
+        ``levels.depth_levels``.
+    """
+
+    zlo: float
+    h: float
+    count: int
+
+
+class SubBoxPlanes(NamedTuple):
+    """The re-spaced planes of the sub-boxes (eq. 4-22), as the acceptance kernel reads them.
+
+    Attributes
+    ----------
+    sub_of : (levels,) int64
+        The sub-box of each depth level, -1 for an empty level.
+    z0 : (B,) float64
+        Each sub-box's first plane's slab start (faces) or top (slabs).
+    spacing : (B,) float64
+        Its plane spacing.
+    count : (B,) int64
+        Its planes, ``n_i``.
+    first : (B,) int64
+        The index of its first plane among all sub-boxes' planes.
+    faces : bool
+        Planes on the sub-box's faces (``component``, ``thesis``), else at slab centres.
+    """
+
+    sub_of: np.ndarray
+    z0: np.ndarray
+    spacing: np.ndarray
+    count: np.ndarray
+    first: np.ndarray
+    faces: bool
 
 
 @nb.njit(cache=True, parallel=True)
-def _profile(depth, own, zlo, h, levels, counts):
+def _profile(depth, own, dl, counts):
     """counts[b, k]: texels of band b of rows in level k (bands in parallel, merged by the caller)."""
+    zlo = dl.zlo
+    h = dl.h
+    levels = dl.count
     H, W = depth.shape
     nbands = counts.shape[0]
     for b in nb.prange(nbands):
@@ -70,11 +120,21 @@ def _profile(depth, own, zlo, h, levels, counts):
 
 
 @nb.njit(cache=True, parallel=True)
-def _respaced_index(depth, own, zlo, h, levels, sub_of, z0, si, n_i, first, thesis, out):
+def _respaced_index(depth, own, dl, sub, out):
     """out[i, j]: the plane of the texel's own sub-box nearest to it (eq. 4-22's slicing), -1 for none.
 
-    ``n_i[b]``: the sub-box's planes; ``thesis``: planes on the faces (index ``0 .. n_i - 1`` nearest),
-    else slab centres (slab index)."""
+    ``sub.count[b]``: the sub-box's planes; ``sub.faces``: planes on the faces (index ``0 .. n_i - 1``
+    nearest), else slab centres (slab index)."""
+    # unpacked by name outside the prange loop (numba#7135)
+    zlo = dl.zlo
+    h = dl.h
+    levels = dl.count
+    sub_of = sub.sub_of
+    z0 = sub.z0
+    si = sub.spacing
+    n_i = sub.count
+    first = sub.first
+    thesis = sub.faces
     H, W = depth.shape
     for i in nb.prange(H):
         for j in range(W):
@@ -121,7 +181,7 @@ def depth_profile(lm, box, levels):
     """
     nbands = max(1, min(lm.depth.shape[0], 32))
     counts = np.zeros((nbands, int(levels)), np.int64)
-    _profile(lm.depth, lm.own, -box.h / 2.0, box.h, int(levels), counts)
+    _profile(lm.depth, lm.own, DepthLevels(-box.h / 2.0, box.h, int(levels)), counts)
     return counts.sum(axis=0)
 
 
@@ -159,7 +219,61 @@ def sub_boxes(profile):
     return out
 
 
-def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
+def sub_box_bounds(box, run, levels):
+    """Eq. 4-21: a sub-box's depths and its height as a fraction of the box's.
+
+    Parameters
+    ----------
+    box : Box
+        The reference box (extent ``h`` along ``T0``).
+    run : (int, int)
+        The sub-box's levels ``(first, last + 1)`` (:func:`sub_boxes`).
+    levels : int
+        Depth levels of the profile.
+
+    Returns
+    -------
+    z0, z1 : float
+        Its top and bottom depths, ``-h/2 + h a / levels`` and ``-h/2 + h e / levels``.
+    hr : float
+        ``hr_i = (e - a) / levels``, so that ``h_i = h hr_i``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, eq. 4-21.
+    """
+    a, e = run
+    z0 = -box.h / 2.0 + box.h * a / levels
+    z1 = -box.h / 2.0 + box.h * e / levels
+    return z0, z1, (e - a) / levels
+
+
+def sub_box_planes(hr, slices):
+    """Eq. 4-22: ``n_i = hr_i / (2 eps)``, a sub-box's share of the normal slicing's slices.
+
+    With ``eps = s / (2 h)`` the normal slicing's acceptance threshold as a
+    fraction of ``h``, ``1 / (2 eps)`` is its slice count (:func:`normal_slices`).
+
+    Parameters
+    ----------
+    hr : float
+        ``hr_i`` (:func:`sub_box_bounds`).
+    slices : int
+        The normal slicing's slices.
+
+    Returns
+    -------
+    float
+        ``n_i``, unrounded.
+
+    References
+    ----------
+    Tipprasert (2006), §4.7.2, eq. 4-22; Table 5-4 (``n_i`` counts planes).
+    """
+    return hr * slices
+
+
+def smart_planes(lm, box, n, levels, placement, pidx=None):
     """Indices (into the normal slicing's ``n`` planes) of the planes smart slicing keeps (``"lattice"``).
 
     Parameters
@@ -173,8 +287,9 @@ def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
     pidx : (Hc, Wc) int32, optional
         The plane index map; planes it uses are always kept (a guard against
         rounding at level boundaries; they are within the sub-boxes anyway).
-    placement : {"tight", "component", "thesis"}
-        The normal slicing's lattice (:func:`~refraction_ref.levelmap.planes.plane_lattice`).
+    placement : {"component", "thesis", "tight"}
+        The normal slicing's lattice (``caustics.placement``,
+        :func:`~refraction_ref.levelmap.planes.plane_lattice`).
 
     Returns
     -------
@@ -192,18 +307,16 @@ def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
     boxes = sub_boxes(prof)
     lat = plane_lattice(box, n, placement)
     s, zlo = lat.s, lat.zlo
-    slices = _slices(n, placement)
+    slices = normal_slices(n, placement)
     keep = np.zeros(int(n), bool)
     sb = []
-    for a, e in boxes:
-        z0 = -box.h / 2.0 + box.h * a / levels
-        z1 = -box.h / 2.0 + box.h * e / levels
+    for run in boxes:
+        z0, z1, hr = sub_box_bounds(box, run, levels)
         # planes whose slab [zlo + s i, zlo + s (i + 1)) meets [z0, z1)
         i0 = max(int(np.floor((z0 - zlo) / s)), 0)
         i1 = min(int(np.ceil((z1 - zlo) / s)), int(n))
         keep[i0:i1] = True
-        hr = (e - a) / levels
-        sb.append([box.h * hr, hr, hr * slices])  # h_i (eq. 4-21), hr_i, n_i = hr_i / (2 eps) (eq. 4-22)
+        sb.append([box.h * hr, hr, sub_box_planes(hr, slices)])  # h_i (eq. 4-21), hr_i, n_i (eq. 4-22)
     if pidx is not None:
         used = np.unique(pidx[pidx >= 0])
         keep[used[used < n]] = True
@@ -211,12 +324,28 @@ def smart_planes(lm, box, n, levels, pidx=None, placement="tight"):
         "profile": prof.tolist(), "sub_boxes": sb, "empty_levels": int(np.count_nonzero(prof == 0))}
 
 
-def _slices(n, placement):
-    """Slices of the normal slicing: ``planes - 1`` (thesis, eq. 4-6) or ``planes`` (tight slabs)."""
+def normal_slices(n, placement):
+    """Eq. 4-6: the normal slicing's slices, ``planes - 1`` (planes on the faces) or ``planes`` (tight slabs).
+
+    Parameters
+    ----------
+    n : int
+        Planes (``levelmap.planes``).
+    placement : {"component", "thesis", "tight"}
+        ``caustics.placement``; one plane on the faces' lattice counts one slice.
+
+    Returns
+    -------
+    int
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1, eq. 4-6.
+    """
     return max(int(n) - 1, 1) if placement in CENTRED else int(n)
 
 
-def respaced_planes(lm, box, n, levels, placement="tight"):
+def respaced_planes(lm, box, n, levels, placement):
     """Eq. 4-22: each sub-box sliced anew with ``n_i = round(hr_i / (2 eps))`` planes (``"respace"``).
 
     Parameters
@@ -249,7 +378,7 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
     levels = int(levels)
     prof = depth_profile(lm, box, levels)
     boxes = sub_boxes(prof)
-    slices = _slices(n, placement)
+    slices = normal_slices(n, placement)
     thesis = placement in CENTRED
     sub_of = np.full(levels, -1, np.int64)
     z0 = np.zeros(max(len(boxes), 1))
@@ -259,11 +388,9 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
     zeta, sb = [], []
     for b, (a, e) in enumerate(boxes):
         sub_of[a:e] = b
-        lo = -box.h / 2.0 + box.h * a / levels
-        hi = -box.h / 2.0 + box.h * e / levels
-        hr = (e - a) / levels
+        lo, hi, hr = sub_box_bounds(box, (a, e), levels)
         # n_i = hr_i / (2 eps) planes (eq. 4-22; Table 5-4 counts planes), at least one per sub-box
-        k = max(int(round(hr * slices)), 1)
+        k = max(int(round(sub_box_planes(hr, slices))), 1)
         first[b] = len(zeta)
         z0[b] = lo
         if thesis:
@@ -279,6 +406,7 @@ def respaced_planes(lm, box, n, levels, placement="tight"):
         n_i[b] = k
         sb.append([box.h * hr, hr, k])
     pidx = np.empty(lm.depth.shape, np.int32)
-    _respaced_index(lm.depth, lm.own, -box.h / 2.0, box.h, levels, sub_of, z0, si, n_i, first, thesis, pidx)
+    _respaced_index(lm.depth, lm.own, DepthLevels(-box.h / 2.0, box.h, levels),
+                    SubBoxPlanes(sub_of, z0, si, n_i, first, thesis), pidx)
     return np.asarray(zeta, np.float64), pidx, {
         "profile": prof.tolist(), "sub_boxes": sb, "empty_levels": int(np.count_nonzero(prof == 0))}

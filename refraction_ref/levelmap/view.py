@@ -59,7 +59,7 @@ from ..embree import nearest_hits, soup_scene
 from ..optics import refract3
 from ..status import VIEW_DIRECT, VIEW_LOST, VIEW_MISSED, VIEW_STATUS, VIEW_THROUGH, VIEW_TIR
 
-__all__ = ["VIEW_STATUS", "view_through_water", "direct_view", "water_surface_hits_mesh", "water_surface_hits_analytic"]
+__all__ = ["VIEW_STATUS", "CausticMaps", "shade_point", "view_through_water", "direct_view", "water_surface_hits_mesh", "water_surface_hits_analytic"]
 
 
 class _Waves(NamedTuple):
@@ -100,7 +100,7 @@ class _Look(NamedTuple):
     K: float
 
 
-class _Grid(NamedTuple):
+class _WaterGrid(NamedTuple):
     """The water mesh as the regular height-field grid :func:`~.water.water_mesh` builds."""
 
     vertices: np.ndarray  # ((n + 1)^2, 3), vertex (i, j) at i (n + 1) + j: z = zs[i], x = xs[j]
@@ -430,14 +430,33 @@ def _receiver_points(h, look, img):
         if not (st == VIEW_THROUGH or st == VIEW_LOST):
             for c in range(3):
                 T[q, c] = np.nan
-        _shade_one(look, rid[q], Q[q, 0], Q[q, 1], Q[q, 2], length[q] if rid[q] >= 0 else 0.0, img, q)
+        shade_point(look, rid[q], Q[q, 0], Q[q, 1], Q[q, 2], length[q] if rid[q] >= 0 else 0.0, img, q)
 
 
 @nb.njit(cache=True, inline="always")
-def _shade_one(look, r, qx, qy, qz, length, out, q):
+def shade_point(look, r, qx, qy, qz, length, out, q):
     """Eq. 4-19 at one receiver point, nearest texel of its caustics map, times exp(-K d) (eq. 4-17).
 
-    ``look`` (:class:`_Look`) is only read; the colour is written to ``out[q]`` (0 where ``r`` < 0).
+    ``I_o = albedo (I_c + ambient)``: ``I_c I_d + I_a`` with the diffuse map's
+    ``I_d`` the albedo and ``I_a = ambient * albedo``.
+
+    Parameters
+    ----------
+    look : _Look
+        The receivers' albedo, map frames, caustics maps, ambient and ``K``; only read.
+    r : int
+        The receiver, < 0 for none (black).
+    qx, qy, qz : float
+        The point, world space.
+    length : float
+        Distance travelled in water to it (0 for a direct ray).
+    out : (N, 3) float32
+        Gets the colour in row ``q``.
+    q : int
+
+    References
+    ----------
+    Tipprasert (2006), §4.6, eq. 4-19; §4.5, eq. 4-17.
     """
     albedo, centre, U, W, ext = look.albedo, look.centre, look.U, look.W, look.ext
     maps, ambient, K = look.maps, look.ambient, look.K
@@ -461,12 +480,31 @@ def _shade_one(look, r, qx, qy, qz, length, out, q):
         out[q, c] = np.float32(albedo[r, c] * (e + ambient) * tr)
 
 
-def _look(receivers, boxes, maps, ambient, K):
+class CausticMaps(NamedTuple):
+    """Each receiver's caustics map, its frame and eq. 4-19's ambient term: what a view shades with.
+
+    Attributes
+    ----------
+    boxes : list of Box
+        Frame (first light's box) of each receiver's caustics map.
+    maps : (R, Hc, Wc) float32 array or list of (Hc, Wc) arrays
+        ``caustic_map_r``.
+    ambient : float
+        ``caustics.ambient``, a fraction of the albedo.
+    """
+
+    boxes: list
+    maps: object
+    ambient: float
+
+
+def _look(receivers, caustics, K):
+    boxes, maps = caustics.boxes, caustics.maps
     R = len(boxes)
     stacked = maps if isinstance(maps, np.ndarray) else np.ascontiguousarray(np.stack(maps[:R]), np.float32)
     return _Look(np.ascontiguousarray(receivers.albedo, np.float64), np.array([b.center for b in boxes]),
                  np.array([b.U for b in boxes]), np.array([b.W for b in boxes]), np.array([[b.w, b.d] for b in boxes]),
-                 stacked, float(ambient), float(K))
+                 stacked, float(caustics.ambient), float(K))
 
 
 @nb.njit(cache=True, parallel=True)
@@ -483,26 +521,22 @@ def _direct_shade(eye, D, fwd, depths, look, out):
                     k = r
             q = i * Wd + j
             if k < 0:
-                _shade_one(look, -1, 0.0, 0.0, 0.0, 0.0, out, q)
+                shade_point(look, -1, 0.0, 0.0, 0.0, 0.0, out, q)
                 continue
             t = b / (D[q, 0] * fwd[0] + D[q, 1] * fwd[1] + D[q, 2] * fwd[2])
-            _shade_one(look, k, eye[0] + D[q, 0] * t, eye[1] + D[q, 1] * t, eye[2] + D[q, 2] * t, 0.0, out, q)
+            shade_point(look, k, eye[0] + D[q, 0] * t, eye[1] + D[q, 1] * t, eye[2] + D[q, 2] * t, 0.0, out, q)
 
 
-def direct_view(camera, receivers, boxes, maps, ambient, rays=None):
-    """The receivers seen directly, without the water (eq. 4-19; the level map's ``image`` before contract 4).
+def direct_view(camera, receivers, caustics, rays=None):
+    """The receivers seen directly, without the water (eq. 4-19).
 
     Parameters
     ----------
     camera : Camera
     receivers : Receivers
         The receivers' triangle soup.
-    boxes : list of Box
-        Frame (first light's box) of each receiver's caustics map.
-    maps : list of (Hc, Wc) arrays
-        ``caustic_map_r`` of each receiver.
-    ambient : float
-        Ambient term of eq. 4-19, a fraction of the albedo.
+    caustics : CausticMaps
+        Each receiver's caustics map, its frame and the ambient term.
     rays : (origins, directions), optional
         ``camera.primary_rays()``, when already computed.
 
@@ -520,12 +554,12 @@ def direct_view(camera, receivers, boxes, maps, ambient, rays=None):
 
     H, W = camera.shape
     depths = np.stack([rasterize(camera.world_to_view(receivers.tris[receivers.owner == r]), camera, "min")
-                       for r in range(len(boxes))])
+                       for r in range(len(caustics.boxes))])
     _, rd = camera.primary_rays() if rays is None else rays
     D = np.ascontiguousarray(rd.reshape(-1, 3), np.float64)
     img = np.empty((H * W, 3), np.float32)
     _direct_shade(np.asarray(camera.eye, np.float64), D, np.ascontiguousarray(-camera.basis[2], np.float64), depths,
-                  _look(receivers, boxes, maps, ambient, 0.0), img)
+                  _look(receivers, caustics, 0.0), img)
     return img.reshape(H, W, 3), np.isfinite(depths).any(axis=0)
 
 
@@ -615,7 +649,7 @@ def water_surface_hits_mesh(mesh, origins, dirs, eta, water=None):
     n = int(water["resolution"])
     sx, sz = (float(v) for v in water["size"])
     V = np.ascontiguousarray(mesh.vertices, np.float64)
-    grid = _Grid(V, np.ascontiguousarray(mesh.normals, np.float64), n, -sx / 2.0, -sz / 2.0, sx / n, sz / n,
+    grid = _WaterGrid(V, np.ascontiguousarray(mesh.normals, np.float64), n, -sx / 2.0, -sz / 2.0, sx / n, sz / n,
                  float(V[:, 1].min()), float(V[:, 1].max()))
     rays = _new_rays(origins, dirs)
     _mesh_surface(grid, rays, float(eta))
@@ -652,24 +686,20 @@ def water_surface_hits_analytic(water, origins, dirs, eta):
     return rays.P, rays.T, rays.status
 
 
-def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, mesh=None, rays=None):
+def view_through_water(camera, water, eta, receivers, caustics, mesh=None, rays=None):
     """Render the pool as the camera sees it through the water surface.
 
     Parameters
     ----------
     camera : Camera
     water : dict
-        The resolved ``water`` block.
+        The resolved ``water`` block (its ``absorption`` K attenuates the eye
+        path in water, eq. 4-17).
     eta : float
         ``outside_ior / water.ior``.
-    K : float
-        ``water.absorption``.
     receivers : Receivers
-    boxes : list of Box
-        Frame (first light's box) of each receiver's caustics map.
-    maps : list of (Hc, Wc) arrays
-        ``caustic_map_r``.
-    ambient : float
+    caustics : CausticMaps
+        Each receiver's caustics map, its frame and the ambient term.
     mesh : WaterMesh, optional
         Refract at this mesh (level map); the analytic surface when None (exact).
     rays : (origins, directions), optional
@@ -711,7 +741,7 @@ def view_through_water(camera, water, eta, K, receivers, boxes, maps, ambient, m
     rid = np.empty(len(O), np.int64)
     img = np.empty((len(O), 3), np.float32)
     _receiver_points(_Hits(O, D, P, T, prim, status, np.ascontiguousarray(receivers.tris), receivers.owner, Q,
-                           length, rid), _look(receivers, boxes, maps, ambient, K), img)
+                           length, rid), _look(receivers, caustics, float(water["absorption"])), img)
     ok = (status == VIEW_THROUGH) | (status == VIEW_DIRECT)
     return {"image": img.reshape(H, W, 3), "object_mask": ok.reshape(H, W),
             "view_status": status.reshape(H, W), "water_pos": P.reshape(H, W, 3),

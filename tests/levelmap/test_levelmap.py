@@ -15,7 +15,8 @@ import pytest
 import refraction_ref as rr
 from refraction_ref.levelmap import default_scene
 from refraction_ref.levelmap.illumination import illumination_volumes
-from refraction_ref.levelmap.pipeline import _caustics_pair, prepare, render_levelmap
+from refraction_ref.levelmap.knobs import levelmap_knobs
+from refraction_ref.levelmap.pipeline import pair_caustics, prepare, render_levelmap
 from refraction_ref.levelmap.planes import from_map
 from refraction_ref.levelmap.water import WaterMesh, water_mesh
 from refraction_ref.metrics import luv_difference, relative_l1
@@ -211,8 +212,9 @@ def test_zero_area_water_triangles():
     assert np.all(vols.flux[area == 0] == 0) and np.all(np.isfinite(vols.flux))
     ctx = prepare(sc)
     ctx["vols"] = [vols]
+    knobs = levelmap_knobs(sc.data["levelmap"], sc.data["caustics"]["placement"], ctx["K"])
     for variant in ("levelmap", "per_ray"):
-        E = _caustics_pair(ctx, 0, 0, sc.data["levelmap"], variant, {}, [])
+        E = pair_caustics(ctx, 0, 0, knobs._replace(variant=variant)).map
         assert np.all(np.isfinite(E)) and E.min() >= 0
         # total flux on the floor equals the flux through the water above it (nothing lost, nothing made)
         assert E.sum() > 0
@@ -221,7 +223,7 @@ def test_zero_area_water_triangles():
 # --- identities --------------------------------------------------------------------------------
 
 def test_smart_slicing_changes_no_pixel_and_uses_fewer_planes():
-    """Lattice smart slicing (levelmap.smart_spacing = lattice, the default of contract_version 4) keeps the
+    """Lattice smart slicing (levelmap.smart_spacing = lattice) keeps the
     normal slicing's planes: no texel changes. The default re-slicing (respace) moves planes: see
     test_levelmap_thesis.py and Table 5-5."""
     base = {

@@ -1,4 +1,4 @@
-"""Every level-map output and stage buffer is bit-identical with 1 and 2 Numba threads (issue 12).
+"""Every level-map output and stage buffer is bit-identical with 1 and 2 Numba threads.
 
 The stages split their work among threads (prange over pixels, rays, texel
 rows and bands of map rows) without accumulating floats in thread order, so

@@ -68,7 +68,7 @@ def test_flat_water_view_is_snell_closed_form_pixel_for_pixel(method):
     img = res["image"].astype(float)
     assert np.array_equal(res["object_mask"], on)
     np.testing.assert_allclose(img, want, rtol=2e-6, atol=1e-7)
-    if "stage.image.view_status" in res.arrays:  # the exact reference's image stage lists them from contract 4
+    if "stage.image.view_status" in res.arrays:  # both methods' image stages make them (IMAGE_BUFFERS)
         st = res["stage.image.view_status"]
         assert np.all(st[on] == 1) and not np.any(st == 4)
         np.testing.assert_allclose(res["stage.image.receiver_pos"][on], q[on], atol=1e-9)
@@ -110,14 +110,14 @@ def test_view_differs_from_direct_view_and_tir_is_defined():
 
 
 def test_thesis_box_and_planes_eqs_4_3_and_4_7_to_4_9():
-    # eq. 4-3 read literally (caustics.placement = thesis, the default of contract_version 4): centred on the
+    # eq. 4-3 read literally (caustics.placement = thesis): centred on the
     # floor's origin, each extent twice the whole length of the farthest vertex: a corner, sqrt(2) from the centre
     sc = pool(planes=7, placement="thesis")
     ctx = prepare(sc)
     box = ctx["pairs"][0][0].box
     assert np.allclose(box.center, [0, FLOOR_Y, 0])
     assert np.allclose([box.w, box.h, box.d], 2 * math.sqrt(2), rtol=1e-12)
-    # the default (component, contract_version 5): the farthest vertex's coordinate along each axis; under a
+    # the default (component): the farthest vertex's coordinate along each axis; under a
     # vertical sun the flat floor's box is its own 2 x 2 square, about as thin as the floor (floored at 1e-6)
     comp = prepare(pool(planes=7))["pairs"][0][0].box
     assert np.allclose(comp.center, [0, FLOOR_Y, 0]) and np.allclose([comp.w, comp.d], 2.0) and comp.h < 1e-5
@@ -160,8 +160,7 @@ def test_respaced_smart_slicing_eq_4_22():
     res = rr.render(base, method="levelmap", keep="caustics")
     zeta = res["stage.caustics.planes_0_0"]
     assert np.all(np.diff(zeta) > 0)
-    # eq. 4-22: n_i = hr_i / (2 eps) planes per sub-box (Table 5-4 counts planes; contract_version 4 drew
-    # n_i + 1); the total stays near hr times the normal slicing's 12 slices
+    # eq. 4-22: n_i = hr_i / (2 eps) planes per sub-box (Table 5-4 counts planes, not n_i + 1); the total stays near hr times the normal slicing's 12 slices
     st = res.meta["stats"][0]
     n_i = [sb[2] for sb in st["smart"]["sub_boxes"]]
     assert len(zeta) == sum(n_i) and min(n_i) >= 1

@@ -1,4 +1,4 @@
-"""contract_version 5: the thesis's level map read as the thesis means it (Tipprasert 2006).
+"""The thesis's level map read as the thesis means it (Tipprasert 2006).
 
 * eq. 4-3's box read per axis (``caustics.placement = "component"``): a flat
   floor's box is its own extent about its origin, where the literal reading
@@ -6,7 +6,7 @@
 * smart slicing re-slices each sub-box (``levelmap.smart_spacing =
   "respace"``, eqs. 4-21/4-22) with ``n_i`` counting planes, so the thesis's
   sphere of Table 5-4 draws 3 -> 1 and 101 -> 50 planes;
-* both are the defaults, and the old ones stay reachable by name.
+* both are the defaults, and the other readings stay reachable by name.
 """
 
 import numpy as np
@@ -45,9 +45,9 @@ def test_defaults_are_component_box_and_respaced_smart_slicing():
     from refraction_ref.levelmap import default_scene
 
     d = default_scene().data
-    assert CONTRACT_VERSION >= 5  # these defaults arrived in 5 and still hold
+    assert CONTRACT_VERSION >= 5
     assert d["caustics"]["placement"] == "component" and d["levelmap"]["smart_spacing"] == "respace"
-    # the contract_version 4 outputs stay reachable, under the old alias too
+    # the other readings stay reachable, under the old alias too
     old = load_scene(default_scene(), {"levelmap.placement": "thesis", "levelmap.smart_spacing": "lattice"}).data
     assert old["caustics"]["placement"] == "thesis" and old["levelmap"]["smart_spacing"] == "lattice"
 

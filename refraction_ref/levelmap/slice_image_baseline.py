@@ -1,4 +1,9 @@
-"""The volumetric baseline the thesis compares against (§5.2.1, Iwasaki et al. 2003).
+"""The thesis's baseline: Iwasaki et al.'s volumetric-texture method, a stack of slice images (§5.2.1).
+
+The scene value ``levelmap.variant = "volumetric"`` selects it; it is not
+Sun 2008's volumetric method (``--method volumetric``). The thesis calls it
+the "volumetric texture based" technique: its illumination map is a
+volumetric texture, a set of slice images of the receiver.
 
 For every sample plane (the reference planes of §4.2.1), a *slice image* of
 the receivers is drawn: the part of the surface between the clip planes half
@@ -34,38 +39,33 @@ from __future__ import annotations
 import numpy as np
 
 from ..raster import rasterize_ortho
-from .caustics_map import splat_plane
+from .caustics_map import PlaneSet, ReceiverTexels, splat_plane
 from .intersection import plane_rects
 from .planes import plane_lattice
 
-__all__ = ["volumetric_caustics"]
+__all__ = ["slice_image_caustics"]
 
 
-def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out, placement="tight", full=False):
-    """Caustics of receiver ``r`` with one slice image per sample plane.
+def slice_image_caustics(beams, cand, pair, receivers, knobs, out):
+    """Caustics of a pair's receiver with one slice image per sample plane (the thesis's baseline).
 
     Parameters
     ----------
     beams : BeamSet
     cand : (M,) int64
         Candidate beams.
-    box : Box
+    pair : LevelMapPair
+        The (receiver, light) pair: its box, the receiver triangles drawn
+        (``sel``, all of them or the receiver's own) and their raster set-up
+        (:func:`~refraction_ref.raster.ortho_setup` in the box's map).
     receivers : Receivers
-    r : int
-    sel : (T',) int64
-        Receiver triangles in ``setup`` (all of them, or ``r``'s own).
-    setup : RasterSetup
-        :func:`~refraction_ref.raster.ortho_setup` of those triangles in the box's map.
-    n : int
-        Number of sample planes.
-    K : float
+    knobs : LevelMapKnobs
+        ``planes`` (sample planes, laid as the level map's by ``placement``,
+        :func:`~refraction_ref.levelmap.planes.plane_lattice`), ``K``, and
+        ``cull``: draw each intersection triangle only over the slice's texels
+        (``levelmap.culling = "bounds"``), else over the whole map.
     out : (Hc, Wc) float64
         Receives the illumination map (overwritten where lit).
-    placement : {"tight", "thesis"}
-        The sample planes (:func:`~refraction_ref.levelmap.planes.plane_lattice`), as the level map's.
-    full : bool
-        Draw every intersection triangle over the whole map (``levelmap.culling = "none"``), or only
-        over the slice's texels (``"bounds"``).
 
     Returns
     -------
@@ -76,26 +76,27 @@ def volumetric_caustics(beams, cand, box, receivers, r, sel, setup, n, K, out, p
     ----------
     Tipprasert (2006), §5.1, §5.2.1, Figs. 5-1 to 5-4; Iwasaki et al. (2003).
     """
+    box, sel, setup, r, n = pair.box, pair.sel, pair.setup, pair.receiver, knobs.planes
     Hc, Wc = box.size
-    lat = plane_lattice(box, n, placement)
-    ztop, s = lat.zlo, lat.s
+    lat = plane_lattice(box, n, knobs.placement)
+    zlo, s = lat.zlo, lat.s
     whole = np.array([0, Hc - 1, 0, Wc - 1], np.int64)
     # slice of everything between the water and the box (occluders)
-    _, ids = rasterize_ortho(setup, box.size, slab=(ztop, s, -np.inf, -1.0))
+    _, ids = rasterize_ortho(setup, box.size, slab=(zlo, s, -np.inf, -1.0))
     filled = ids >= 0
     cbuf = np.empty((Hc, Wc))
     drawn = 0
     for i in range(n):
-        d_i, ids_i = rasterize_ortho(setup, box.size, slab=(ztop, s, float(i), float(i)))
+        d_i, ids_i = rasterize_ortho(setup, box.size, slab=(zlo, s, float(i), float(i)))
         nonempty = ids_i >= 0
         tri = sel[np.maximum(ids_i, 0)]
         show = nonempty & ~filled & (receivers.owner[tri] == r)
         normal = receivers.normals[tri]
         accept = show.astype(np.int32)
         cbuf[...] = 0.0
-        rect = whole if full else plane_rects(np.where(show, 0, -1).astype(np.int32), 1)[0]
-        zp = float(lat.zeta[i])
-        drawn += splat_plane(beams, cand, box, zp, K, rect, accept, 1, d_i, normal, cbuf)
+        rect = plane_rects(np.where(show, 0, -1).astype(np.int32), 1)[0] if knobs.cull else whole
+        plane = PlaneSet(float(lat.zeta[i]), 1, rect)
+        drawn += splat_plane(beams, cand, box, plane, ReceiverTexels(accept, d_i, normal), knobs.K, cbuf)
         out[show] = cbuf[show]
         filled |= nonempty
     return {"slices": n + 1, "triangles": drawn, "memory_bytes": int((n + 1) * Hc * Wc * 2)}
