@@ -43,7 +43,7 @@ import numpy as np
 
 __all__ = ["THESIS_4_1", "THESIS_4_1_ALL", "COLS_4_1", "THESIS_4_2", "SCENES_4_2", "THESIS_SCENE_TEXT",
            "STAGE_OF", "View", "VIEWS", "RING", "Model", "ERROR_OPTIONS", "FORMER_DEFAULTS", "eye_of",
-           "with_view", "view_complexities", "highest_complexity_view", "time_pipeline", "pipeline_ms",
+           "with_view", "scene_of", "view_complexities", "highest_complexity_view", "time_pipeline", "pipeline_ms",
            "photon_generation_ms", "photon_generation_pass", "cell_scene", "time_cells", "table_4_1", "table_4_2", "exit_error", "error_vs_view",
            "summarize_error", "defaults_before_after", "PIPELINE_STAGES"]
 
@@ -175,7 +175,18 @@ def with_view(scene, view, distance, res, fov_y=30.0, target=(0.0, 0.0, 0.0), im
     return d
 
 
-def _model_scene(model):
+def scene_of(model):
+    """A table row's scene dict: its objects (copied), no receivers; the camera is the view's (:func:`with_view`).
+
+    Parameters
+    ----------
+    model : Model
+        The row's objects and camera distance.
+
+    Returns
+    -------
+    dict
+    """
     return {"objects": copy.deepcopy(model.objects), "receivers": []}
 
 
@@ -401,7 +412,7 @@ VIEWPORT = 512
 def _scene_for(model, view, res, layers, mode):
     from ..scene import load_scene
 
-    return load_scene(with_view(_model_scene(model), view, model.distance, VIEWPORT,
+    return load_scene(with_view(scene_of(model), view, model.distance, VIEWPORT,
                                 imagespace={"layers": int(layers), "peel_all": mode == "thesis",
                                             "grid": [int(res), int(res)]}))
 
@@ -491,7 +502,7 @@ def table_4_1(models, time_fn=None, cols=COLS_4_1, modes=("thesis", "ours"), vie
     cache = {} if cache is None else cache
     rows = []
     for name, model in models.items():
-        view, vrows = highest_complexity_view(_model_scene(model), views, model.distance)
+        view, vrows = highest_complexity_view(scene_of(model), views, model.distance)
         best = next(r for r in vrows if r["view"] == view.name)
         if log:
             log(f"{name}: view of highest depth complexity {view.name} (max {best['dc_max']} fragments per pixel, "
@@ -505,9 +516,9 @@ def table_4_1(models, time_fn=None, cols=COLS_4_1, modes=("thesis", "ours"), vie
     return rows
 
 
-def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="thesis", views=VIEWS, cache=None,
-              photon_fn=None, log=print, time_many=None):
-    """Table 4.2: ms per stage for I-A, I-B, II-A, II-B at 256x256x256 and 512x512x256, 32 layers.
+def table_4_2(models, time_many, scenes=None, resolutions=(256, 512), views=VIEWS, cache=None, photon_fn=None,
+              log=print):
+    """Table 4.2: ms per stage for I-A, I-B, II-A, II-B at 256x256x256 and 512x512x256, 32 layers, thesis mode.
 
     Parameters
     ----------
@@ -519,11 +530,21 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
         complexity over ``views`` (or each scene's own where I-A is missing),
         so that one bunny and two are compared in one framing, as the thesis's
         Table 4.2 compares one scene with one and two bunnies.
-    time_fn, time_many, cache :
-        As for :func:`table_4_1` (cells it timed are reused).
+    time_many : callable
+        ``time_many(scenes) -> list of dict``: the cells of a scene timed together (as for :func:`table_4_1`).
+    scenes : dict, optional
+        See ``models``.
+    resolutions : sequence of int
+        Voxel grids (texels a side).
+    views : sequence of View
+        The listed views.
+    cache : dict, optional
+        Shared with :func:`table_4_1` (cells it timed are reused).
     photon_fn : callable, optional
         ``photon_fn(scene) -> ms`` for the photon-generation row (default
         :func:`photon_generation_ms`).
+    log : callable, optional
+        Receives one progress line per cell.
 
     Returns
     -------
@@ -537,7 +558,7 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
     out = {}
     ia = models.get(scenes.get("I-A"))
     if ia is not None:
-        views = (highest_complexity_view(_model_scene(ia), views, ia.distance)[0],)
+        views = (highest_complexity_view(scene_of(ia), views, ia.distance)[0],)
     for sc in SCENES_4_2:
         name = scenes.get(sc)
         model = models.get(name)
@@ -545,10 +566,10 @@ def table_4_2(models, time_fn=None, scenes=None, resolutions=(256, 512), mode="t
             for res in resolutions:
                 out[(sc, res)] = None
             continue
-        view, _ = highest_complexity_view(_model_scene(model), views, model.distance)
-        got = _cells(model, view, [(res, 32, mode) for res in resolutions], time_fn, time_many, cache, log)
+        view, _ = highest_complexity_view(scene_of(model), views, model.distance)
+        got = _cells(model, view, [(res, 32, "thesis") for res in resolutions], None, time_many, cache, log)
         for res in resolutions:
-            cell = got[(res, 32, mode)]
+            cell = got[(res, 32, "thesis")]
             pg = photon_fn(cell["scene"])
             if log:
                 log(f"  {sc} ({name}) {res}: photon generation (one more rasterization) {pg:.2f} ms")

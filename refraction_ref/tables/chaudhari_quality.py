@@ -38,8 +38,8 @@ import time
 
 import numpy as np
 
-__all__ = ["SCENES", "NORMAL_OPTIONS", "front_normal_error", "roughness", "normals_study", "layered",
-           "bounds_study"]
+__all__ = ["SCENES", "NORMAL_OPTIONS", "study_scene", "PreparedScene", "front_normal_error", "roughness",
+           "normals_study", "layered", "bounds_study"]
 
 #: pixels from the silhouette (the reference's hit mask's edge) that count as "at the silhouettes" (Fig. 3.4)
 SILHOUETTE = 2
@@ -59,7 +59,20 @@ NORMAL_OPTIONS = (("forward (eq. 3.1)", {"normals": "forward"}),
                   ("mesh3x3 (Fig. 3.4)", {"normals": "mesh3x3"}))
 
 
-def _scene(name, res):
+def study_scene(name, res):
+    """One scene of the studies (:data:`SCENES`) at ``res``^2 pixels: (scene dict, IOR).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`SCENES`.
+    res : int
+        Image side in pixels.
+
+    Returns
+    -------
+    (dict, float)
+    """
     import copy
 
     d, ior = SCENES[name]
@@ -151,7 +164,7 @@ def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
 
     rows = []
     for name in scenes:
-        d, ior = _scene(name, res)
+        d, ior = study_scene(name, res)
         ex = render(d, method="exact", overrides={"exact.record": 1}, keep="trace")
         hit = np.asarray(ex["hit"], bool)
         band = hit & ~binary_erosion(hit, iterations=SILHOUETTE, border_value=0)  # Fig. 3.4's silhouettes
@@ -173,7 +186,7 @@ def normals_study(res=128, scenes=("bunny", "sphere"), log=None):
     return rows
 
 
-class _Prepared:
+class PreparedScene:
     """The passes of one view up to the peel, run once (the bounds and iterations vary after them)."""
 
     def __init__(self, scene_dict):
@@ -202,7 +215,7 @@ def run_passes(prep):
 
     Parameters
     ----------
-    prep : _Prepared
+    prep : PreparedScene
         One view's loaded scene, knobs, geometry and camera.
 
     Returns
@@ -227,7 +240,7 @@ def layered(prep, bound="tight", iterations=5, timings=None):
 
     Parameters
     ----------
-    prep : _Prepared
+    prep : PreparedScene
         One view's loaded scene, knobs, geometry and camera.
     bound : {'tight', 'global', 'loose'}
         The search bound.
@@ -313,9 +326,9 @@ def bounds_study(res=128, scenes=("bunny", "sphere"), rounds=5, log=None):
 
     rows, timing, searches, multi = [], {}, {}, {}
     for name in scenes:
-        d, _ = _scene(name, res)
+        d, _ = study_scene(name, res)
         ex = render(d, method="exact")
-        prep = _Prepared(d)
+        prep = PreparedScene(d)
         ray = ex.arrays
         many = np.asarray(ray["hit"], bool) & (np.asarray(ray["interfaces"]) > MULTI)
         sub = dict(ray, hit=many)

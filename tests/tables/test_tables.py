@@ -110,11 +110,11 @@ def test_busy_machine_marks_timing_verdicts_unreliable(tmp_path):
 
 
 def test_a_verdict_whose_rounds_straddle_its_threshold_says_so(tmp_path):
-    from refraction_ref.tables.chaudhari_report import _straddles
+    from refraction_ref.tables.claims import ratio_straddles
     from refraction_ref.tables.common import straddles
 
-    assert _straddles((1.02, 0.97, 1.08), 1.0) and not _straddles((1.05, 1.01, 1.08), 1.0)
-    assert _straddles((1.0, 0.6, 0.9), 0.67, 1.5) and not _straddles((1.0, 0.8, 1.2), 0.67, 1.5)
+    assert ratio_straddles((1.02, 0.97, 1.08), 1.0) and not ratio_straddles((1.05, 1.01, 1.08), 1.0)
+    assert ratio_straddles((1.0, 0.6, 0.9), 0.67, 1.5) and not ratio_straddles((1.0, 0.8, 1.2), 0.67, 1.5)
     assert straddles(0.97, 1.08, 1.0) and not straddles(1.01, 1.08, 1.0)
     c = [Claim("P 2000", "§1", "It is fast.", HELD, "1.02x", "because", rule="held if > 1", timing=True,
                straddles=True),
@@ -192,7 +192,7 @@ def test_component_box_reads_eq_4_3_along_each_axis():
     """The eq. 4-3 study's component-wise box: a receiver symmetric about its origin gets the tight box's extents,
     while the default full-norm reading takes the farthest vertices' whole lengths (larger in every axis)."""
     from refraction_ref.levelmap.planes import reference_box
-    from refraction_ref.tables.tipprasert import component_box
+    from refraction_ref.tables.tipprasert_placement import component_box
 
     floor = np.array([[x, -1.0, z] for x in (-2.0, 2.0) for z in (-2.0, 2.0)])
     T0 = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])
@@ -214,9 +214,9 @@ def test_chaudhari_quality_normals_and_bounds():
     from refraction_ref.render import render
     from refraction_ref.tables import chaudhari_quality as Q
 
-    d, _ = Q._scene("bunny", 64)
+    d, _ = Q.study_scene("bunny", 64)
     r = render(d)
-    tr = Q.layered(Q._Prepared(d), "tight", 5)
+    tr = Q.layered(Q.PreparedScene(d), "tight", 5)
     assert np.array_equal(tr["status"], r["status"])
     assert np.array_equal(tr["exit_dir"], r["exit_dir"], equal_nan=True)
     rows = {x["option"]: x for x in Q.normals_study(64, scenes=("bunny",))}
@@ -266,21 +266,21 @@ def test_time_rounds_median_and_spread_with_a_fake_timer():
 
 
 def test_chaudhari_fps_trend_is_a_median_of_per_round_ratios():
-    from refraction_ref.tables.chaudhari_report import _fps_ratio
+    from refraction_ref.tables.chaudhari_models import fps_ratio
 
     # frames = pipeline samples + the cell's photon generation (frame_ms - pipeline_ms, 2 and 5 ms)
     lo = {"pipeline_ms": 10.0, "frame_ms": 12.0, "samples": [10.0, 11.0, 9.0]}
     hi = {"pipeline_ms": 40.0, "frame_ms": 45.0, "samples": [40.0, 44.0, 31.0]}
-    s = _fps_ratio(lo, hi)
+    s = fps_ratio(lo, hi)
     assert (s.n, s.low, s.high) == (3, 36.0 / 11.0, 49.0 / 13.0) and s.median == 45.0 / 12.0
     # cells not timed in the same rounds: one sample, the ratio of the medians
-    assert _fps_ratio(dict(lo, samples=[10.0]), hi).n == 1 and _fps_ratio(dict(lo, samples=[10.0]), hi).median == 3.75
+    assert fps_ratio(dict(lo, samples=[10.0]), hi).n == 1 and fps_ratio(dict(lo, samples=[10.0]), hi).median == 3.75
 
 
 def test_no_gain_is_evidence_only_where_fewer_iterations_reach_similar_output():
     """§4.2: a loose run of 5 or more iterations skips only the reduction, so its ratio is by construction; only
     a run with fewer iterations that reaches similar output can show a gain (numbers, not times)."""
-    from refraction_ref.tables.chaudhari_report import NO_GAIN, claim_no_gain
+    from refraction_ref.tables.chaudhari_claims import NO_GAIN, claim_no_gain
 
     five = {"bunny": {"n_loose": 5, "ratio": (0.99, 0.97, 1.02), "reduce_share": 0.012},
             "sphere": {"n_loose": None}}
@@ -298,7 +298,11 @@ def test_no_gain_is_evidence_only_where_fewer_iterations_reach_similar_output():
 
 
 def test_table_1_photon_half_is_by_construction_and_the_voxel_half_is_judged():
-    from refraction_ref.tables.sun import _claim_scaling
+    from refraction_ref.tables.claims import evaluate
+    from refraction_ref.tables.sun_claims import QUOTE_T1, TABLE_CLAIMS
+
+    # the sentence's two counted halves (photons, occupied voxels); its timed triangle half reads the timings
+    scaling = [r for r in TABLE_CLAIMS if r.quote == QUOTE_T1 and not r.timing]
 
     M = 64
 
@@ -308,7 +312,7 @@ def test_table_1_photon_half_is_by_construction_and_the_voxel_half_is_judged():
     for small_steps, verdict in ((100, HELD), (6000, NOT_HELD)):
         t1 = [row(20480, 0.8, M, 8000, 27000), row(20480, 0.8, M // 4, 500, 27000), row(20480, 0.5, M, small_steps,
                                                                                         8000)]
-        photons, voxels = _claim_scaling(t1, M)
+        photons, voxels = evaluate("Sun et al. 2008", scaling, {"t1": t1, "M": M})
         assert photons.verdict == BY_CONSTRUCTION and "x16.0" in photons.measured
         assert voxels.verdict == verdict and photons.quote == voxels.quote
         s = sentences([Report("Sun", [], [photons, voxels])])
