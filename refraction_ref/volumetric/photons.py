@@ -446,13 +446,13 @@ def _contiguous(a, dtype):
     return out
 
 
-def _proxy_t(org, dirs, b, proxy):
+def _proxy_t(org, dirs, b, proxy_geometry):
     """Start parameters of the texel rays with the proxy (inf: no photon)."""
     t_in = np.empty(len(org))
-    if proxy is None:
+    if proxy_geometry is None:
         slab_entry(org, dirs, b, t_in)  # = box_entry's t_in, in parallel
         return t_in
-    kind, data = proxy
+    kind, data = proxy_geometry
     if kind == "box":
         slab_entry(org, dirs, np.asarray(data, dtype=np.float64), t_in)
         return t_in
@@ -489,7 +489,7 @@ def _inside(p, bounds):
     return bool(np.all(p > bounds[0]) and np.all(p < bounds[1]))
 
 
-def generate_photons(lights, bounds, shape, photons, proxy=None):
+def generate_photons(lights, bounds, shape, photons, proxy_geometry=None):
     """One photon per covered texel of each light's view of the volume box, or of a proxy (§4.3).
 
     Parameters
@@ -503,7 +503,7 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
         Volume grid shape (for the voxel cross-section).
     photons : int
         Texture side M per light.
-    proxy : None or (kind, data), optional
+    proxy_geometry : None or (kind, data), optional
         None: photons start on the volume's box. ``("mesh", tris)`` with
         ``tris`` (T, 3, 3) the proxy's triangles wound outwards
         (:func:`inflate_mesh`; or ``("mesh", (tris, points, welded))``, its
@@ -593,7 +593,7 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
                              "and 'point'")
         org = _contiguous(org, np.float64)  # (the directional light's broadcast direction, copied in parallel)
         dirs = _contiguous(dirs, np.float64)
-        t_in = _proxy_t(org, dirs, b, proxy)
+        t_in = _proxy_t(org, dirs, b, proxy_geometry)
         idx = np.flatnonzero(np.isfinite(t_in)) if np.any(rad > 0) else np.zeros(0, np.int64)
         pos = np.empty((len(idx), 3))
         dsel = np.empty((len(idx), 3))
@@ -606,7 +606,8 @@ def generate_photons(lights, bounds, shape, photons, proxy=None):
             out_r.append(np.array(weights[idx]))
         out_l.append(np.full(len(idx), li, np.int32))
         hit_count = len(idx)
-        on = "box" if proxy is None else ("inflated mesh proxy" if proxy[0] == "mesh" else "occupied-box proxy")
+        on = ("box" if proxy_geometry is None
+              else "inflated mesh proxy" if proxy_geometry[0] == "mesh" else "occupied-box proxy")
         notes.append(f"{what}, {hit_count} texels covered by the {on} -> photons")
     if not out_p:
         z = np.zeros((0, 3))

@@ -278,9 +278,9 @@ def _st_photons(ctx):
         z = np.zeros((0, 3))
         ph = (z, z.copy(), z.copy(), np.zeros(0, np.int32), ["no lights: no photons"])
     else:
-        proxy, what = _proxy(ctx)
+        geometry, what = _proxy(ctx)
         ctx.note(what)
-        ph = generate_photons(d["lights"], voxels["bounds"], voxels["ior"].shape, M, proxy=proxy)
+        ph = generate_photons(d["lights"], voxels["bounds"], voxels["ior"].shape, M, proxy_geometry=geometry)
     for n in ph[4]:
         ctx.note(n)
     ctx.stats["photons"] = {"photons_initial": M * M * len(d["lights"]), "photons_generated": int(len(ph[0])),

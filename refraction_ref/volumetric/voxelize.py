@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..filters import gaussian_blur, separable_correlate  # re-exported (__all__): they lived here
+from ..filters import gaussian_blur, separable_correlate  # in __all__: the blur of §4.1 (voxelize_objects)
 from ..raster import ortho_fragments
 
 __all__ = ["auto_bounds", "column_crossings", "winding_at_centres", "solid_coverage",

@@ -13,7 +13,8 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.volumetric.gradient import gradient_field
-from refraction_ref.volumetric.march import STATUS, march_photons, trace_paths
+from refraction_ref.volumetric.knobs import march_knobs, octree_dilations
+from refraction_ref.volumetric.march import STATUS, march_grid, march_photons, trace_paths
 from refraction_ref.volumetric.octree import build_octree
 from refraction_ref.volumetric.photons import generate_photons
 
@@ -32,20 +33,25 @@ def luneburg(N, R=0.8):
     return np.where(r2 < 1, np.sqrt(np.maximum(2 - r2, 1.0)), 1.0)
 
 
-def _setup(ior, eps=0.005, eps2=0.02, ds_max=8.0):
+def robust(**knobs):
+    """The march's knobs with ``stepping = 'robust'`` (the stepping these analytic tests were written for)."""
+    return march_knobs({"stepping": "robust", **knobs})
+
+
+def _setup(ior, eps=0.005, eps2=0.02, ds_max=8.0, kappa=0.0, stepping="robust"):
+    """The march's grid of an index volume (uniform extinction ``kappa``), its octree built for ``stepping``."""
     field = gradient_field(ior, BOUNDS)
-    level, smax, st = build_octree(ior, eps, eps2, ds_max)
-    ext = np.zeros(ior.shape + (3,), np.float32)
-    return field, ext, level, smax, st
+    level, step_max, st = build_octree(ior, eps, eps2, ds_max, dilate=octree_dilations(stepping)[0])
+    ext = np.full(ior.shape + (3,), kappa, np.float32)
+    return march_grid(field, ext, level, step_max, BOUNDS), st
 
 
 def _luneburg_miss(N, integrator, ds_min, M=24, R=0.8):
     ior = luneburg(N, R)
-    field, ext, level, smax, _ = _setup(ior)
+    grid, _ = _setup(ior)
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0, 0, -1],
                                               "radiance": [1, 1, 1]}], BOUNDS, ior.shape, M)
-    sums, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, ds_min=ds_min,
-                               integrator=integrator)
+    sums, info = march_photons(grid, (pos, dirs, rad), robust(ds_min=ds_min, integrator=integrator))
     sel = (info["status"] == STATUS["exited"]) & (np.hypot(pos[:, 0], pos[:, 1]) < 0.7 * R)
     F = np.array([0.0, 0.0, -R])  # antipodal point of the photons' entry side
     p, d = info["exit_pos"][sel], info["exit_dir"][sel]
@@ -76,11 +82,11 @@ def test_square_linear_index_gives_parabolas(integrator, tol):
     N, n0, k = 40, 1.2, 0.3
     X, Y, Z = _centres(N)
     ior = np.sqrt(n0 ** 2 + k * Y)
-    field, ext, level, smax, _ = _setup(ior)
+    grid, _ = _setup(ior)
     y0s = np.array([-0.6, -0.3, 0.0, 0.3])
     pos = np.stack([np.full(4, -1.0), y0s, np.zeros(4)], axis=1)
     dirs = np.tile([1.0, 0.0, 0.0], (4, 1))
-    paths = trace_paths(field, ext, level, smax, BOUNDS, pos, dirs, ds_min=1.0, integrator=integrator)
+    paths = trace_paths(grid, pos, dirs, robust(ds_min=1.0, integrator=integrator))
     h = 2.0 / N
     for y0, path in zip(y0s, paths):
         assert len(path) > 5
@@ -91,7 +97,7 @@ def test_square_linear_index_gives_parabolas(integrator, tol):
         assert np.max(np.abs(path[:, 2])) < 1e-9
     # exit directions from the full marcher: v(t) = (a, k t / 2, 0)
     rad = np.ones_like(pos)
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, ds_min=1.0, integrator=integrator)
+    _, info = march_photons(grid, (pos, dirs, rad), robust(ds_min=1.0, integrator=integrator))
     assert np.all(info["status"] == STATUS["exited"])
     a = np.sqrt(n0 ** 2 + k * y0s)
     t = (info["exit_pos"][:, 0] + 1.0) / a
@@ -105,13 +111,12 @@ def test_sharp_sphere_is_stiff_but_bounded():
     N = 32
     X, Y, Z = _centres(N)
     ior = np.where(X ** 2 + Y ** 2 + Z ** 2 < 0.5 ** 2, 1.5, 1.0)   # no blur
-    field, ext, level, smax, _ = _setup(ior)
+    grid, _ = _setup(ior)
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0, -1, 0],
                                               "radiance": [1, 1, 1]}], BOUNDS, ior.shape, 24)
     for integ in ("euler", "rk4"):
         for ds in (1.0, 4.0):
-            sums, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, ds_min=ds,
-                                       integrator=integ)
+            sums, info = march_photons(grid, (pos, dirs, rad), robust(ds_min=ds, integrator=integ))
             assert np.all(np.isfinite(sums))
             ex = info["status"] == STATUS["exited"]
             assert ex.mean() > 0.95
@@ -136,13 +141,13 @@ def test_sharp_sphere_is_stiff_but_bounded():
 def test_octree_leaves_constant_regions(N):
     X, Y, Z = _centres(N)
     ior = 1.0 + 0.3 * np.clip(1.0 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2) / 0.3, 0, 1)  # a cone of index in the middle
-    level, smax, st = build_octree(ior, 0.005, 0.02, 8.0)
-    assert level.shape == ior.shape and smax.shape == ior.shape
+    level, step_max, st = build_octree(ior, 0.005, 0.02, 8.0, dilate=True)
+    assert level.shape == ior.shape and step_max.shape == ior.shape
     corner = (slice(0, N // 4),) * 3
-    assert np.all(np.isinf(smax[corner]))            # far corner: constant, unbounded step
+    assert np.all(np.isinf(step_max[corner]))            # far corner: constant, unbounded step
     assert level[0, 0, 0] >= 2                        # crossed by big nodes
     assert np.all(level[N // 2 - 1:N // 2 + 1, N // 2 - 1:N // 2 + 1, N // 2] == 0)  # the varying tip
-    assert np.all(np.isfinite(smax[N // 2, N // 2, N // 2]))
+    assert np.all(np.isfinite(step_max[N // 2, N // 2, N // 2]))
     assert 0.3 < st["constant_fraction"] < 1.0 and not st["constant_index"]
     # every voxel labelled constant really lies in a node whose range is < eps
     K = int(np.ceil(np.log2(N)))
@@ -155,10 +160,10 @@ def test_octree_leaves_constant_regions(N):
 def test_constant_nodes_are_crossed_in_one_step():
     N = 32
     ior = np.ones((N, N, N))
-    field, ext, level, smax, _ = _setup(ior)
+    grid, _ = _setup(ior)
     pos = np.array([[-1.0, 0.1, 0.2]])
     dirs = np.array([[1.0, 0.0, 0.0]])
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, np.ones((1, 3)), ds_min=1.0)
+    _, info = march_photons(grid, (pos, dirs, np.ones((1, 3))), robust(ds_min=1.0))
     assert info["total_steps"] == 1 and info["status"][0] == STATUS["exited"]
     assert np.allclose(info["exit_pos"][0], [1.0, 0.1, 0.2])
 
@@ -311,15 +316,15 @@ def test_reused_deposit_buffers_give_identical_results():
     from refraction_ref.volumetric.march import release_workspace
 
     ior = luneburg(32)
-    field, ext, level, smax, _ = _setup(ior)
-    ext[...] = 0.3
+    grid, _ = _setup(ior, kappa=0.3)
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0.2, -1, 0.1],
                                               "radiance": [1, 0.5, 0.25]}], BOUNDS, ior.shape, 24)
+    knobs = robust(stop_fraction=0.05)
     release_workspace()
-    a, ia = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)
-    b, ib = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)  # reused buffers
+    a, ia = march_photons(grid, (pos, dirs, rad), knobs)
+    b, ib = march_photons(grid, (pos, dirs, rad), knobs)  # reused buffers
     release_workspace()
-    c, _ = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stop_fraction=0.05)   # fresh buffers
+    c, _ = march_photons(grid, (pos, dirs, rad), knobs)   # fresh buffers
     assert ia["truncated"] > 0                      # the stopping rule removed late deposits again
     assert np.array_equal(a, b) and np.array_equal(a, c)
     assert a[..., :3].min() >= 0.0                  # removal is exact: nothing negative is left behind

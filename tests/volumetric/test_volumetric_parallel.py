@@ -9,7 +9,7 @@ from scipy import ndimage
 import refraction_ref as rr
 from refraction_ref.volumetric.octree import build_octree
 from refraction_ref.volumetric.photons import generate_photons
-from refraction_ref.volumetric.voxelize import separable_correlate
+from refraction_ref.filters import separable_correlate
 
 from test_volumetric import BOUNDS, luneburg
 
@@ -73,7 +73,7 @@ def test_octree_and_photons_identical_on_one_and_two_threads(on_one_and_two_thre
 
 def test_parallel_slab_entry_matches_box_entry(on_one_and_two_threads):
     """The photon kernel's slab test gives box_entry's t_in bit for bit, edge cases included."""
-    from refraction_ref.volumetric.photons import _slab_entry, box_entry
+    from refraction_ref.volumetric.photons import box_entry, slab_entry
 
     rng = np.random.default_rng(3)
     o = rng.uniform(-3, 3, (4000, 3))
@@ -88,7 +88,7 @@ def test_parallel_slab_entry_matches_box_entry(on_one_and_two_threads):
 
     def run():
         t = np.empty(len(o))
-        _slab_entry(o, d, BOUNDS, t)
+        slab_entry(o, d, BOUNDS, t)
         return t
 
     a, b = on_one_and_two_threads(run)
@@ -98,7 +98,7 @@ def test_parallel_slab_entry_matches_box_entry(on_one_and_two_threads):
 
 def test_parallel_slab_exit_and_entry_points_match_numpy(on_one_and_two_threads):
     """The photon kernels' exit parameter and texel entry points equal box_entry's NumPy, bit for bit."""
-    from refraction_ref.volumetric.photons import _slab_both, box_entry, entry_points
+    from refraction_ref.volumetric.photons import box_entry, entry_points, slab_both
 
     rng = np.random.default_rng(5)
     o = rng.uniform(-3, 3, (4000, 3))
@@ -117,7 +117,7 @@ def test_parallel_slab_exit_and_entry_points_match_numpy(on_one_and_two_threads)
     def run():
         t_in = np.empty(len(o))
         t_out = np.empty(len(o))
-        _slab_both(o, d, BOUNDS, t_in, t_out, True)
+        slab_both(o, d, BOUNDS, t_in, t_out, True)
         e = np.empty_like(o)
         entry_points(o, d, BOUNDS, e)
         return t_in, t_out, e

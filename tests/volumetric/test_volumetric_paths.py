@@ -13,7 +13,8 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.volumetric.gradient import gradient_field
-from refraction_ref.volumetric.march import STATUS, march_photons, trace_paths
+from refraction_ref.volumetric.knobs import march_knobs, octree_dilations
+from refraction_ref.volumetric.march import STATUS, march_grid, march_photons, trace_paths
 from refraction_ref.volumetric.octree import build_octree
 from refraction_ref.volumetric.photons import generate_photons
 from refraction_ref.volumetric.pipeline import PATH_SAMPLE, PATH_STEPS, path_sample
@@ -31,10 +32,18 @@ def luneburg(N, R=0.8):
     return np.where(r2 < 1, np.sqrt(np.maximum(2 - r2, 1.0)), 1.0)
 
 
-def _setup(ior, eps=0.005, eps2=0.02, ds_max=8.0):
+def robust(**knobs):
+    """The march's knobs with ``stepping = 'robust'`` (the stepping these tests were written for)."""
+    return march_knobs({"stepping": "robust", **knobs})
+
+
+def _setup(ior, eps=0.005, eps2=0.02, ds_max=8.0, kappa=(0.0, 0.0, 0.0)):
+    """The march's grid of an index volume (extinction ``kappa`` per channel), its octree for 'robust' stepping."""
     field = gradient_field(ior, BOUNDS)
-    level, smax, _ = build_octree(ior, eps, eps2, ds_max)
-    return field, np.zeros(ior.shape + (3,), np.float32), level, smax
+    level, step_max, _ = build_octree(ior, eps, eps2, ds_max, dilate=octree_dilations("robust")[0])
+    ext = np.empty(ior.shape + (3,), np.float32)
+    ext[...] = kappa
+    return march_grid(field, ext, level, step_max, BOUNDS)
 
 
 def _finite_rows(path):
@@ -64,10 +73,10 @@ def _on_face(p, tol=1e-12):
 def test_constant_index_paths_are_straight_and_cross_the_box_in_one_step():
     N = 16
     ior = np.ones((N, N, N))
-    field, ext, level, smax = _setup(ior)
-    assert np.all(np.isinf(smax)) and np.all(level == 4)     # one constant node: the whole box
+    grid = _setup(ior)
+    assert np.all(np.isinf(grid.step_max)) and np.all(grid.level == 4)     # one constant node: the whole box
     pos, dirs, rad, _, _ = generate_photons(OBLIQUE, BOUNDS, ior.shape, 12)
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, record=5)
+    _, info = march_photons(grid, (pos, dirs, rad), robust(), record=5)
     P = len(pos)
     assert info["paths"].shape == (P, 6, 3) and info["paths"].dtype == np.float64
     # one step across the box; a photon that starts on an upper face (x, y or z = +1) sits in a
@@ -102,10 +111,11 @@ def test_constant_index_steps_end_at_octree_node_boundaries(lev):
     field = gradient_field(ior, BOUNDS)
     ext = np.zeros((N, N, N, 3), np.float32)
     level = np.full((N, N, N), lev, np.int8)
-    smax = np.full((N, N, N), np.inf, np.float32)
+    step_max = np.full((N, N, N), np.inf, np.float32)
     pos, dirs, rad, _, _ = generate_photons(OBLIQUE, BOUNDS, ior.shape, 10)
     ds_min = 0.01
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, ds_min=ds_min, record=400)
+    grid = march_grid(field, ext, level, step_max, BOUNDS)
+    _, info = march_photons(grid, (pos, dirs, rad), robust(ds_min=ds_min), record=400)
     h = 2.0 / N
     node = h * 2 ** lev
     nudge, ds_w = 1e-4 * h, ds_min * h
@@ -143,10 +153,10 @@ def test_constant_index_steps_end_at_octree_node_boundaries(lev):
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 def test_last_recorded_point_is_the_exit_point_on_the_face(integrator):
     ior = luneburg(32)
-    field, ext, level, smax = _setup(ior)
+    grid = _setup(ior)
     pos, dirs, rad, _, _ = generate_photons(OBLIQUE, BOUNDS, ior.shape, 16)
     K = 300
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, integrator=integrator, record=K)
+    _, info = march_photons(grid, (pos, dirs, rad), robust(integrator=integrator), record=K)
     ex = info["status"] == STATUS["exited"]
     assert ex.mean() > 0.95
     steps = info["steps"]
@@ -162,7 +172,7 @@ def test_last_recorded_point_is_the_exit_point_on_the_face(integrator):
         assert not _on_face(path[-2]) or len(path) == 2
     # a photon with more steps than recorded: the path holds exactly its first K steps
     few = 3
-    _, short = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, integrator=integrator, record=few)
+    _, short = march_photons(grid, (pos, dirs, rad), robust(integrator=integrator), record=few)
     long_ = steps > few
     assert long_.any()
     assert np.array_equal(short["paths"][long_], info["paths"][long_, :few + 1])
@@ -176,11 +186,10 @@ def test_luneburg_paths_converge_on_the_far_side_focus(integrator, tol):
     antipodal point of their entry side: the recorded paths converge there (tests/volumetric/test_volumetric.py)."""
     N, R = 48, 0.8
     ior = luneburg(N, R)
-    field, ext, level, smax = _setup(ior)
+    grid = _setup(ior)
     light = [{"type": "directional", "direction": [0, 0, -1], "radiance": [1, 1, 1]}]
     pos, dirs, rad, _, _ = generate_photons(light, BOUNDS, ior.shape, 24)
-    _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, ds_min=1.0, integrator=integrator,
-                            record=512)
+    _, info = march_photons(grid, (pos, dirs, rad), robust(ds_min=1.0, integrator=integrator), record=512)
     sel = (info["status"] == STATUS["exited"]) & (np.hypot(pos[:, 0], pos[:, 1]) < 0.7 * R)
     assert sel.sum() >= 50
     F = np.array([0.0, 0.0, -R])
@@ -277,15 +286,13 @@ def test_photon_paths_rerun_with_the_march_knobs():
 @pytest.mark.parametrize("integrator", ["euler", "rk4"])
 def test_recording_leaves_the_march_bit_identical(integrator):
     ior = luneburg(32)
-    field, ext, level, smax = _setup(ior)
-    ext[..., 0] = 0.3
-    ext[..., 1] = 0.2
+    grid = _setup(ior, kappa=(0.3, 0.2, 0.0))
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0.2, -1, 0.1],
                                               "radiance": [1, 0.5, 0.25]}], BOUNDS, ior.shape, 24)
-    kw = dict(integrator=integrator, stop_fraction=0.05, min_radiance=0.5)
-    a, ia = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, **kw)
+    knobs = robust(integrator=integrator, stop_fraction=0.05, min_radiance=0.5)
+    a, ia = march_photons(grid, (pos, dirs, rad), knobs)
     K = 40
-    b, ib = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, record=K, **kw)
+    b, ib = march_photons(grid, (pos, dirs, rad), knobs, record=K)
     assert "paths" not in ia and ib["paths"].shape == (len(pos), K + 1, 3)
     assert np.array_equal(a, b)
     for k in ia:
@@ -301,21 +308,18 @@ def test_recording_leaves_the_march_bit_identical(integrator):
 
 def test_recorded_paths_match_trace_paths_and_any_thread_count(on_one_and_two_threads):
     ior = luneburg(24)
-    field, ext, level, smax = _setup(ior)
+    grid = _setup(ior)
     pos, dirs, rad, _, _ = generate_photons(OBLIQUE, BOUNDS, ior.shape, 8)
     K = 200
-    (_, i1), (_, i2) = on_one_and_two_threads(
-        lambda: march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, integrator="rk4", ds_min=2.0,
-                              stop_fraction=None, record=K))
+    knobs = robust(integrator="rk4", ds_min=2.0, stop_fraction=0.0)
+    (_, i1), (_, i2) = on_one_and_two_threads(lambda: march_photons(grid, (pos, dirs, rad), knobs, record=K))
     assert np.array_equal(i1["paths"], i2["paths"], equal_nan=True)
-    ref = trace_paths(field, ext, level, smax, BOUNDS, pos, dirs, integrator="rk4", ds_min=2.0)
+    ref = trace_paths(grid, pos, dirs, knobs)
     for p in range(len(pos)):
         assert np.array_equal(_finite_rows(i1["paths"][p]), ref[p][:K + 1])
 
 
 def test_negative_record_is_refused():
-    ior = np.ones((8, 8, 8))
-    field, ext, level, smax = _setup(ior)
+    grid = _setup(np.ones((8, 8, 8)))
     with pytest.raises(ValueError, match="record"):
-        march_photons(field, ext, level, smax, BOUNDS, np.zeros((1, 3)), np.array([[0, 0, 1.0]]),
-                      np.ones((1, 3)), record=-1)
+        march_photons(grid, (np.zeros((1, 3)), np.array([[0, 0, 1.0]]), np.ones((1, 3))), record=-1)

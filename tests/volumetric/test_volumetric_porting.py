@@ -1,4 +1,4 @@
-"""The volumetric porting rules of docs/oracle.md reproduce the oracle's stage buffers (issue 29).
+"""The volumetric porting rules of docs/oracle.md reproduce the oracle's stage buffers.
 
 tests/volumetric/volport.py is "Porting rules: volumetric" written down as plain Python (photons, march with
 its deposits, extinction and receivers, smooth, view). Here it runs on small scenes that exercise

@@ -1,4 +1,4 @@
-"""Sun et al. (2008), faithfully (issue 13): proxy geometry (§4.3), receivers in the volume (Fig. 9),
+"""Sun et al. (2008), faithfully: proxy geometry (§4.3), receivers in the volume (Fig. 9),
 the paper's stepping (§4.4, §5.3) as a named mode and the default.
 
 Small volumes (32^3..64^3) keep the file under ~25 s on two cores; the
@@ -15,7 +15,9 @@ import refraction_ref as rr
 from refraction_ref.metrics import relative_l1
 from refraction_ref.scene import SceneError, load_scene
 from refraction_ref.volumetric.gradient import gradient_field
-from refraction_ref.volumetric.march import STATUS, march_photons, receiver_tuple
+from refraction_ref.volumetric.knobs import march_knobs, octree_dilations
+from refraction_ref.volumetric.march import STATUS, march_grid, march_photons
+from refraction_ref.volumetric.receivers import receiver_tuple, segment_receiver
 from refraction_ref.volumetric.octree import build_octree
 from refraction_ref.volumetric.photons import generate_photons, inflate_mesh, occupied_box
 
@@ -85,7 +87,7 @@ def test_proxy_photons_are_a_subset_of_the_box_texels_starting_outside_the_objec
     assert r.min() >= 0.4 + 6 * h * 0.99 - 1e-9   # every face moved out by the distance (sphere radius 0.4)
     lights = sc.data["lights"]
     pb = generate_photons(lights, BOUNDS, (48, 48, 48), 64)
-    pp = generate_photons(lights, BOUNDS, (48, 48, 48), 64, proxy=("mesh", tris))
+    pp = generate_photons(lights, BOUNDS, (48, 48, 48), 64, proxy_geometry=("mesh", tris))
     key = lambda p: set(map(tuple, np.round(p[0][:, [0, 2]], 9)))  # noqa: E731
     assert key(pp) <= key(pb) and len(pp[0]) < len(pb[0])
     assert np.array_equal(pp[2], pb[2][: len(pp[0])])  # the same weight per texel
@@ -156,11 +158,9 @@ def test_receivers_outside_the_volume_are_met_after_the_exit():
 def test_segment_receiver_hits_the_first_triangle():
     tris = np.array([[[-1, 0, -1], [1, 0, -1], [0, 0, 1]], [[-1, -1, -1], [1, -1, -1], [0, -1, 1]]], float)
     rc = receiver_tuple(tris, np.array([1, 0]))
-    from refraction_ref.volumetric.march import _segment_receiver
-
-    t, q = _segment_receiver(rc, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 5.0)
+    t, q = segment_receiver(rc, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 5.0)
     assert t == pytest.approx(1.0) and np.searchsorted(rc.start, q, side="right") - 1 == 1
-    assert _segment_receiver(rc, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 0.5)[1] == -1  # the step ends before it
+    assert segment_receiver(rc, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 0.5)[1] == -1  # the step ends before it
 
 
 def test_scene_without_receivers_says_so_in_the_plan():
@@ -184,8 +184,8 @@ def test_fig9_scene_is_bundled():
 # ------------------------------------------------------------------ §4.4 / §5.3 stepping
 def test_paper_octree_has_no_dilation():
     n = luneburg(32)
-    lev_p, smax_p, _ = build_octree(n, dilate=False)
-    lev_r, smax_r, _ = build_octree(n)
+    lev_p, smax_p, _ = build_octree(n, dilate=octree_dilations("paper")[0])
+    lev_r, smax_r, _ = build_octree(n, dilate=octree_dilations("robust")[0])
     # a single voxel is a constant node in the paper's octree (its own range is zero)
     assert np.all(np.isinf(smax_p[lev_p == 0]))
     assert np.count_nonzero(np.isinf(smax_p)) >= np.count_nonzero(np.isinf(smax_r))
@@ -201,8 +201,9 @@ def test_paper_and_robust_stepping_differ_and_paper_focuses_the_luneburg_lens():
     ext = np.zeros(ior.shape + (3,), np.float32)
     out = {}
     for stepping in ("paper", "robust"):
-        level, smax, _ = build_octree(ior, dilate=stepping == "robust")
-        _, info = march_photons(field, ext, level, smax, BOUNDS, pos, dirs, rad, stepping=stepping)
+        level, step_max, _ = build_octree(ior, dilate=octree_dilations(stepping)[0])
+        grid = march_grid(field, ext, level, step_max, BOUNDS)
+        _, info = march_photons(grid, (pos, dirs, rad), march_knobs({"stepping": stepping}))
         sel = (info["status"] == STATUS["exited"]) & (np.hypot(pos[:, 0], pos[:, 1]) < 0.7 * R)
         F = np.array([0.0, 0.0, -R])
         p, d = info["exit_pos"][sel], info["exit_dir"][sel]
