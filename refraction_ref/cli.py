@@ -154,7 +154,8 @@ def _cmd_scene(a):
 
 
 def _cmd_crosscheck(a):
-    from .crosscheck import failed_targets, run
+    from .interop.crosscheck import run
+    from .interop.report import failed_targets
 
     _check_workers(a.workers)
     parts = tuple(x for x in a.parts.split(",") if x)

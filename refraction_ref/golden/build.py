@@ -39,7 +39,11 @@ from ..files import atomic_open, atomic_path
 from .tolerances import tolerance_for
 
 __all__ = ["catalogue", "build", "case_scene", "array_sha256", "key_stage", "stage_order", "FINAL_KEY_STAGES",
-           "COMPLETE", "CATALOGUE_DIR"]
+           "COMPLETE", "CATALOGUE_DIR", "SEED_KEY", "photon_quantum"]
+
+#: the scene key of the exact reference's one seed, of its photons and of its water samples: batch ``b`` of a
+#: noisy case renders with it set to ``b``
+SEED_KEY = "exact.photon_seed"
 
 #: the completion marker of a suite, written after everything else (``check`` refuses a suite without it)
 COMPLETE = "complete.json"
@@ -254,10 +258,6 @@ def key_stage(key, stages):
                    "refraction_ref.golden.build.FINAL_KEY_STAGES")
 
 
-def _seed_key(scene):
-    return "exact.photon_seed"  # the exact reference's one seed, of its photons and of its water samples
-
-
 def photon_quantum(scene):
     """The irradiance one photon of the exact references deposits in one texel (flux / texel area).
 
@@ -442,10 +442,9 @@ def _build_case(case, d, progress=False):
         entry["files"].append("geometry.npz")
     if noisy:
         K = int(case["batches"])
-        sk = _seed_key(scene)
         maps = {}
         for b in range(K):
-            r = render(scene, method=method, overrides={sk: b})
+            r = render(scene, method=method, overrides={SEED_KEY: b})
             for k, a in r.arrays.items():
                 if k.startswith("caustic_map_"):
                     maps.setdefault(k, []).append(a)
@@ -453,7 +452,7 @@ def _build_case(case, d, progress=False):
         q = photon_quantum(scene)
         for k in maps:
             keys[k]["tolerance"]["quantum"] = q
-        entry["batches"] = {"count": K, "seed_key": sk, "keys": sorted(maps), "quantum": q}
+        entry["batches"] = {"count": K, "seed_key": SEED_KEY, "keys": sorted(maps), "quantum": q}
         entry["files"].append("batches.npz")
     if case.get("reference"):
         ref = render(scene, method=case["reference"])

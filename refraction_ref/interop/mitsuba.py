@@ -6,7 +6,7 @@ ours                       Mitsuba 3
 ``camera`` (perspective)   ``perspective``, ``fov_axis="y"``, ``to_world = look_at(eye, target,
                            up)``, a ``box`` pixel filter; pixel (row i, col j) is Mitsuba's film
                            position ``((j + 0.5) / W, (i + 0.5) / H)`` (row 0 at the top in both;
-                           checked to float32 precision by :func:`refraction_ref.crosscheck`)
+                           checked to float32 precision by :mod:`refraction_ref.interop.paths`)
 object                     ``ply`` mesh with the exact reference's shading normals written into
                            it (``exact.normals``: crease and file normals split the vertices per
                            corner, smooth normals per vertex, face normals as ``face_normals``)
@@ -49,15 +49,31 @@ import os
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+import trimesh
+from trimesh.exchange.ply import export_ply
+
+from ..camera import Camera
+from ..environment import environment_lookup
+from ..exact.pipeline import shading_normals
+from ..files import check_out_file
+from ..levelmap.water import water_mesh
+from ..meshes import object_mesh, scene_geometry
+
+# Mitsuba and Dr.Jit are the optional ``crosscheck`` extra: they are imported inside the functions that need
+# them (require(), to_dict(), register_refract_bsdf(), the variant of the bitmap writer), so that this module
+# and the export's spec import without them
 
 __all__ = ["require", "export", "export_files", "to_dict", "to_xml", "write_xml", "load", "object_meshes",
            "envmap_bitmap", "register_refract_bsdf", "REFRACT_PLUGIN", "write_ply", "ENV_WIDTH",
-           "export_water_mesh"]
+           "export_water_mesh", "NEAR_CLIP", "SIGMA_T_MIN"]
 
 #: name under which :func:`register_refract_bsdf` registers the Fresnel-free BSDF
 REFRACT_PLUGIN = "refraction_ref_refract"
 #: default envmap width: 64 texels per checker square of the default 48-square checker
 ENV_WIDTH = 3072
+#: the sensor's near clip (world units): our primary rays start at the eye, Mitsuba's on this plane, on the
+#: same line
+NEAR_CLIP = 1e-4
 _INSTALL = 'pip install -e ".[crosscheck]"  (or: pip install "mitsuba>=3.5")'
 
 
@@ -110,9 +126,6 @@ def write_ply(path, vertices, faces, normals=None):
     -------
     None
     """
-    import trimesh
-    from trimesh.exchange.ply import export_ply
-
     m = trimesh.Trimesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int64), process=False,
                         vertex_normals=None if normals is None else np.asarray(normals, np.float64))
     with open(path, "wb") as fh:
@@ -144,9 +157,6 @@ def object_meshes(scene):
         ``vertices`` (V, 3), ``faces`` (F, 3), ``normals`` (V, 3) or None (face
         normals), ``ior``, ``absorption`` (3,), ``rule`` (the normals rule).
     """
-    from ..exact.pipeline import shading_normals
-    from ..meshes import scene_geometry
-
     geom = scene_geometry(scene)
     if not len(geom.faces):
         return []
@@ -196,8 +206,6 @@ def envmap_bitmap(env, width=ENV_WIDTH, base_dir="."):
     (W // 2 + 1, W, 3) float32 ndarray
         Linear RGB.
     """
-    from ..environment import environment_lookup
-
     W = int(width)
     H = W // 2 + 1
     u = (np.arange(W) + 0.5) / W + 0.5
@@ -227,8 +235,6 @@ def export_water_mesh(water, resolution=None):
     resolution : int
         The quads per side used.
     """
-    from ..levelmap.water import water_mesh
-
     res = int(resolution) if resolution else max(512, 4 * int(water["resolution"]))
     return water_mesh({**water, "resolution": res}), res
 
@@ -258,7 +264,7 @@ def _medium(sigma_t):
 
 
 def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resolution=None,
-           integrator=None, max_depth=None, near_clip=1e-4, prefix=""):
+           integrator=None, max_depth=None, prefix=""):
     """Write a scene's meshes and environment into ``folder``; the scene spec (plain data).
 
     Parameters
@@ -281,8 +287,6 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
     max_depth : int, optional
         Default ``exact.max_bounces + 2`` (camera segment, every event, the
         segment to the environment), Russian roulette off (``rr_depth`` the same).
-    near_clip : float
-        The sensor's near clip (our primary rays start at the eye).
     prefix : str
         Put before every file name (:func:`write_xml` gives the XML's stem and ``_``, so that two exports
         into one folder do not share ``object_0.ply``).
@@ -293,9 +297,6 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
         The spec: ``{name: {"type": ..., ...}}`` with ``"file"`` entries
         relative to ``folder``.
     """
-    from ..camera import Camera
-    from ..meshes import object_mesh
-
     os.makedirs(folder, exist_ok=True)
     d = scene.data
     out_ior = float(d["outside_ior"])
@@ -306,7 +307,7 @@ def export(scene, folder, *, bsdf="dielectric", env_width=ENV_WIDTH, water_resol
     spec = {"type": "scene"}
     depth = int(max_depth) if max_depth is not None else int(d["exact"]["max_bounces"]) + 2
     spec["sensor"] = {
-        "type": "perspective", "fov": float(cam.fov_y), "fov_axis": "y", "near_clip": float(near_clip),
+        "type": "perspective", "fov": float(cam.fov_y), "fov_axis": "y", "near_clip": NEAR_CLIP,
         "far_clip": max(1e4, float(cam.far)), "to_world": _lookat(cam.eye, cam.target, cam.up),
         "film": {"type": "hdrfilm", "width": int(cam.width), "height": int(cam.height), "pixel_format": "rgb",
                  "rfilter": {"type": "box"}, "sample_border": False},
@@ -533,8 +534,6 @@ def write_xml(scene, path, force=False, **kw):
     dict
         The spec (:func:`export`).
     """
-    from ..files import check_out_file
-
     check_out_file(path, "the Mitsuba scene (--to mitsuba OUT.xml)")
     there = [p for p in export_files(scene, path) if os.path.exists(p)]
     if there and not force:

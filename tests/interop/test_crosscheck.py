@@ -1,4 +1,4 @@
-"""The exact references against Mitsuba 3 (refraction_ref.interop.mitsuba, refraction_ref.crosscheck).
+"""The exact references against Mitsuba 3 (refraction_ref.interop: the export, and the cross-check by part).
 
 Skipped with a reason where Mitsuba is absent (pip install -e ".[crosscheck]"). The default run keeps a
 small subset (sphere paths at 32x32, the export's round trip through mi.load_file); the golden cases'
@@ -16,7 +16,7 @@ mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip inst
 
 from refraction_ref import load_scene  # noqa: E402
 from refraction_ref.compare import angular_error_deg  # noqa: E402
-from refraction_ref.crosscheck import mitsuba_paths, paths_case  # noqa: E402
+from refraction_ref.interop.paths import exact_arrays, mitsuba_paths, paths_case, paths_only_scene  # noqa: E402
 from refraction_ref.golden.build import catalogue  # noqa: E402
 from refraction_ref.interop import mitsuba as M  # noqa: E402
 from refraction_ref.status import EXITED  # noqa: E402
@@ -131,7 +131,7 @@ def test_envmap_bitmap_matches_mitsuba_lookup():
 def test_golden_case_paths_meet_the_targets(name, tmp_path):
     """Every image-space golden case: status agreement >= 99 %, median <= 0.01 deg; p99 <= 0.5 deg except
     the TIR-chaos cases and the open meshes documented in docs/oracle.md."""
-    from refraction_ref.crosscheck import TIR_CHAOS
+    from refraction_ref.interop.report import TIR_CHAOS
 
     num, _ = paths_case(catalogue([name])[0], str(tmp_path))
     assert num["status_agree"] >= 0.99
@@ -143,11 +143,11 @@ def test_golden_case_paths_meet_the_targets(name, tmp_path):
 def test_path_integrator_difference_is_its_spawn_offset(tmp_path):
     """Bunny pixels whose colour Mitsuba's path integrator gets wrong: a loop over Mitsuba's own parts with
     its spawn_ray gives the integrator's pixels exactly; the same loop spawned along the ray gives ours."""
-    from refraction_ref.crosscheck import _exact, _paths_only_scene, loop_radiance, render_pixel_centres
+    from refraction_ref.interop.images import loop_radiance, render_pixel_centres
 
     c = _small("is_bunny_1_2", 48)
-    scene = _paths_only_scene(c, str(tmp_path / "s"))
-    img = np.asarray(_exact(scene)["image"], np.float64).reshape(-1, 3)
+    scene = paths_only_scene(c, str(tmp_path / "s"))
+    img = np.asarray(exact_arrays(scene)["image"], np.float64).reshape(-1, 3)
     ms, spec = M.load(scene, str(tmp_path / "m"), "scalar_rgb", bsdf="refract", env_width=3072)
     pix = np.array([15 * 48 + 12, 19 * 48 + 25, 20 * 48 + 6])  # paths with 1-4 total internal reflections
     depth = spec["integrator"]["max_depth"]
@@ -163,7 +163,7 @@ def test_path_integrator_difference_is_its_spawn_offset(tmp_path):
 def test_zero_absorption_channel_exports_a_positive_sigma_t(tmp_path):
     """volpath gives NaN for a medium channel of sigma_t = 0 (0 / 0 in its free-flight sampling): the export
     floors it at SIGMA_T_MIN; the absorbing sphere renders finite."""
-    from refraction_ref.crosscheck import render_pixel_centres
+    from refraction_ref.interop.images import render_pixel_centres
 
     c = _small("is_sphere_1_5", 8)
     scene = load_scene(c["scene"])
@@ -177,7 +177,7 @@ def test_zero_absorption_channel_exports_a_positive_sigma_t(tmp_path):
 def test_sphere_image_matches_mitsuba_parts(tmp_path):
     """Our exact image (IOR 1.5, Beer-Lambert) against Mitsuba's intersector, Fresnel-free plugin, medium and
     envmap (24x24): within 1e-4 relative RMSE on the judged pixels; volpath within its noise."""
-    from refraction_ref.crosscheck import images_case
+    from refraction_ref.interop.images import images_case
 
     num, _ = images_case(_small("is_sphere_1_5", 24), str(tmp_path), spp_fresnel=1, spp_absorb=16)
     assert num["judged_pixels"] > 0.8 * num["pixels"]
@@ -189,7 +189,7 @@ def test_sphere_image_matches_mitsuba_parts(tmp_path):
 def test_sphere_caustic_passes_the_ztest_against_mitsuba_photons(tmp_path):
     """exact_caustics_sphere: photons on Mitsuba's intersector from a window and random stream of their own,
     in our map frame, pass the golden Z-test against our batches; the same power."""
-    from refraction_ref.crosscheck import caustics_case
+    from refraction_ref.interop.caustics import caustics_case
 
     num, _ = caustics_case(catalogue(["exact_caustics_sphere"])[0], str(tmp_path), batches=3, oversample=1.0)
     (r,) = num["receivers"]
@@ -209,7 +209,7 @@ def test_water_caustics_pass_the_ztest_against_mitsuba_photons(tmp_path):
     """lm_steep (small maps): photons of Mitsuba's intersector through the exported water mesh (analytic vertex
     normals), in our map frames, pass the golden Z-test against our K batches on both receivers, also with each
     map's own quantum; the same power."""
-    from refraction_ref.crosscheck import caustics_case
+    from refraction_ref.interop.caustics import caustics_case
 
     num, _ = caustics_case(_small_water("lm_steep"), str(tmp_path), batches=4)
     assert num["water_resolution"] == 512 and num["normal_error_deg"] < 0.1
@@ -223,7 +223,7 @@ def test_water_caustics_pass_the_ztest_against_mitsuba_photons(tmp_path):
 def test_water_caustics_crosscheck_sees_a_wrong_surface(tmp_path, monkeypatch):
     """The same check with the exported waves 50 % higher than the analytic surface: the floor's maps differ by
     more than twice either side's own noise (the criterion the check above passes)."""
-    from refraction_ref.crosscheck import caustics_case
+    from refraction_ref.interop.caustics import caustics_case
 
     orig = M.export_water_mesh
 
@@ -240,7 +240,7 @@ def test_water_caustics_crosscheck_sees_a_wrong_surface(tmp_path, monkeypatch):
 def test_water_eye_rays_agree_with_mitsuba(tmp_path):
     """lm_steep at 32x32: our refracted eye directions at the analytic surface against Snell at Mitsuba's hit on
     the exported mesh: the same pixels meet the water, and the directions agree within the mesh's normal bound."""
-    from refraction_ref.crosscheck import water_paths_case
+    from refraction_ref.interop.water import water_paths_case
 
     num, figs = water_paths_case(_small("lm_steep"), str(tmp_path))
     assert num["kind"] == "water" and num["both"] > 500
@@ -255,7 +255,8 @@ def test_water_eye_rays_agree_with_mitsuba(tmp_path):
 def test_golden_water_case_crosschecks(name, tmp_path):
     """Every golden water case at its catalogue size: eye rays within 0.01 deg at the median, the same pixels meet
     the water, every caustic map passes the Z-test (K = 8) both ways."""
-    from refraction_ref.crosscheck import run_case, verdicts
+    from refraction_ref.interop.crosscheck import run_case
+    from refraction_ref.interop.report import verdicts
 
     e = run_case(catalogue([name])[0], str(tmp_path), figures=False)
     assert "skipped" not in e and "images" not in e
@@ -266,7 +267,7 @@ def test_golden_water_case_crosschecks(name, tmp_path):
 @pytest.mark.parametrize("name", [c["name"] for c in catalogue() if c["method"] == "volumetric"])
 def test_volumetric_cases_are_skipped_with_their_reason(name, tmp_path):
     """A graded-index volume has no Mitsuba plugin: the volumetric cases get a row with that reason, nothing run."""
-    from refraction_ref.crosscheck import run_case
+    from refraction_ref.interop.crosscheck import run_case
 
     e = run_case(catalogue([name])[0], str(tmp_path))
     assert e["skipped"].startswith("volumetric: a graded-index volume") and "no Mitsuba plugin" in e["skipped"]
@@ -274,7 +275,7 @@ def test_volumetric_cases_are_skipped_with_their_reason(name, tmp_path):
 
 def test_failed_targets_name_the_missed_targets_and_skip_the_unjudged():
     """The report's FAIL and the command's exit status come from one list: judged targets that miss."""
-    from refraction_ref.crosscheck import TARGETS, TIR_CHAOS, failed_targets
+    from refraction_ref.interop.report import TARGETS, TIR_CHAOS, failed_targets
 
     paths = {"median_deg": 0.001, "p99_deg": 10 * TARGETS["p99_deg"], "status_agree": 1.0}
     assert failed_targets("is_sphere_1_5", {"paths": paths}) == ["p99_deg"]
