@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["plane_index_map", "plane_rects", "section_points"]
+__all__ = ["plane_index_map", "plane_rects"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -127,31 +127,3 @@ def plane_rects(pidx, n):
     out = np.empty((int(n), 4), np.int64)
     _rects(np.ascontiguousarray(pidx, dtype=np.int32), int(n), out)
     return out
-
-
-def section_points(origins, dirs, zeta_p):
-    """Where edge rays (map coordinates) cross the plane ``zeta = zeta_p``.
-
-    Parameters
-    ----------
-    origins, dirs : (..., 3) array_like
-        Ray origins ``(col, row, zeta)`` and rates ``(dcol, drow, dzeta)``
-        per unit length.
-    zeta_p : float
-
-    Returns
-    -------
-    points : (..., 2) float64 and lam : (...) float64
-        ``(col, row)`` on the plane and the distance travelled; ``lam`` is
-        ``+inf`` for rays that never go deeper (``dzeta <= 0``).
-
-    References
-    ----------
-    Tipprasert (2006), §4.4, Fig. 4-14.
-    """
-    o = np.asarray(origins, dtype=np.float64)
-    d = np.asarray(dirs, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = np.where(d[..., 2] > 0, (zeta_p - o[..., 2]) / d[..., 2], np.inf)
-    lam_f = np.where(np.isfinite(lam), lam, 0.0)
-    return o[..., :2] + lam_f[..., None] * d[..., :2], lam

@@ -134,7 +134,8 @@ def prepare(scene, timings=None, plan=None):
 
     References
     ----------
-    Tipprasert (2006), §4.2.1 to §4.3, eqs. 2-8, 4-1 to 4-14.
+    Tipprasert (2006), §4.2 and §4.3: :func:`water_pass`, :func:`planes_pass`,
+    :func:`level_map_pass`.
     """
     check_water_scene(scene)
     bufs = run_stages(shared_stages(scene), {}, scene, timings, plan)

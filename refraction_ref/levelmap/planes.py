@@ -67,7 +67,7 @@ from ..caustics.boxes import CENTRED, PLACEMENTS, Box, dir_to_map, frame_of, fro
 from ..optics import refract
 from ..validation import SceneError
 
-__all__ = ["Box", "Lattice", "CENTRED", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin", "slice_planes",
+__all__ = ["Box", "Lattice", "CENTRED", "PLACEMENTS", "refracted_axis", "reference_box", "receiver_origin",
            "plane_lattice", "to_map", "dir_to_map", "from_map", "frame_of"]
 # Box, PLACEMENTS, reference_box and the map frame (to_map, dir_to_map, from_map, frame_of) live in
 # caustics.boxes: every receiver's caustic map uses them, the level map's planes are laid in them.
@@ -191,32 +191,3 @@ def plane_lattice(box, n, placement):
         return Lattice(zeta, s, -box.h / 2.0 - s / 2.0)
     s = box.h / n
     return Lattice(-box.h / 2.0 + s * (np.arange(n) + 0.5), s, -box.h / 2.0)
-
-
-def slice_planes(box, n, placement):
-    """Depths ``zeta_i`` of ``n`` equally spaced reference planes (eqs. 4-6 to 4-9).
-
-    Parameters
-    ----------
-    box : Box
-        The reference box.
-    n : int
-        Number of planes.
-    placement : {"component", "thesis", "tight"}
-        ``caustics.placement``: the lattice (:func:`plane_lattice`).
-
-    Returns
-    -------
-    zeta : (n,) float64
-        Plane depths along ``T0`` from the box centre, nearest the light first.
-    s : float
-        Spacing (eq. 4-8).
-    eps : float
-        Acceptance threshold ``s / 2`` (eq. 4-15).
-
-    References
-    ----------
-    Tipprasert (2006), §4.2.1, eqs. 4-6 to 4-9; §4.4, eq. 4-15.
-    """
-    lat = plane_lattice(box, n, placement)
-    return lat.zeta, lat.s, lat.s / 2.0

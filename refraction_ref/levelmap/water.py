@@ -19,11 +19,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..optics import refract
 from ..validation import SceneError
 
-__all__ = ["WaterMesh", "wave_height", "wave_gradient", "water_mesh", "incident_directions",
-           "refract_at_vertices", "light_weight"]
+__all__ = ["WaterMesh", "wave_height", "wave_gradient", "surface_normals", "water_mesh", "incident_directions",
+           "light_weight"]
 
 
 class WaterMesh(NamedTuple):
@@ -235,34 +234,3 @@ def incident_directions(light, points):
         r2 = np.maximum(r2, 1e-300)
         return d / np.sqrt(r2)[:, None], w / r2
     raise SceneError(f"levelmap: light type {light['type']!r} is not supported; use 'directional' or 'point'")
-
-
-def refract_at_vertices(light, mesh, eta):
-    """Refracted light direction ``T_i`` at every water vertex (eq. 2-8).
-
-    Parameters
-    ----------
-    light : dict
-        A scene light (directional or point).
-    mesh : WaterMesh
-    eta : float
-        ``outside_ior / water.ior``.
-
-    Returns
-    -------
-    incident : (V, 3) float64
-        Unit incident directions ``I_i``.
-    refracted : (V, 3) float64
-        Unit refracted directions ``T_i`` (:func:`refraction_ref.optics.refract`).
-    ok : (V,) bool
-        False where the light meets the surface from below or is totally
-        reflected (no light enters the water there).
-
-    References
-    ----------
-    Tipprasert (2006), eq. 2-8 and §4.3.
-    """
-    inc, _ = incident_directions(light, mesh.vertices)
-    t, tir = refract(inc, mesh.normals, eta)
-    facing = np.einsum("ij,ij->i", inc, mesh.normals) < 0.0
-    return inc, t, facing & ~tir & (t[:, 1] < 0.0)
