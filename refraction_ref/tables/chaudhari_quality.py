@@ -220,15 +220,15 @@ def run_passes(prep):
 
     Returns
     -------
-    mm, vox, pl
+    minmax, voxels, peeled
         The outputs of :func:`~refraction_ref.imagespace.pipeline.pass_minmax`,
         ``pass_voxelize`` and ``pass_peel``.
     """
     from ..imagespace import pipeline as P
 
-    mm = P.pass_minmax(prep.geom, prep.cam, prep.p)
-    vox = P.pass_voxelize(mm, prep.cam, prep.p)
-    return mm, vox, P.pass_peel(vox, prep.cam.shape, prep.p)
+    minmax = P.pass_minmax(prep.geom, prep.cam, prep.p)
+    voxels = P.pass_voxelize(minmax, prep.cam, prep.p)
+    return minmax, voxels, P.pass_peel(voxels, prep.cam.shape, prep.p)
 
 
 def layered(prep, bound="tight", iterations=5, timings=None):
@@ -262,21 +262,22 @@ def layered(prep, bound="tight", iterations=5, timings=None):
     t = {}
     t0 = tic()
     # a timed frame runs every pass; an untimed one reuses the view's passes before the bound
-    mm, vox, pl = run_passes(prep) if timings is not None else prep.passes()
+    minmax, voxels, peeled = run_passes(prep) if timings is not None else prep.passes()
     t["passes"] = (tic() - t0) * 1e3
     t0 = tic()
     if bound == "loose":
-        L = pl.ldi.shape[0]
-        red = P.Bounds(np.full(L, mm.gmax), np.full(L, mm.gmin), "the object's largest depth bounds every layer")
+        L = peeled.ldi.shape[0]
+        bounds = P.Bounds(np.full(L, minmax.gmax), np.full(L, minmax.gmin),
+                          "the object's largest depth bounds every layer")
     else:
-        red = P.pass_reduce(mm, pl, dict(p, bounds="global" if bound == "global" else "mip"))
+        bounds = P.pass_reduce(minmax, peeled, dict(p, bounds="global" if bound == "global" else "mip"))
     t["reduce"] = (tic() - t0) * 1e3
     t0 = tic()
-    tr = P.pass_trace(mm, vox, pl, red, prep.cam, p, prep.ior, prep.outside)
+    traced = P.pass_trace(minmax, voxels, peeled, bounds, prep.cam, p, prep.ior, prep.outside)
     t["trace"] = (tic() - t0) * 1e3
     if timings is not None:
         timings.update(t, frame=sum(t.values()))
-    return tr
+    return traced
 
 
 #: binary-search iterations tried with the loose bound for "similar output": fewer than the tight search's 5 too, the
