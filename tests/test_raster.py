@@ -17,7 +17,7 @@ from hypothesis import given, settings, strategies as st
 
 from refraction_ref.analytic import icosphere_mesh
 from refraction_ref.camera import Camera
-from refraction_ref.raster import clip_near, rasterize
+from refraction_ref.raster import clip_near, raster_setup, raster_stats, rasterize
 
 NEAR = 0.1
 
@@ -186,7 +186,7 @@ def _slice_depth(s, lo=1.0, hi=3.0):
 
 def _bits(tris, cam, op):
     H, W = cam.shape
-    return rasterize(tris, cam, op, zlo=np.full((H, W), 1.0), zhi=np.full((H, W), 3.0), slices=S)
+    return rasterize(tris, cam, op, bounds=(np.full((H, W), 1.0), np.full((H, W), 3.0)), slices=S)
 
 
 @pytest.mark.parametrize("s", [0, 5, 30, 40, 62])
@@ -240,8 +240,8 @@ def test_or_equals_add_where_no_slice_is_shared():
     lo, hi = rasterize(tris, cam, "minmax")
     cov = np.isfinite(lo)
     zlo, zhi = np.where(cov, lo, 0.0), np.where(cov, hi, 0.0)
-    o = rasterize(tris, cam, "or", zlo=zlo, zhi=zhi, slices=128)
-    a = rasterize(tris, cam, "add", zlo=zlo, zhi=zhi, slices=128)
+    o = rasterize(tris, cam, "or", bounds=(zlo, zhi), slices=128)
+    a = rasterize(tris, cam, "add", bounds=(zlo, zhi), slices=128)
     c = rasterize(tris, cam, "count")
     distinct = _popcount(o) == c  # every fragment in a slice of its own
     assert distinct.sum() > 0.9 * cov.sum()
@@ -286,13 +286,13 @@ def test_degenerate_triangles_produce_no_fragments():
     m = _unproject(cam, 15.5, 4, 7.0)  # on the screen segment a-b (at another depth): collinear on screen
     degenerate = np.array([[a, a, b], [a, b, b], [c, c, c], [a, m, b], [a, b, a]])
     for op in ("count", "min", "max"):
-        res, stats = rasterize(degenerate, cam, op, return_stats=True)
+        res, stats = rasterize(degenerate, cam, op), raster_stats(raster_setup(degenerate, cam))
         assert stats["degenerate"] == len(degenerate)
         if op == "count":
             assert np.all(res == 0)
         else:
             assert not np.isfinite(res).any()
-    bits = rasterize(degenerate, cam, "add", zlo=np.ones((32, 32)), zhi=np.full((32, 32), 3.0), slices=32)
+    bits = rasterize(degenerate, cam, "add", bounds=(np.ones((32, 32)), np.full((32, 32), 3.0)), slices=32)
     assert np.all(bits == 0)
     # mixed with a real triangle: identical to the real triangle alone
     real = np.array([[a, b, c]])
@@ -324,8 +324,7 @@ def test_triangles_crossing_the_near_plane_are_clipped():
     # the behind-the-eye triangle alone draws nothing
     assert rasterize(behind, cam, "count").max() == 0
     # without clipping, vertices behind the eye are dropped rather than wrapped around
-    _, stats = rasterize(tris, cam, "count", clip=False, return_stats=True)
-    assert stats["dropped"] == 2
+    assert raster_stats(raster_setup(tris, cam, clip=False))["dropped"] == 2
 
 
 # --------------------------------------------------------------------------
@@ -342,7 +341,7 @@ def test_bit_identical_whatever_the_thread_count(on_one_and_two_threads):
     def run():
         out = [rasterize(tris, cam, op) for op in ("min", "max", "count")]
         out += list(rasterize(tris, cam, "minmax"))
-        out += [rasterize(tris, cam, op, zlo=zlo, zhi=zhi, slices=96) for op in ("or", "add")]
+        out += [rasterize(tris, cam, op, bounds=(zlo, zhi), slices=96) for op in ("or", "add")]
         out += list(rasterize(tris, cam, "collect", capacity=6))
         return out
 
@@ -359,7 +358,7 @@ def test_unknown_op_and_bad_slices_are_refused():
     with pytest.raises(ValueError, match="op"):
         rasterize(q, cam, "xor")
     with pytest.raises(ValueError, match="slices"):
-        rasterize(q, cam, "or", zlo=np.ones((8, 8)), zhi=np.ones((8, 8)) * 3, slices=48)
+        rasterize(q, cam, "or", bounds=(np.ones((8, 8)), np.ones((8, 8)) * 3), slices=48)
     with pytest.raises(ValueError, match="zlo"):
         rasterize(q, cam, "or")
 
@@ -369,7 +368,7 @@ def test_recorded_fragments_voxelize_like_a_second_rasterization(blend):
     """The min/max pass's recorded fragments give the very bitmask a second pass gives (§3.3)."""
     import refraction_ref as rr
     from refraction_ref.meshes import scene_geometry
-    from refraction_ref.raster import Fragments, raster_setup
+    from refraction_ref.raster import Fragments
 
     sc = rr.load_scene({"camera": {"width": 96, "height": 80}})
     cam = Camera.from_dict(sc.data["camera"])
@@ -381,8 +380,8 @@ def test_recorded_fragments_voxelize_like_a_second_rasterization(blend):
     z2 = rasterize(rs, cam, "minmax")
     np.testing.assert_array_equal(zmin, z2[0])
     np.testing.assert_array_equal(zmax, z2[1])
-    a = rasterize(fr, cam, blend, zlo=zmin, zhi=zmax, slices=128)
-    b = rasterize(rs, cam, blend, zlo=zmin, zhi=zmax, slices=128)
+    a = rasterize(fr, cam, blend, bounds=(zmin, zmax), slices=128)
+    b = rasterize(rs, cam, blend, bounds=(zmin, zmax), slices=128)
     np.testing.assert_array_equal(a, b)
     assert np.count_nonzero(a) > 0
 

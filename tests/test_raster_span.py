@@ -1,7 +1,7 @@
 """raster.row_span, the one scanline step: the covered run of a row equals the pixel-by-pixel test.
 
-The rasterizer (_raster_band), the level map's intersection triangles (caustics_map._splat) and
-its per-ray variant (per_ray._splat_own_depth, a run of one pixel) all walk rows with it, so it
+The rasterizer's band kernel (refraction_ref.raster.blend), the level map's intersection triangles
+(levelmap.caustics_map) and its per-ray beams (levelmap.per_ray, a run of one pixel) all walk rows with it, so it
 must keep exactly the pixels, and give exactly the integer edge values, of testing every centre.
 """
 
