@@ -89,7 +89,7 @@ def source_volume(radiance, direction, scattering, extinction):
     Parameters
     ----------
     radiance : (nx, ny, nz, 3) float32
-        Smoothed radiance (:func:`~refraction_ref.volumetric.march.smooth_radiance`).
+        Smoothed radiance (:func:`~refraction_ref.volumetric.smooth.smooth_radiance`).
     direction : (nx, ny, nz, 3) float32
         Unit mean photon direction per voxel.
     scattering : array_like, broadcastable to (nx, ny, nz, 3)
@@ -219,7 +219,11 @@ def _in_scatter(src, i, j, k, u, g, seg, t, c):
 
     ``u`` is the ray's unit direction (the camera sees along ``-u``), ``g``
     the Henyey-Greenstein asymmetry (0: isotropic); ``t`` and ``c`` are RGB
-    3-tuples. Returns the new colour (Sun et al. 2008, §4.5).
+    3-tuples. Returns the new colour.
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (in-scattering along the viewing ray).
     """
     cr, cg, cb = c
     tr, tg, tb = t
