@@ -26,8 +26,7 @@ from ..vec3 import affine, dot
 __all__ = ["Box", "PLACEMENTS", "CENTRED", "box_axes", "reference_box", "to_map", "dir_to_map", "from_map", "frame_of"]
 
 #: where a receiver's box sits (``caustics.placement``): eq. 4-3 read per axis (the component of ``P_a``
-#: along the axis, the default since contract_version 5), eq. 4-3 read literally (the whole vector's length
-#: ``|P_a|``, the default of contract_version 4), or the tight box
+#: along the axis, the default), eq. 4-3 read literally (the whole vector's length ``|P_a|``), or the tight box
 PLACEMENTS = ("component", "thesis", "tight")
 
 #: the placements of eqs. 4-2/4-3: box centred on the receiver's origin ``P_0``, the thesis's plane lattice
@@ -96,7 +95,7 @@ def box_axes(T0):
     return U, V, W
 
 
-def reference_box(vertices, T0, size, placement="tight", origin=None):
+def reference_box(vertices, T0, size, placement, origin=None):
     """Bounding box of a receiver aligned with ``V = -T0`` (eqs. 4-1 to 4-3).
 
     Parameters
@@ -108,7 +107,8 @@ def reference_box(vertices, T0, size, placement="tight", origin=None):
     size : int or (Hc, Wc)
         Texels of the maps.
     placement : {"tight", "component", "thesis"}
-        ``"tight"``: the tight box of the vertices; ``"component"``: centred
+        No default: the caustic maps' boxes are tight, the level map's follow
+        ``caustics.placement``. ``"tight"``: the tight box of the vertices; ``"component"``: centred
         on ``origin`` with extents ``2 max |(P - P_0) . a|`` along each axis
         ``a`` (eq. 4-3 with ``|P_a|`` the component of the farthest vertex
         along ``a``: the smallest box centred on ``P_0`` that encloses the

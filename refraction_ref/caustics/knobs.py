@@ -6,8 +6,10 @@ that the image-space (Chaudhari 2008, §4.1), volumetric (Sun et al. 2008,
 reference share, so their settings live in one block read by all of them.
 Each knob is declared once in :data:`KNOBS` (type, range or choices,
 default, meaning and section: the table of ``docs/oracle.md`` is written
-from them); :func:`caustics_knobs` turns the checked block into the typed
-value the stages read (:class:`CausticsKnobs`).
+from them). No kernel reads these knobs: ``map_size`` reaches the kernels
+as each receiver's map box (``Box.size``), ``gather`` as the gathering
+window of :func:`refraction_ref.filters.gather_gaussian`, and the stages
+read each knob they declare (``Stage.reads``) on its own.
 
 The old names (``imagespace.caustic_map``, ``imagespace.gather``,
 ``levelmap.map_size``, ...) keep working as aliases (``KnobBlock.aliases``
@@ -25,12 +27,10 @@ References
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 from ..knobs import Knob, declare_block
 from ..validation import SceneError
 
-__all__ = ["KNOBS", "CAUSTICS_DEFAULTS", "PLACEMENTS", "CausticsKnobs", "caustics_knobs", "BLOCK"]
+__all__ = ["KNOBS", "CAUSTICS_DEFAULTS", "PLACEMENTS", "BLOCK"]
 
 #: the level map's reference-box placements (as :data:`refraction_ref.caustics.boxes.PLACEMENTS`;
 #: this module imports no kernels)
@@ -77,49 +77,3 @@ BLOCK = declare_block("caustics", KNOBS, owner="caustics")
 
 #: every knob's default (the block's, derived from :data:`KNOBS`)
 CAUSTICS_DEFAULTS = BLOCK.defaults
-
-
-class CausticsKnobs(NamedTuple):
-    """The ``caustics`` block as the stages read it: one typed value, built once from the checked block.
-
-    Attributes
-    ----------
-    map_size : int
-        Texels per side of each receiver's caustic map (Chaudhari §4.1).
-    gather : int
-        Gaussian gathering window in texels, odd; 1 = none (Wyman and Davis 2006).
-    placement : str
-        The level map's reference box, one of :data:`PLACEMENTS` (Tipprasert §4.2.1).
-    shadows : bool
-        Receivers occlude each other in the level map's maps (Tipprasert §4.2.2).
-    ambient : float
-        Eq. 4-19's ``I_a`` as a fraction of the albedo (Tipprasert §4.6).
-    """
-
-    map_size: int
-    gather: int
-    placement: str
-    shadows: bool
-    ambient: float
-
-
-def caustics_knobs(data):
-    """The typed value of a scene's ``caustics`` block (:class:`CausticsKnobs`).
-
-    Parameters
-    ----------
-    data : dict
-        The merged, checked scene (``scene.data``).
-
-    Returns
-    -------
-    CausticsKnobs
-
-    References
-    ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    """
-    p = data["caustics"]
-    return CausticsKnobs(int(p["map_size"]), int(p["gather"]), str(p["placement"]), bool(p["shadows"]),
-                         float(p["ambient"]))

@@ -13,7 +13,8 @@ stage (``timings_ms``)      pass                                                
 ==========================  =====================================================  ===========
 
 A method puts its own ``photon_trace`` (the photons that leave its objects)
-and ``caustic_final`` (the final image) around these:
+and ``caustic_final`` (the final image, colouring its rays by
+:func:`~refraction_ref.caustics.shade.shade_rays`) around these:
 :func:`refraction_ref.imagespace.caustics.imagespace_caustic_stages` (the
 passes of chapter 3 in each light's view),
 :func:`refraction_ref.exact.caustics.exact_caustic_stages` (the exact photon
@@ -61,46 +62,18 @@ stay NumPy's, over the same arrays.
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
-from ..environment import environment_lookup
 from ..graph import Stage
 from ..status import EXITED
-from .receivers import eye_buffers, hit_exact, march_eyespace, receiver_set
-from .shade import shade_points, shade_rows, take_rows
+from .receivers import eye_buffers, receiver_hits, receiver_set
 from .splat import (accumulate_light, channel_mean, finite_maps, gather_gaussian, receiver_photons,
                     splat_bilinear, splat_bilinear_groups)
 
-__all__ = ["has_caustics", "caustic_arrays", "receiver_hits", "collect_maps",
-           "splat_maps", "merge_caustics", "skip_reason", "camera_array", "receiver_stages", "photon_buffer_names",
-           "per_light_names", "gather_names", "receiver_hit_stage", "splat_stage", "gather_stage", "shade_rays",
-           "put_rows"]
-
-
-@nb.njit(cache=True, parallel=True)
-def _put_rows_kernel(a, idx, vals):
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        for c in range(a.shape[1]):
-            a[i, c] = vals[k, c]
-
-
-def put_rows(a, idx, vals):
-    """``a[idx] = vals`` (rows of an (N, C) float64 array), on every thread.
-
-    Parameters
-    ----------
-    a : (N, C) float64
-        Written in place.
-    idx : (M,) array_like of int
-    vals : (M, C) array_like
-    """
-    if len(idx):
-        _put_rows_kernel(a, np.ascontiguousarray(idx, np.int64), np.ascontiguousarray(vals, dtype=np.float64))
+__all__ = ["has_caustics", "caustic_arrays", "collect_maps", "splat_maps", "merge_caustics", "skip_reason",
+           "camera_array", "receiver_stages", "photon_buffer_names", "per_light_names", "gather_names",
+           "receiver_hit_stage", "splat_stage", "gather_stage"]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -202,64 +175,6 @@ def skip_reason(scene):
     """
     missing = [k for k in ("lights", "receivers") if not scene.data[k]]
     return f"the scene has no {' and no '.join(missing)}: no caustics to map"
-
-
-def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None, view=None):
-    """Where world rays meet the receivers: eye-space march or Embree.
-
-    Parameters
-    ----------
-    rs : ReceiverSet
-    origins, dirs : (N, 3) array_like
-        World rays.
-    mode : str
-        ``"eyespace"`` (march in ``eyebuf``, Krüger et al. 2006) or ``"exact"`` (Embree).
-    cam : Camera, optional
-        The eye camera (eye-space mode).
-    eyebuf : (depth, tri), optional
-        :func:`~refraction_ref.caustics.receivers.eye_buffers` (eye-space mode).
-    view : (origins, dirs) in the camera's view space, optional
-        ``cam.world_to_view(origins)`` and ``cam.dir_world_to_view(dirs)`` (eye-space mode), when the
-        caller computed them already (with their operations, so the same bits).
-
-    Returns
-    -------
-    points : (N, 3) float64
-        Hit points (NaN where none).
-    face : (N,) int64
-        Receiver triangle hit, ``-1`` where none.
-    """
-    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    if mode == "exact":
-        t, face = hit_exact(rs.tris, o, d)
-    else:
-        ov, dv = (cam.world_to_view(o), cam.dir_world_to_view(d)) if view is None else view
-        t, pix = march_eyespace(ov, dv, eyebuf[0], cam)
-        face = np.empty(len(o), np.int64)  # the triangle seen at the hit's pixel, -1 none
-        _pixel_face_kernel(pix, np.ascontiguousarray(eyebuf[1], dtype=np.int64), face)
-    P = np.empty(o.shape)
-    face_out = np.empty(len(o), np.int64)
-    if len(o):  # P = o + t[:, None] * d; face where t is finite, else -1: on every thread
-        _hit_points_kernel(np.ascontiguousarray(o), np.ascontiguousarray(t, dtype=np.float64),
-                           np.ascontiguousarray(d), np.ascontiguousarray(face, dtype=np.int64), P, face_out)
-    return P, face_out
-
-
-@nb.njit(cache=True, parallel=True)
-def _pixel_face_kernel(pix, tri, face):
-    for k0 in nb.prange(pix.shape[0]):
-        k = np.int64(k0)
-        face[k] = tri[pix[k, 0], pix[k, 1]] if pix[k, 0] >= 0 else -1
-
-
-@nb.njit(cache=True, parallel=True)
-def _hit_points_kernel(o, t, d, face, P, face_out):
-    for k0 in nb.prange(o.shape[0]):
-        k = np.int64(k0)
-        for c in range(3):
-            P[k, c] = o[k, c] + t[k] * d[k, c]
-        face_out[k] = face[k] if (math.isfinite(t[k]) and face[k] >= 0) else -1
 
 
 def splat_maps(rs, P, face, flux, size, groups=None):
@@ -717,90 +632,3 @@ def caustic_arrays(scene, method, bufs, stats):
         info.update({"receiver_hit": d["imagespace"]["receiver_hit"], "gather": int(d["caustics"]["gather"]),
                      "photons": int(d["imagespace"]["photons"])})
     return arrays, info
-
-
-def shade_rays(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct=None, shadow_buffers=None, view=None):
-    """Colour seen along world rays: the receiver they meet (shaded), else the environment.
-
-    Parameters
-    ----------
-    scene : Scene
-    rs : ReceiverSet
-    cam : Camera or None
-        The eye camera (eye-space hits).
-    o, d : (N, 3) float64
-        World rays.
-    mode : str
-        ``"eyespace"`` or ``"exact"`` (:func:`receiver_hits`).
-    eyebuf : (depth, tri) or None
-    rgb_maps : list of (Hc, Wc, 3) float64
-        Caustic irradiance per receiver (:func:`collect_maps`).
-    vis : callable
-        ``vis(l, points, normals)``: light ``l``'s visibility.
-    direct : (points, faces, ray directions), optional
-        Receiver points seen directly, shaded in the same call (every point's
-        colour is its own).
-    shadow_buffers : (dest, code, margin, tie), optional
-        Filled for the direct points where :func:`~refraction_ref.caustics.shade.shade_rows`
-        shades them (:func:`~refraction_ref.caustics.shade.shade_rows_applies`), else untouched.
-    view : (origins, dirs), optional
-        The rays in the camera's view space (:func:`receiver_hits`).
-
-    Returns
-    -------
-    (N, 3) float64
-        The rays' colours; with ``direct``, ``(rays' colours, theirs)``.
-    """
-    out = np.zeros((len(o), 3))
-    d = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
-    if len(o):
-        P, face = receiver_hits(rs, o, d, mode, cam, eyebuf, view)
-    else:
-        P, face = np.zeros((0, 3)), np.zeros(0, np.int64)
-    hi = np.flatnonzero(face >= 0)
-    mi = np.flatnonzero(face < 0)
-    nh = len(hi)
-    if direct is not None:  # shadow maps, directional lights: shaded in place, no gathered rows
-        cd = shade_rows(rs, scene.data["lights"], rgb_maps, P, face, d, hi, direct, vis, out, shadow_buffers)
-        if cd is not None:
-            if len(mi):
-                put_rows(out, mi, environment_lookup(scene.data["environment"], take_rows(d, mi), scene.base_dir))
-            return out, cd
-    # the hit rays' points, faces and directions, then the direct points: gathered and copied
-    # into one set of rows on every thread (np.concatenate of the boolean selections, row for row)
-    nd = 0 if direct is None else len(direct[0])
-    pts, fcs, drs = np.empty((nh + nd, 3)), np.empty(nh + nd, np.int64), np.empty((nh + nd, 3))
-    _gather_rows_kernel(P, face, d, hi, pts, fcs, drs)
-    if nd:
-        _copy_rows_kernel(np.ascontiguousarray(direct[0], dtype=np.float64).reshape(-1, 3),
-                          np.ascontiguousarray(direct[1], dtype=np.int64).reshape(-1),
-                          np.ascontiguousarray(direct[2], dtype=np.float64).reshape(-1, 3), nh, pts, fcs, drs)
-    c = shade_points(rs, scene.data["lights"], rgb_maps, pts, fcs, drs, vis)
-    put_rows(out, hi, c[:nh])
-    if len(mi):
-        put_rows(out, mi, environment_lookup(scene.data["environment"], take_rows(d, mi), scene.base_dir))
-    return out if direct is None else (out, c[nh:])
-
-
-@nb.njit(cache=True, parallel=True)
-def _gather_rows_kernel(P, face, d, idx, pts, fcs, drs):
-    # rows idx of P, face, d into the first rows of pts, fcs, drs
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        i = idx[k]
-        fcs[k] = face[i]
-        for c in range(3):
-            pts[k, c] = P[i, c]
-            drs[k, c] = d[i, c]
-
-
-@nb.njit(cache=True, parallel=True)
-def _copy_rows_kernel(p, f, d, at, pts, fcs, drs):
-    # p, f, d into pts, fcs, drs from row `at` on
-    for k0 in nb.prange(p.shape[0]):
-        k = np.int64(k0)
-        fcs[at + k] = f[k]
-        for c in range(3):
-            pts[at + k, c] = p[k, c]
-            drs[at + k, c] = d[k, c]
-

@@ -19,37 +19,19 @@ Frames
     **tight** box of its vertices in axes aligned with the first light's
     direction at the receiver: the level map's axes (eq. 4-1,
     :func:`~refraction_ref.caustics.boxes.box_axes`), not the level map's
-    box (:func:`~refraction_ref.caustics.boxes.reference_box` with its
-    default ``placement="tight"``; ``caustics.placement`` places only the
+    box (:func:`~refraction_ref.caustics.boxes.reference_box` with
+    ``placement="tight"``; ``caustics.placement`` places only the
     level map's boxes), framed by
     :func:`~refraction_ref.caustics.boxes.frame_of`: ``caustic_frame_r``
     is (origin, u, v, normal) and texel (a, b) holds the irradiance on the
     first surface of the receiver seen from the light through
     ``origin + (b + .5)/Wc u + (a + .5)/Hc v``. A floor lit from straight
     above gets the floor rectangle itself.
-Eye-space intersection (``receiver_hit = 'eyespace'``)
-    The thesis follows Krüger et al. (2006): the exiting photon becomes a
-    line primitive in the camera's image, and the first fragment of the
-    line that falls behind the receivers' depth image is its hit. Here the
-    ray is clipped to the camera's frustum, sampled once per pixel along
-    its screen-space projection (``ceil(L) + 1`` steps for ``L`` pixels
-    along the major axis, uniform on screen, perspective-correct along the
-    ray), compared at each sample with the depth image of the receivers
-    (rasterized from the camera with the shared rasterizer, nearest depth
-    and triangle) at the nearest texel, and the crossing is refined by
-    linear interpolation of the depth gap between the last sample in front
-    and the first behind (the first behind itself when the sample before
-    it saw no receiver); the hit's triangle is that of the texel where the
-    crossing was detected. The hit lies on the ray, near but not exactly
-    on the receiver (docs/oracle.md, "Porting rules: image-space",
-    ``receiver_hit``). A sample that lands
-    behind by more than the ray's depth step plus 1 % of the depth is taken
-    as passing behind an occluder, not a hit, and the march goes on.
-    Photons that leave the frustum, or never cross, are lost (the method's
-    known limitation: it only sees what the camera sees).
-Exact intersection (``receiver_hit = 'exact'``)
-    Embree on the receivers' triangles: the oracle's ground truth for this
-    step.
+Hits
+    Where rays meet the receivers (:func:`receiver_hits`): the eye-space
+    march in the camera's depth image of the receivers (:func:`eye_buffers`;
+    :mod:`~refraction_ref.caustics.eyespace`, Krüger et al. 2006) or Embree
+    on their triangles (:mod:`~refraction_ref.caustics.exact_hits`).
 
 References
 ----------
@@ -67,15 +49,15 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..camera import project_point
-from ..embree import HIT_CHUNK, chunk_length, commit, run_chunks, soup_scene
-from .boxes import frame_of, reference_box, to_map
 from ..meshes import object_mesh
 from ..raster import clip_near, rasterize
 from ..validation import SceneError
+from .boxes import frame_of, reference_box, to_map
+from .exact_hits import hit_exact
+from .eyespace import march_eyespace
 
-__all__ = ["Receivers", "receiver_soup", "ReceiverSet", "receiver_set", "eye_buffers", "march_eyespace", "hit_exact", "map_position",
-           "IndexedTriangles"]
+__all__ = ["Receivers", "receiver_soup", "ReceiverSet", "receiver_set", "eye_buffers", "map_position",
+           "ReceiverHitMode", "receiver_hits"]
 
 
 class Receivers(NamedTuple):
@@ -211,7 +193,7 @@ def receiver_set(scene, light, size):
             T0 = centre - np.asarray(light["position"], dtype=np.float64)
             if not np.linalg.norm(T0) > 0:
                 T0 = np.array([0.0, -1.0, 0.0])
-        boxes.append(reference_box(v, T0 / np.linalg.norm(T0), int(size)))
+        boxes.append(reference_box(v, T0 / np.linalg.norm(T0), int(size), "tight"))
     return ReceiverSet(soup.tris, soup.owner, soup.normals, soup.albedo, boxes)
 
 
@@ -314,313 +296,48 @@ def eye_buffers(rs, cam):
     return depth, np.where(ids >= 0, src[np.maximum(ids, 0)], -1)
 
 
-@nb.njit(cache=True, inline="always")
-def _clip_plane(a0, a1, t0, t1):
-    """Clip [t0, t1] to where the linear function a0 + a1 t <= 0."""
-    if a1 == 0.0:
-        if a0 > 0.0:
-            return 1.0, 0.0
-        return t0, t1
-    tc = -a0 / a1
-    if a1 > 0.0:
-        return t0, min(t1, tc)
-    return max(t0, tc), t1
+class ReceiverHitMode(NamedTuple):
+    """How rays meet the receivers (the ``receiver_hit`` pass, §4.1).
 
-
-class _Rays(NamedTuple):
-    """Rays in the camera's view space."""
-
-    O: np.ndarray  # (N, 3) origins
-    D: np.ndarray  # (N, 3) directions
-
-
-class _View(NamedTuple):
-    """The camera the depth image was rendered with: image grid, projection, depth range."""
-
-    W: int
-    H: int
-    sx: float
-    sy: float
-    ortho: bool
-    near: float
-    far: float
-
-
-class _Knobs(NamedTuple):
-    """Settings of the march."""
-
-    rel_thick: float  # surface thickness as a fraction of its depth
-    max_samples: int  # samples per ray at most
-
-
-class _Hits(NamedTuple):
-    """What the march finds, per ray."""
-
-    t: np.ndarray  # (N,) ray parameter of the hit, NaN where none
-    pix: np.ndarray  # (N, 2) int64 pixel (row, column), -1 where none
-
-
-#: sides (pixels) of the two levels of tiles whose nearest receiver depth lets the march
-#: step over samples that cannot hit (see :func:`_march_kernel`); the coarse a multiple of the fine
-TILE_COARSE = 32
-TILE_FINE = 8
-
-
-@nb.njit(cache=True, parallel=True)
-def _tile_min_kernel(depth, T, out):
-    # out[a, b]: the nearest finite depth of tile (a, b) of T x T pixels, +inf where none
-    # (min is exact: the same whatever the order)
-    H, W = depth.shape
-    for a0 in nb.prange(out.shape[0]):
-        a = np.int64(a0)
-        for b in range(out.shape[1]):
-            out[a, b] = np.inf
-        for i in range(a * T, min(a * T + T, H)):
-            for j in range(W):
-                v = depth[i, j]
-                if math.isfinite(v) and v < out[a, j // T]:
-                    out[a, j // T] = v
-
-
-def tile_min(depth, T):
-    """The nearest finite depth of each ``T`` x ``T`` tile of a depth image (``+inf`` where none).
-
-    Parameters
+    Attributes
     ----------
-    depth : (H, W) float64
-    T : int
-        Tile side in pixels (the last row and column of tiles may be partial).
-
-    Returns
-    -------
-    (ceil(H / T), ceil(W / T)) float64
-
-    References
-    ----------
-    .. [1] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
-       Accurate Photon Tracing on GPUs", EGSR 2006.
+    mode : str
+        ``"eyespace"`` (march in the camera's depth image, Krüger et al. 2006) or ``"exact"`` (Embree).
+    cam : Camera or None
+        The eye camera (eye-space mode).
+    eyebuf : (depth, tri) or None
+        :func:`eye_buffers` (eye-space mode).
     """
-    d = np.ascontiguousarray(depth, dtype=np.float64)
-    out = np.empty((-(-d.shape[0] // T), -(-d.shape[1] // T)))
-    _tile_min_kernel(d, np.int64(T), out)
-    return out
+
+    mode: str
+    cam: object = None
+    eyebuf: tuple | None = None
 
 
-@nb.njit(cache=True, parallel=True)
-def _coarsen_min(fine, r, out):
-    # out[a, b] = min of fine[r a : r a + r, r b : r b + r] (exact in any order)
-    for a0 in nb.prange(out.shape[0]):
-        a = np.int64(a0)
-        for b in range(out.shape[1]):
-            v = np.inf
-            for i in range(a * r, min(a * r + r, fine.shape[0])):
-                for j in range(b * r, min(b * r + r, fine.shape[1])):
-                    v = min(v, fine[i, j])
-            out[a, b] = v
-
-
-@nb.njit(cache=True, inline="always")
-def _march_sample(m, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz, W, H, sx, sy, ortho):
-    """Sample ``m`` of ``n`` of a clipped ray: its parameter ``t`` and (col, row, depth) on screen."""
-    u = m / n
-    if persp:  # perspective-correct: 1/depth is linear in screen space
-        s = (u / dB) / ((1.0 - u) / dA + u / dB)
-    else:
-        s = u
-    t = t0 + s * (t1 - t0)
-    col, row, rd = project_point(ox + t * dx, oy + t * dy, oz + t * dz, W, H, sx, sy, ortho)
-    return t, col, row, rd
-
-
-#: how far inside a tile (pixels) the samples of a run stepped over must lie on the line
-#: through the end points: far above the rounding of their screen positions (~1e-10 px),
-#: far below a pixel
-_TILE_MARGIN = 1e-6
-
-
-@nb.njit(cache=True, inline="always")
-def _run_in_tile(T, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H):
-    """The tile (a, b) of ``T`` pixels (a literal: the divisions are shifts) holding sample
-    ``m`` (on screen ``(c0, r0) + m (stepc, stepr)``, ``_TILE_MARGIN`` inside) and the last
-    sample ``mb <= n`` of the run from ``m`` still in it (``inv_c``, ``inv_r``: 1 / steps,
-    0 for none); ``mb = -1`` when sample ``m`` is not inside a tile."""
-    col = c0 + m * stepc
-    row = r0 + m * stepr
-    if not (col >= 0.0 and col < W and row >= 0.0 and row < H):
-        return 0, 0, np.int64(-1)
-    a = np.int64(math.floor(row)) // T
-    b = np.int64(math.floor(col)) // T
-    x0 = b * T + _TILE_MARGIN
-    x1 = min(b * T + T, W) - _TILE_MARGIN
-    y0 = a * T + _TILE_MARGIN
-    y1 = min(a * T + T, H) - _TILE_MARGIN
-    if not (col >= x0 and col <= x1 and row >= y0 and row <= y1):
-        return a, b, np.int64(-1)
-    k = 1e18
-    if stepc > 0.0:
-        k = min(k, (x1 - col) * inv_c)
-    elif stepc < 0.0:
-        k = min(k, (x0 - col) * inv_c)
-    if stepr > 0.0:
-        k = min(k, (y1 - row) * inv_r)
-    elif stepr < 0.0:
-        k = min(k, (y0 - row) * inv_r)
-    return a, b, min(m + np.int64(k), n)
-
-
-@nb.njit(cache=True, inline="always")
-def _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, lim):
-    """Whether the ray's depth at samples ``m .. me`` is below ``lim`` (less ``slack``): from its
-    end depths, 1/depth linear in the sample for perspective-correct samples (``ia``, ``ib``
-    the end points' 1/depth), the depth itself for orthographic ones; the extremes at the ends."""
-    if persp:
-        w = min(ia + (m * inv_n) * (ib - ia), ia + (me * inv_n) * (ib - ia))
-        return w > 0.0 and w * (lim - slack) > 1.0
-    return max(dA + (m * inv_n) * (dB - dA), dA + (me * inv_n) * (dB - dA)) + slack < lim
-
-
-@nb.njit(cache=True, parallel=True)
-def _march_kernel(rays, depth, view, knobs, tiles, hits):
-    # the named tuples unpacked by name, outside the prange loop (inside it, Numba
-    # drops stores into arrays taken from a tuple: numba#7135)
-    O, D = rays.O, rays.D
-    W, H, sx, sy, ortho, near, far = view.W, view.H, view.sx, view.sy, view.ortho, view.near, view.far
-    rel_thick, max_samples = knobs.rel_thick, knobs.max_samples
-    t_hit, pix = hits.t, hits.pix
-    tc, tf = tiles.coarse, tiles.fine
-    for k0 in nb.prange(O.shape[0]):
-        k = np.int64(k0)
-        t_hit[k] = np.nan
-        pix[k, 0] = -1
-        pix[k, 1] = -1
-        ox, oy, oz = O[k, 0], O[k, 1], O[k, 2]
-        dx, dy, dz = D[k, 0], D[k, 1], D[k, 2]
-        if not (math.isfinite(ox) and math.isfinite(dx)):
-            continue
-        # clip the ray to the view frustum: each bound is linear in t
-        t0 = 0.0
-        t1 = 1e30
-        t0, t1 = _clip_plane(near + oz, dz, t0, t1)      # depth >= near
-        t0, t1 = _clip_plane(-oz - far, -dz, t0, t1)     # depth <= far
-        if ortho:
-            t0, t1 = _clip_plane(ox - sx, dx, t0, t1)
-            t0, t1 = _clip_plane(-ox - sx, -dx, t0, t1)
-            t0, t1 = _clip_plane(oy - sy, dy, t0, t1)
-            t0, t1 = _clip_plane(-oy - sy, -dy, t0, t1)
-        else:  # |x| <= sx d, |y| <= sy d with d = -z
-            t0, t1 = _clip_plane(ox + sx * oz, dx + sx * dz, t0, t1)
-            t0, t1 = _clip_plane(-ox + sx * oz, -dx + sx * dz, t0, t1)
-            t0, t1 = _clip_plane(oy + sy * oz, dy + sy * dz, t0, t1)
-            t0, t1 = _clip_plane(-oy + sy * oz, -dy + sy * dz, t0, t1)
-        if not (t1 > t0) or t1 >= 1e29:
-            continue
-        # screen-space end points: one sample per pixel along the projected line
-        c0, r0, dA = project_point(ox + t0 * dx, oy + t0 * dy, oz + t0 * dz, W, H, sx, sy, ortho)
-        c1, r1, dB = project_point(ox + t1 * dx, oy + t1 * dy, oz + t1 * dz, W, H, sx, sy, ortho)
-        n = np.int64(math.ceil(max(abs(c1 - c0), abs(r1 - r0)))) + 1
-        n = min(max(n, 2), max_samples)
-        persp = not (ortho or not (dA > 0.0 and dB > 0.0))
-        # Tiles: whether sample m hits depends on it and on sample m - 1 alone, and it can hit
-        # only where the ray is at or behind the receiver under it. With samples uniform on
-        # screen (orthographic, or perspective-correct: then on screen sample m lies at
-        # (c0, r0) + m (c1 - c0, r1 - r0) / n and 1/depth is linear in m), a run of samples
-        # inside one tile whose ray depth at both ends is nearer than the tile's nearest
-        # receiver holds no hit: it is stepped over, and the sample before the next one tested
-        # is evaluated as the state that one compares with. The hits are those of testing
-        # every sample.
-        tiled = ortho or persp
-        stepc = (c1 - c0) / n
-        stepr = (r1 - r0) / n
-        inv_c = 1.0 / stepc if stepc != 0.0 else 0.0
-        inv_r = 1.0 / stepr if stepr != 0.0 else 0.0
-        inv_n = 1.0 / n
-        ia = 1.0 / dA if dA != 0.0 else 0.0
-        ib = 1.0 / dB if dB != 0.0 else 0.0
-        # the bounds' own rounding, and that of a sample's depth -(oz + t dz), are ~1e-15 of these
-        slack = 1e-9 * (abs(oz) + abs(t0 * dz) + abs(t1 * dz) + abs(dA) + abs(dB))
-        prev_gap = -np.inf
-        prev_t = t0
-        prev_rd = dA
-        m = np.int64(0)
-        stale = False  # prev_* are not sample m - 1's (a run was stepped over)
-        hit = False
-        while m <= n and not hit:
-            mb = m  # test samples m .. mb one by one
-            if tiled:
-                a, b, me = _run_in_tile(TILE_COARSE, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H)
-                if me >= m and _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, tc[a, b]):
-                    m = me + 1
-                    stale = True
-                    continue
-                a, b, me = _run_in_tile(TILE_FINE, m, n, c0, r0, stepc, stepr, inv_c, inv_r, W, H)
-                if me >= m:
-                    if _nearer(m, me, persp, inv_n, ia, ib, dA, dB, slack, tf[a, b]):
-                        m = me + 1
-                        stale = True
-                        continue
-                    mb = me  # the rest of this fine tile, tested sample by sample
-            if stale:
-                t, col, row, rd = _march_sample(m - 1, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz,
-                                                W, H, sx, sy, ortho)
-                i = min(max(np.int64(math.floor(row)), 0), H - 1)
-                j = min(max(np.int64(math.floor(col)), 0), W - 1)
-                sd = depth[i, j]
-                prev_gap = rd - sd if math.isfinite(sd) else -np.inf
-                prev_t = t
-                prev_rd = rd
-                stale = False
-            for q in range(m, mb + 1):
-                t, col, row, rd = _march_sample(q, n, persp, t0, t1, dA, dB, ox, oy, oz, dx, dy, dz,
-                                                W, H, sx, sy, ortho)
-                i = min(max(np.int64(math.floor(row)), 0), H - 1)
-                j = min(max(np.int64(math.floor(col)), 0), W - 1)
-                sd = depth[i, j]
-                gap = rd - sd if math.isfinite(sd) else -np.inf
-                if gap >= 0.0 and prev_gap < 0.0:
-                    if gap <= abs(rd - prev_rd) + rel_thick * sd:
-                        f = 1.0
-                        if math.isfinite(prev_gap):
-                            f = -prev_gap / (gap - prev_gap)
-                        t_hit[k] = prev_t + f * (t - prev_t)
-                        pix[k, 0] = i
-                        pix[k, 1] = j
-                        hit = True
-                        break
-                prev_gap = gap
-                prev_t = t
-                prev_rd = rd
-            m = mb + 1
-
-
-class _Tiles(NamedTuple):
-    """The depth image's nearest depth per tile, two levels (:func:`tile_min`)."""
-
-    coarse: np.ndarray  # TILE_COARSE pixels a side
-    fine: np.ndarray  # TILE_FINE pixels a side
-
-
-def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samples=1 << 16):
-    """Krüger-style screen-space march of rays against a depth image.
+def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None, view=None):
+    """Where world rays meet the receivers: eye-space march or Embree.
 
     Parameters
     ----------
-    origins_view, dirs_view : (N, 3) array_like
-        Rays in the camera's view space.
-    depth : (H, W) float64
-        The receivers' depth image (:func:`eye_buffers`).
-    cam : Camera
-    rel_thick : float
-        Surface thickness as a fraction of its depth (beyond it a sample
-        behind the surface is taken as passing behind it).
-    max_samples : int
-        Samples per ray at most.
+    rs : ReceiverSet
+    origins, dirs : (N, 3) array_like
+        World rays.
+    mode : str
+        ``"eyespace"`` (march in ``eyebuf``, Krüger et al. 2006) or ``"exact"`` (Embree).
+    cam : Camera, optional
+        The eye camera (eye-space mode).
+    eyebuf : (depth, tri), optional
+        :func:`eye_buffers` (eye-space mode).
+    view : (origins, dirs) in the camera's view space, optional
+        ``cam.world_to_view(origins)`` and ``cam.dir_world_to_view(dirs)`` (eye-space mode), when the
+        caller computed them already (with their operations, so the same bits).
 
     Returns
     -------
-    t : (N,) float64
-        Ray parameter of the hit, NaN where none.
-    pix : (N, 2) int64
-        Pixel (row, column) of the hit, ``-1`` where none.
+    points : (N, 3) float64
+        Hit points (NaN where none).
+    face : (N,) int64
+        Receiver triangle hit, ``-1`` where none.
 
     References
     ----------
@@ -629,215 +346,34 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
     .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
        Accurate Photon Tracing on GPUs", EGSR 2006.
     """
-    O = np.ascontiguousarray(origins_view, dtype=np.float64).reshape(-1, 3)
-    D = np.ascontiguousarray(dirs_view, dtype=np.float64).reshape(-1, 3)
-    t = np.empty(len(O))
-    pix = np.empty((len(O), 2), np.int64)
-    if len(O):
-        W, H, sx, sy = cam.kernel_args()
-        # marches differ in length by orders of magnitude (a ray crossing the image against one
-        # that leaves at once): rays go to the threads in small chunks as they free up
-        dep = np.ascontiguousarray(depth, dtype=np.float64)
-        fine = tile_min(dep, TILE_FINE)
-        coarse = np.empty((-(-dep.shape[0] // TILE_COARSE), -(-dep.shape[1] // TILE_COARSE)))
-        _coarsen_min(fine, TILE_COARSE // TILE_FINE, coarse)
-        with nb.parallel_chunksize(64):
-            _march_kernel(_Rays(O, D), dep, _View(W, H, sx, sy, bool(cam.ortho), float(cam.near), float(cam.far)),
-                          _Knobs(float(rel_thick), int(max_samples)), _Tiles(coarse, fine), _Hits(t, pix))
-    return t, pix
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    if mode == "exact":
+        t, face = hit_exact(rs.tris, o, d)
+    else:
+        ov, dv = (cam.world_to_view(o), cam.dir_world_to_view(d)) if view is None else view
+        t, pix = march_eyespace(ov, dv, eyebuf[0], cam)
+        face = np.empty(len(o), np.int64)  # the triangle seen at the hit's pixel, -1 none
+        _pixel_face_kernel(pix, np.ascontiguousarray(eyebuf[1], dtype=np.int64), face)
+    P = np.empty(o.shape)
+    face_out = np.empty(len(o), np.int64)
+    if len(o):  # P = o + t[:, None] * d; face where t is finite, else -1: on every thread
+        _hit_points_kernel(np.ascontiguousarray(o), np.ascontiguousarray(t, dtype=np.float64),
+                           np.ascontiguousarray(d), np.ascontiguousarray(face, dtype=np.int64), P, face_out)
+    return P, face_out
 
 
 @nb.njit(cache=True, parallel=True)
-def _abs_max_kernel(vertices, faces):
-    # max |vertices[faces]| (max is exact: the same whatever the order)
-    m = 0.0
-    for f0 in nb.prange(faces.shape[0]):
-        f = np.int64(f0)
-        for k in range(3):
-            for c in range(3):
-                m = max(m, abs(vertices[faces[f, k], c]))
-    return m
+def _pixel_face_kernel(pix, tri, face):
+    for k0 in nb.prange(pix.shape[0]):
+        k = np.int64(k0)
+        face[k] = tri[pix[k, 0], pix[k, 1]] if pix[k, 0] >= 0 else -1
 
 
-class IndexedTriangles:
-    """The triangles ``vertices[faces]`` without building them: what :func:`hit_exact` and
-    :func:`~refraction_ref.caustics.shade.exact_visibility` read of them.
-
-    ``tris[f, k]`` (``f`` indices, ``k`` a corner) is ``vertices[faces[f, k]]``, the values
-    ``vertices[faces][f, k]`` holds; ``len`` is the number of faces; ``np.asarray`` builds
-    the (F, 3, 3) array.
-    """
-
-    def __init__(self, vertices, faces):
-        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
-        self.shape = (len(self.faces), 3, 3)
-
-    def __len__(self):
-        return len(self.faces)
-
-    def __getitem__(self, key):
-        f, k = key
-        return self.vertices[self.faces[f, k]]
-
-    def __array__(self, dtype=None, copy=None):
-        a = self.vertices[self.faces]
-        return a if dtype is None else a.astype(dtype)
-
-    def abs_max(self):
-        """``np.abs(vertices[faces]).max()`` on every thread (0 without faces)."""
-        return float(_abs_max_kernel(self.vertices, self.faces)) if len(self.faces) else 0.0
-
-
-def hit_exact(tris, origins, dirs, scene=None):
-    """Nearest hit of world rays with triangles (Embree), t recomputed in float64.
-
-    The rays are traced in fixed chunks of :data:`~refraction_ref.embree.HIT_CHUNK`
-    on ``numba.get_num_threads()`` threads (:func:`~refraction_ref.embree.run_chunks`):
-    each ray's hit is computed on its own, so the result does not depend on the
-    chunks or the threads.
-
-    Parameters
-    ----------
-    tris : (T, 3, 3) float64 or IndexedTriangles
-    origins, dirs : (N, 3) float64
-    scene : embreex scene, optional
-        An Embree scene whose primitive ``k`` is ``tris[k]`` (e.g. the indexed mesh
-        ``embree.mesh_scene(vertices, faces)`` with ``tris = vertices[faces]``);
-        default the cached soup of ``tris``.
-
-    Returns
-    -------
-    t : (N,) float64
-        Distance along the ray, NaN on a miss.
-    face : (N,) int64
-        Triangle index, ``-1`` on a miss.
-
-    References
-    ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    """
-    o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
-    d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
-    n = len(o)
-    if n == 0 or len(tris) == 0:
-        return np.full(n, np.nan), np.full(n, -1, np.int64)
-    t = np.empty(n)  # rows set to NaN / -1 by their chunk (_finite_rows32), then the hits
-    face = np.empty(n, np.int64)
-    scene = commit(soup_scene(np.asarray(tris)) if scene is None else scene)  # built before the threads query it
-
-    VF = _indexed(tris)
-
-    def one(a, b):
-        # rays [a, b): the finite ones are traced; their float32 copies for Embree are made
-        # by a nogil kernel (no NumPy under the GIL), in the chunk's thread
-        m = b - a
-        ii = np.empty(m, np.int64)
-        o32 = np.empty((m, 3), np.float32)
-        d32 = np.empty((m, 3), np.float32)
-        cnt = _finite_rows32(o, d, a, b, ii, o32, d32, t, face)
-        if cnt == 0:
-            return
-        res = scene.run(o32[:cnt], d32[:cnt], output=1)
-        _mt_kernel(VF[0], VF[1], o, d, ii[:cnt], np.asarray(res["primID"]), np.asarray(res["tfar"]), t, face)
-
-    run_chunks(one, n, chunk_length(n, HIT_CHUNK))
-    return t, face
-
-
-@nb.njit(cache=True, nogil=True)
-def _finite_rows32(o, d, a, b, ii, o32, d32, t, face):
-    # rays [a, b): t NaN and face -1 (no hit yet); those whose origin and direction are finite,
-    # in order: their indices and float32 copies (NumPy's casts: round to nearest); returns how many
-    cnt = 0
-    for i in range(a, b):
-        t[i] = np.nan
-        face[i] = -1
-        ok = True
+@nb.njit(cache=True, parallel=True)
+def _hit_points_kernel(o, t, d, face, P, face_out):
+    for k0 in nb.prange(o.shape[0]):
+        k = np.int64(k0)
         for c in range(3):
-            if not (math.isfinite(o[i, c]) and math.isfinite(d[i, c])):
-                ok = False
-        if ok:
-            ii[cnt] = i
-            for c in range(3):
-                o32[cnt, c] = np.float32(o[i, c])
-                d32[cnt, c] = np.float32(d[i, c])
-            cnt += 1
-    return cnt
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _mt_kernel(V, F, o, d, ii, prim, tfar, t, face):
-    # the float64 Moller-Trumbore distance on the triangle Embree found, for rays ii: the
-    # NumPy code it replaced (np.cross; einsum('ij,ij->i'), whose order _einsum_dot keeps),
-    # operation for operation; compiled nogil, so the chunks' threads run it at once
-    for m in range(ii.shape[0]):
-        f = np.int64(prim[m])
-        if f < 0:
-            continue
-        i = ii[m]
-        a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        e1x, e1y, e1z = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
-        e2x, e2y, e2z = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        px = dy * e2z - dz * e2y
-        py = dz * e2x - dx * e2z
-        pz = dx * e2y - dy * e2x
-        det = _einsum_dot(e1x, e1y, e1z, px, py, pz)
-        tx, ty, tz = o[i, 0] - V[a, 0], o[i, 1] - V[a, 1], o[i, 2] - V[a, 2]
-        qx = ty * e1z - tz * e1y
-        qy = tz * e1x - tx * e1z
-        qz = tx * e1y - ty * e1x
-        tt = _einsum_dot(e2x, e2y, e2z, qx, qy, qz) / det
-        if not (math.isfinite(tt) and tt > 0):
-            tt = np.float64(tfar[m])
-        t[i] = tt
-        face[i] = f
-
-
-@nb.njit(cache=True, inline="always")
-def _einsum_dot(ax, ay, az, bx, by, bz):
-    """``np.einsum('ij,ij->i')``'s sum of one row, in its order (see ``exact._dot3``)."""
-    return (ax * bx + az * bz) + ay * by
-
-
-def _indexed(tris):
-    """(V, F) with ``tris[f, k] == V[F[f, k]]``: an IndexedTriangles' arrays, or a soup's corners."""
-    if isinstance(tris, IndexedTriangles):
-        return tris.vertices, tris.faces
-    V = np.ascontiguousarray(tris, dtype=np.float64).reshape(-1, 3)
-    return V, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
-
-
-def occluded(tris, origins, dirs, tmax=None, scene=None):
-    """Does a ray meet any of the triangles (before ``tmax``)? Embree any-hit test.
-
-    Parameters
-    ----------
-    tris : (T, 3, 3) float64 or IndexedTriangles
-    origins, dirs : (N, 3) float64
-        World rays.
-    tmax : (N,) float64, optional
-        Farthest distance tested per ray; default unbounded.
-    scene : embreex scene, optional
-        As for :func:`hit_exact`.
-
-    Returns
-    -------
-    (N,) bool
-        True where the ray is blocked.
-
-    References
-    ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    """
-    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    if len(o) == 0 or len(tris) == 0:
-        return np.zeros(len(o), bool)
-    t, _ = hit_exact(tris, o, dirs, scene)
-    hit = np.isfinite(t)
-    if tmax is not None:
-        hit &= t < np.asarray(tmax)
-    return hit
+            P[k, c] = o[k, c] + t[k] * d[k, c]
+        face_out[k] = face[k] if (math.isfinite(t[k]) and face[k] >= 0) else -1

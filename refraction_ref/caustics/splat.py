@@ -76,9 +76,21 @@ def _footprint(col, row, Hc, Wc, rows, j0s, i0s, fx, fy):
         rows[k, 1] = min(max(i0 + 1, 0), Hc - 1)
 
 
+class _SplatFootprint(NamedTuple):
+    """Each photon's bilinear footprint in the map (:func:`_footprint`) and what it deposits."""
+
+    i0s: np.ndarray  # (N,) int64 row of the footprint's first texel (may be -1 or Hc: folded at the border)
+    j0s: np.ndarray  # (N,) int64 its column
+    fx: np.ndarray  # (N,) float64 bilinear fractions
+    fy: np.ndarray  # (N,)
+    val: np.ndarray  # (N, C) float64 the photon's deposit
+
+
 @nb.njit(cache=True, inline="always")
-def _deposit(k, i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, out):
-    # photon k's bilinear weights added into out (Hc, Wc, C), rows r0..r1 only (its band)
+def _deposit(k, fp, Hc, Wc, r0, r1, out):
+    # photon k's bilinear weights added into out (Hc, Wc, C), rows r0..r1 only (its band); out is
+    # an array of its own, not a tuple's (Numba drops stores into a tuple's arrays in prange)
+    i0s, j0s, fx, fy, val = fp.i0s, fp.j0s, fp.fx, fp.fy, fp.val
     for di in range(2):
         i = min(max(i0s[k] + di, 0), Hc - 1)
         if i < r0 or i > r1:
@@ -94,13 +106,13 @@ def _deposit(k, i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, band, out):
+def _splat_kernel(fp, counts, items, Hc, Wc, band, out):
     nb_bands = counts.shape[0] - 1
     for b in nb.prange(nb_bands):
         r0 = b * band
         r1 = min(r0 + band, Hc) - 1
         for q in range(counts[b], counts[b + 1]):
-            _deposit(items[q], i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, out)
+            _deposit(items[q], fp, Hc, Wc, r0, r1, out)
 
 
 def _footprint_bands(col, row, Hc, Wc):
@@ -159,7 +171,7 @@ def splat_bilinear(col, row, values, shape, out=None):
     # caustics crowd photons into a few bands: the threads take bands one at a time (dynamic
     # scheduling), not equal runs of bands; which thread adds a band does not change its sums
     with nb.parallel_chunksize(1):
-        _splat_kernel(i0s, j0s, fx, fy, val, counts, items, Hc, Wc, BAND, out)
+        _splat_kernel(_SplatFootprint(i0s, j0s, fx, fy, val), counts, items, Hc, Wc, BAND, out)
     return out
 
 
@@ -200,7 +212,7 @@ class _GroupBins(NamedTuple):
 
 
 @nb.njit(cache=True, parallel=True)
-def _splat_groups_kernel(i0s, j0s, fx, fy, val, bins, Hc, Wc, band, out):
+def _splat_groups_kernel(fp, bins, Hc, Wc, band, out):
     # out[0]: every photon; out[1 + g]: the photons of group g. Work item q is (band q // M,
     # map q % M): each owned by one thread, which adds the band's photons (of its group) in
     # index order, so every map is the one _splat_kernel makes of its photons alone, and a
@@ -225,7 +237,7 @@ def _splat_groups_kernel(i0s, j0s, fx, fy, val, bins, Hc, Wc, band, out):
             p0, p1 = goff[b * ng + m - 1], goff[b * ng + m]
         om = out[m]
         for p in range(p0, p1):
-            _deposit(items[p] if m == 0 else gitems[p], i0s, j0s, fx, fy, val, Hc, Wc, r0, r1, om)
+            _deposit(items[p] if m == 0 else gitems[p], fp, Hc, Wc, r0, r1, om)
 
 
 def splat_bilinear_groups(col, row, values, shape, groups, ng):
@@ -279,15 +291,44 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
     if ng:
         _group_fill_kernel(counts, items, grp, goff, gitems)
     with nb.parallel_chunksize(1):
-        _splat_groups_kernel(i0s, j0s, fx, fy, val, _GroupBins(counts, items, goff, gitems), Hc, Wc, BAND, out)
+        _splat_groups_kernel(_SplatFootprint(i0s, j0s, fx, fy, val), _GroupBins(counts, items, goff, gitems), Hc, Wc,
+                             BAND, out)
     return out
 
 
+class _ReceiverPhotons(NamedTuple):
+    """The photons of one receiver, as :func:`_receiver_photons_kernel` reads them."""
+
+    P: np.ndarray  # (M, 3) float64 hit points
+    face: np.ndarray  # (M,) int64 receiver triangle of each
+    idx: np.ndarray  # (N,) int64 the photons on this receiver
+    normals: np.ndarray  # (T, 3) float64 the receivers' face normals
+    flux: np.ndarray  # (M, C) float64
+
+
+class _CausticMapFrame(NamedTuple):
+    """A receiver's caustic map: its frame and texels."""
+
+    frame: np.ndarray  # (5, 3) centre, U, V, W, (w, d, 0)
+    texel_area: float
+    Hc: float
+    Wc: float
+
+
 @nb.njit(cache=True, parallel=True)
-def _receiver_photons_kernel(P, face, idx, normals, frame, texel_area, Hc, Wc, flux, col, row, val):
+def _receiver_photons_kernel(photons, box, col, row, val):
     # per photon idx[k] on the receiver: its map position (levelmap.planes.to_map: q = p - centre,
     # col = (q.U / w + 0.5) Wc, row = (q.W / d + 0.5) Hc, vec3.dot's order) and its irradiance
     # flux |n.V| / A_texel (splat_maps's NumPy expressions, operation for operation)
+    P = photons.P
+    face = photons.face
+    idx = photons.idx
+    normals = photons.normals
+    flux = photons.flux
+    frame = box.frame
+    texel_area = box.texel_area
+    Hc = box.Hc
+    Wc = box.Wc
     cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
     ux, uy, uz = frame[1, 0], frame[1, 1], frame[1, 2]
     vx, vy, vz = frame[2, 0], frame[2, 1], frame[2, 2]
@@ -346,8 +387,8 @@ def receiver_photons(P, face, idx, normals, box, flux):
     n = len(idx)
     col, row, val = np.empty(n), np.empty(n), np.empty((n, flux.shape[1]))
     if n:
-        _receiver_photons_kernel(P, face, idx, normals, frame, float(box.texel_area), float(Hc), float(Wc), flux,
-                                 col, row, val)
+        _receiver_photons_kernel(_ReceiverPhotons(P, face, idx, normals, flux),
+                                 _CausticMapFrame(frame, float(box.texel_area), float(Hc), float(Wc)), col, row, val)
     return col, row, val
 
 

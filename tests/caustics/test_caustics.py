@@ -14,7 +14,7 @@ import pytest
 import refraction_ref as rr
 from refraction_ref.analytic import sphere_refraction
 from refraction_ref.camera import Camera
-from refraction_ref.caustics.receivers import march_eyespace
+from refraction_ref.caustics.eyespace import march_eyespace
 from refraction_ref.caustics.splat import gather_gaussian, splat_bilinear
 from refraction_ref.metrics import relative_l1
 

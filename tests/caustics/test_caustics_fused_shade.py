@@ -3,8 +3,8 @@
 ``shade_points`` with a :class:`~refraction_ref.caustics.shade.ShadowMaps` visibility colours every
 point in one kernel (the facing normal, each light's cosine, shadow-map test and direct term, the
 caustic map's look-up, the albedo); ``shadow_map_test`` writes the shadow buffers' verdict and
-margin in one pass. Both must give the bits of the NumPy expressions (``_shade_points_numpy``,
-``_shadow_map_margin_numpy`` of ``test_caustics_parallel``) whatever the lights, receivers and
+margin in one pass. Both must give the bits of the NumPy expressions (``shade_points_numpy``,
+``shadow_map_margin_numpy`` of ``test_caustics_parallel``) whatever the lights, receivers and
 threads.
 """
 
@@ -14,11 +14,12 @@ import json
 
 import numpy as np
 import pytest
-from test_caustics_parallel import SCENE, _shade_points_numpy, _shadow_map_margin_numpy
+from test_caustics_parallel import SCENE, shade_points_numpy, shadow_map_margin_numpy
 
 import refraction_ref as rr
 from refraction_ref.camera import Camera
 from refraction_ref.caustics import shade
+from refraction_ref.caustics.shadow import ShadowMaps, shadow_map_test, shadow_map_visibility, view_affine
 from refraction_ref.caustics.receivers import receiver_set
 
 
@@ -65,9 +66,9 @@ def test_fused_shade_points_equals_numpy(on_one_and_two_threads, lights, n_recei
         zmin = rng.uniform(2.5, 3.8, (32, 32))
         zmin[rng.random((32, 32)) < 0.2] = np.inf
         shadow.append((_light_cam(l % 2 == 1), zmin, 0.01))
-    vis = shade.ShadowMaps(shadow)
-    assert shade._fused_args(rs, sc.data["lights"], maps, P, vis) is not None  # the fused kernel runs
-    want = _shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
+    vis = ShadowMaps(shadow)
+    assert shade.shade_points_fuses(rs, sc.data["lights"], maps, vis)  # the fused kernel runs
+    want = shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
     # the generic path (any callable) gives the same bits too
     generic = shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, lambda l, p, n: vis(l, p, n))
     a, b = on_one_and_two_threads(lambda: shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, vis))
@@ -93,14 +94,14 @@ def test_shadow_map_test_equals_numpy(on_one_and_two_threads, ortho):
     for tie in (0.0, 5e-3, 0.3):
         code_w = np.zeros(K, np.uint8)
         margin_w = np.full(K, np.nan, np.float32)
-        code_w[idx] = np.where(shade.shadow_map_visibility(lcam, zmin, p, 0.01) > 0, 1, 2)
-        margin_w[idx] = _shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
+        code_w[idx] = np.where(shadow_map_visibility(lcam, zmin, p, 0.01) > 0, 1, 2)
+        margin_w[idx] = shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
         assert (code_w == 2).sum() > 100 and (code_w == 1).sum() > 100
 
         def run():
             code = np.zeros(K, np.uint8)
             margin = np.full(K, np.nan, np.float32)
-            shade.shadow_map_test(lcam, zmin, p, 0.01, tie, idx, code, margin)
+            shadow_map_test(lcam, zmin, p, 0.01, tie, idx, code, margin)
             return code, margin
 
         for code, margin in on_one_and_two_threads(run):
@@ -156,7 +157,7 @@ def test_final_rays_kernel_equals_numpy(on_one_and_two_threads, ortho, method, d
         n = len(xi) + len(oi)
         O, D, Ov, Dv = (np.empty((n, 3)) for _ in range(4))
         Wk, Hk, sx, sy = cam.kernel_args()
-        m, t = shade._world_to_view_args(cam)
+        m, t = view_affine(cam)
         ic._final_rays_kernel(
             ic._FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), eta, NORMAL_METHODS[method], delta),
             no_lut(zfront.shape),
@@ -178,13 +179,13 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
               {"type": "directional", "direction": [-0.3, -1.0, 0.2], "radiance": [0.5, 1, 1]}]
     sc, rs, P, faces, d, maps, rng = _case(lights, n_receivers)
     zmin = rng.uniform(2.5, 3.8, (32, 32))
-    vis = shade.ShadowMaps([(_light_cam(False), zmin, 0.01), None])
+    vis = ShadowMaps([(_light_cam(False), zmin, 0.01), None])
     N = 4000
     face = faces[:N].copy()
     face[rng.random(N) < 0.3] = -1
     hi = np.flatnonzero(face >= 0)
     direct = (P[N:], faces[N:], d[N:])
-    c = _shade_points_numpy(rs, sc.data["lights"], maps, np.concatenate([P[:N][hi], direct[0]]),
+    c = shade_points_numpy(rs, sc.data["lights"], maps, np.concatenate([P[:N][hi], direct[0]]),
                             np.concatenate([face[hi], direct[1]]), np.concatenate([d[:N][hi], direct[2]]), vis)
     want = np.zeros((N, 3))
     want[hi] = c[:len(hi)]
@@ -194,8 +195,8 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
     code_w = np.zeros((2, K), np.uint8)
     margin_w = np.full((2, K), np.nan, np.float32)
     lcam = vis.shadow[0][0]
-    code_w[0, dest] = np.where(shade.shadow_map_visibility(lcam, zmin, direct[0], 0.01) > 0, 1, 2)
-    margin_w[0, dest] = _shadow_map_margin_numpy(lcam, zmin, direct[0], 0.01, 0.3)
+    code_w[0, dest] = np.where(shadow_map_visibility(lcam, zmin, direct[0], 0.01) > 0, 1, 2)
+    margin_w[0, dest] = shadow_map_margin_numpy(lcam, zmin, direct[0], 0.01, 0.3)
     code_w[1, dest], margin_w[1, dest] = 1, -np.inf  # no shadow map
     assert (code_w[0, dest] == 2).sum() > 10 and (margin_w[0, dest] == 0).sum() > 10
 
@@ -203,8 +204,8 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
         out = np.zeros((N, 3))
         code = np.zeros((2, K), np.uint8)
         margin = np.full((2, K), np.nan, np.float32)
-        cd = shade.shade_rows(rs, sc.data["lights"], maps, P[:N], face, d[:N], hi, direct, vis, out,
-                              (dest, code, margin, 0.3) if bufs else None)
+        cd = shade.shade_rows(shade.ReceiverLighting(rs, sc.data["lights"], maps, vis), P[:N], face, d[:N], hi,
+                              direct, out, (dest, code, margin, 0.3) if bufs else None)
         return out, cd, code, margin
 
     for bufs in (False, True):
@@ -217,7 +218,8 @@ def test_shade_rows_equals_gathered_shade_points(on_one_and_two_threads, n_recei
     # a point light: not this kernel's (None, out untouched)
     out = np.zeros((N, 3))
     pl = [{"type": "point", "position": [0.5, 1.5, 0.3], "radiance": [2.0, 2.0, 1.0]}]
-    assert shade.shade_rows(rs, pl, maps, P[:N], face, d[:N], hi, direct, vis, out) is None and not out.any()
+    assert shade.shade_rows(shade.ReceiverLighting(rs, pl, maps, vis), P[:N], face, d[:N], hi, direct,
+                            out) is None and not out.any()
 
 
 def test_final_composite_kernels_equal_numpy(on_one_and_two_threads):

@@ -20,9 +20,8 @@ import numpy as np
 import pytest
 
 import refraction_ref as rr
-from refraction_ref import filters
-from refraction_ref.caustics import shade, splat
-from refraction_ref.caustics.receivers import hit_exact
+from refraction_ref.caustics import shade, shadow, splat
+from refraction_ref.caustics.exact_hits import hit_exact
 from refraction_ref.exact import mesh_normals
 from refraction_ref.meshes import corner_normals, crease_edge_angles, load_mesh, vertex_normals
 
@@ -88,14 +87,27 @@ def test_the_exact_reference_is_the_same_on_one_and_two_threads_for_every_normal
         same_arrays(a, b)
 
 
+def _fold_rows_numpy(a, w):
+    """Mirror-folded correlation along each row: per texel the taps in order, each tap's direct
+    source, then the mass that left through the first edge, then through the last (NumPy, one
+    tap at a time over every texel; a missing source adds 0)."""
+    H, N, C = a.shape
+    r = (len(w) - 1) // 2
+    j = np.arange(N)
+    out = np.zeros(a.shape)
+    for t in range(-r, r + 1):
+        for src in (j - t, -1 - j - t, 2 * N - 1 - j - t):
+            ok = (src >= 0) & (src < N)
+            out += np.where(ok[None, :, None], w[t + r] * a[:, np.clip(src, 0, N - 1), :], 0.0)
+    return out
+
+
 def _gather_transposed(E, window):
-    """The gather as it was: _fold_rows, a transposed copy, _fold_rows again, transposed back."""
+    """The gather by rows, a transposed copy, rows again, transposed back (the reference of the separable pass)."""
     a = np.asarray(E, dtype=np.float64)
     w = splat.gaussian_weights(window)
-    tmp = np.empty_like(a)
-    filters._fold_rows(np.ascontiguousarray(a), w, tmp)
-    out = np.empty((a.shape[1], a.shape[0], a.shape[2]))
-    filters._fold_rows(np.ascontiguousarray(tmp.transpose(1, 0, 2)), w, out)
+    tmp = _fold_rows_numpy(a, w)
+    out = _fold_rows_numpy(np.ascontiguousarray(tmp.transpose(1, 0, 2)), w)
     return np.ascontiguousarray(out.transpose(1, 0, 2))
 
 
@@ -132,7 +144,7 @@ def test_receiver_lookups_equal_numpy(on_one_and_two_threads):
     col[::50], row[::77] = np.nan, np.inf
     sel = np.arange(4000)
     out = np.zeros((4000, 3))
-    shade._add_bilinear_kernel(E, col, row, sel, out)
+    shade.add_bilinear(E, col, row, sel, out)
     assert np.array_equal(out, shade.sample_bilinear(E, col, row))
 
     from refraction_ref.camera import Camera
@@ -144,7 +156,7 @@ def test_receiver_lookups_equal_numpy(on_one_and_two_threads):
         zmin = rng.uniform(2.5, 3.5, (32, 32))
         zmin[rng.random((32, 32)) < 0.2] = np.inf
         p = rng.uniform(-1.5, 1.5, (3000, 3))
-        a, b = on_one_and_two_threads(lambda: shade.shadow_map_visibility(lcam, zmin, p, 0.01))
+        a, b = on_one_and_two_threads(lambda: shadow.shadow_map_visibility(lcam, zmin, p, 0.01))
         col_, row_, d = lcam.to_screen(lcam.world_to_view(p))
         inside = np.isfinite(col_) & np.isfinite(row_) & (col_ >= 0) & (col_ < 32) & (row_ >= 0) & (row_ < 32) & (d > 0)
         i = np.where(inside, np.floor(np.nan_to_num(row_)), 0).astype(np.int64).clip(0, 31)
@@ -165,7 +177,7 @@ def test_chunked_receiver_hits_equal_one_embree_call(on_one_and_two_threads):
     o[5] = np.nan
     a, b = on_one_and_two_threads(lambda: hit_exact(tris, o, d))
     assert np.array_equal(a[0], b[0], equal_nan=True) and np.array_equal(a[1], b[1])
-    # one call for every ray, the float64 recomputation as it was
+    # one call for every ray, the float64 recomputation in NumPy
     res = soup_scene(tris).run(o[np.isfinite(o[:, 0])].astype(np.float32),
                                d[np.isfinite(o[:, 0])].astype(np.float32), output=1)
     face = np.asarray(res["primID"], dtype=np.int64)
@@ -186,15 +198,15 @@ def test_chunked_receiver_hits_equal_one_embree_call(on_one_and_two_threads):
     want[hi] = np.where(np.isfinite(tt) & (tt > 0), tt, tf)
     assert np.array_equal(a[0], want, equal_nan=True)
     # triangles read in place (IndexedTriangles) give the same bits
-    from refraction_ref.caustics.receivers import IndexedTriangles
+    from refraction_ref.caustics.exact_hits import IndexedTriangles
 
     V = tris.reshape(-1, 3)
     c = hit_exact(IndexedTriangles(V, np.arange(len(V)).reshape(-1, 3)), o, d, soup_scene(tris))
     assert np.array_equal(c[0], a[0], equal_nan=True) and np.array_equal(c[1], a[1])
 
 
-def _shade_points_numpy(rs, lights, maps_rgb, P, faces, ray_dirs, visibility):
-    """shade_points as it was (NumPy), the reference of its kernels."""
+def shade_points_numpy(rs, lights, maps_rgb, P, faces, ray_dirs, visibility):
+    """shade_points in NumPy, the reference of its kernels."""
     from refraction_ref.caustics.receivers import map_position
     from refraction_ref.lights import light_direction_at
 
@@ -246,14 +258,14 @@ def test_shade_points_equals_numpy_for_directional_and_point_lights(on_one_and_t
     def vis(l, p, nrm):
         return (p[:, 0] + 0.1 * l > 0).astype(np.float64)
 
-    want = _shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
+    want = shade_points_numpy(rs, sc.data["lights"], maps, P, faces, d, vis)
     a, b2 = on_one_and_two_threads(lambda: shade.shade_points(rs, sc.data["lights"], maps, P, faces, d, vis))
     assert np.array_equal(a, b2) and np.array_equal(a, want) and want.std() > 0
 
 
 def _exact_visibility_numpy(obj_tris, light, p, n):
-    """exact_visibility as it was (NumPy, one Embree call), the reference of the chunked one."""
-    from refraction_ref.caustics.receivers import occluded
+    """exact_visibility in NumPy with one Embree call, the reference of the chunked one."""
+    from refraction_ref.caustics.exact_hits import occluded
     from refraction_ref.lights import light_direction_at
 
     L, _ = light_direction_at(light, p)
@@ -268,7 +280,7 @@ def _exact_visibility_numpy(obj_tris, light, p, n):
 
 
 def test_exact_shadow_rays_equal_numpy_with_indexed_triangles_and_any_chunks(on_one_and_two_threads):
-    from refraction_ref.caustics.receivers import IndexedTriangles
+    from refraction_ref.caustics.exact_hits import IndexedTriangles
     from refraction_ref.embree import mesh_scene
 
     v, f = load_mesh("teapot")
@@ -286,13 +298,13 @@ def test_exact_shadow_rays_equal_numpy_with_indexed_triangles_and_any_chunks(on_
                   {"type": "point", "position": [0.2, 2.0, -0.1]}):
         want = _exact_visibility_numpy(tris, light, p, n)
         assert 0 < want.sum() < len(want)
-        a, b = on_one_and_two_threads(lambda: shade.exact_visibility(it, light, p, n, scene=mesh_scene(v, f)))
+        a, b = on_one_and_two_threads(lambda: shadow.exact_visibility(it, light, p, n, scene=mesh_scene(v, f)))
         assert np.array_equal(a, want) and np.array_equal(b, want)
-        assert np.array_equal(shade.exact_visibility(tris, light, p, n, chunk=777), want)
+        assert np.array_equal(shadow.exact_visibility(tris, light, p, n, chunk=777), want)
 
 
 def _window_samples_numpy(cam, n, seed):
-    """window_samples as it was: one generator, the whole grid in NumPy."""
+    """window_samples from one generator, the whole grid in NumPy (the reference of the chunked draws)."""
     rng = np.random.default_rng(int(seed))
     jj, ii = np.meshgrid(np.arange(n), np.arange(n))
     u = (jj + rng.random((n, n))) / n
@@ -347,7 +359,7 @@ def test_grouped_splat_equals_one_splat_per_group(on_one_and_two_threads):
 
 
 def _relative_l1_scipy(test, ref, mask=None, blur=1.0):
-    """relative_l1 as it was (SciPy's gaussian_filter, NumPy)."""
+    """relative_l1 by SciPy's gaussian_filter and NumPy (the reference of its kernel)."""
     from scipy.ndimage import gaussian_filter
 
     a = np.nan_to_num(np.asarray(test, dtype=np.float64))
@@ -401,14 +413,14 @@ def test_map_position_kernel_equals_to_map(on_one_and_two_threads):
 
 
 def _march_plain(O, D, depth, cam, rel_thick=0.01, max_samples=1 << 16):
-    """march_eyespace as it was: every sample tested, one ray after another (the reference of the
+    """march_eyespace testing every sample, one ray after another (the reference of the
     tiled march, which steps over runs of samples that cannot hit)."""
     import math
 
     import numba as nb
 
     from refraction_ref.camera import project_point
-    from refraction_ref.caustics.receivers import _clip_plane
+    from refraction_ref.caustics.eyespace import clip_interval
 
     @nb.njit
     def run(O, D, depth, W, H, sx, sy, ortho, near, far, t_hit, pix):
@@ -421,18 +433,18 @@ def _march_plain(O, D, depth, cam, rel_thick=0.01, max_samples=1 << 16):
             if not (math.isfinite(ox) and math.isfinite(dx)):
                 continue
             t0, t1 = 0.0, 1e30
-            t0, t1 = _clip_plane(near + oz, dz, t0, t1)
-            t0, t1 = _clip_plane(-oz - far, -dz, t0, t1)
+            t0, t1 = clip_interval(near + oz, dz, t0, t1)
+            t0, t1 = clip_interval(-oz - far, -dz, t0, t1)
             if ortho:
-                t0, t1 = _clip_plane(ox - sx, dx, t0, t1)
-                t0, t1 = _clip_plane(-ox - sx, -dx, t0, t1)
-                t0, t1 = _clip_plane(oy - sy, dy, t0, t1)
-                t0, t1 = _clip_plane(-oy - sy, -dy, t0, t1)
+                t0, t1 = clip_interval(ox - sx, dx, t0, t1)
+                t0, t1 = clip_interval(-ox - sx, -dx, t0, t1)
+                t0, t1 = clip_interval(oy - sy, dy, t0, t1)
+                t0, t1 = clip_interval(-oy - sy, -dy, t0, t1)
             else:
-                t0, t1 = _clip_plane(ox + sx * oz, dx + sx * dz, t0, t1)
-                t0, t1 = _clip_plane(-ox + sx * oz, -dx + sx * dz, t0, t1)
-                t0, t1 = _clip_plane(oy + sy * oz, dy + sy * dz, t0, t1)
-                t0, t1 = _clip_plane(-oy + sy * oz, -dy + sy * dz, t0, t1)
+                t0, t1 = clip_interval(ox + sx * oz, dx + sx * dz, t0, t1)
+                t0, t1 = clip_interval(-ox + sx * oz, -dx + sx * dz, t0, t1)
+                t0, t1 = clip_interval(oy + sy * oz, dy + sy * dz, t0, t1)
+                t0, t1 = clip_interval(-oy + sy * oz, -dy + sy * dz, t0, t1)
             if not (t1 > t0) or t1 >= 1e29:
                 continue
             c0, r0, dA = project_point(ox + t0 * dx, oy + t0 * dy, oz + t0 * dz, W, H, sx, sy, ortho)
@@ -478,7 +490,8 @@ def test_tiled_eyespace_march_equals_testing_every_sample(on_one_and_two_threads
     pixel, NaN and -1 included) are those of the per-sample march, on the receivers' depth image of
     the caustics scene and on a noisy one with holes, NaN and depth steps at tile corners."""
     from refraction_ref.camera import Camera
-    from refraction_ref.caustics.receivers import eye_buffers, march_eyespace, receiver_set
+    from refraction_ref.caustics.eyespace import march_eyespace
+    from refraction_ref.caustics.receivers import eye_buffers, receiver_set
 
     sc = rr.load_scene(SCENE, {"camera.width": 150, "camera.height": 130})
     raw = dict(sc.data["camera"], width=150, height=130)
@@ -523,8 +536,8 @@ def test_caustic_stages_at_a_larger_size_are_the_same_on_one_and_two_threads(on_
 
 
 def _shade_rays_numpy(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct):
-    """shade_rays as it was (boolean indexing, np.concatenate), the reference of its row kernels."""
-    from refraction_ref.caustics.pipeline import receiver_hits
+    """shade_rays by boolean indexing and np.concatenate, the reference of its row kernels."""
+    from refraction_ref.caustics.receivers import receiver_hits
     from refraction_ref.environment import environment_lookup
 
     out = np.zeros((len(o), 3))
@@ -542,8 +555,8 @@ def _shade_rays_numpy(scene, rs, cam, o, d, mode, eyebuf, rgb_maps, vis, direct)
 @pytest.mark.parametrize("mode", ["eyespace", "exact"])
 def test_shade_rays_row_kernels_equal_boolean_indexing(on_one_and_two_threads, mode):
     from refraction_ref.camera import Camera
-    from refraction_ref.caustics.pipeline import shade_rays
-    from refraction_ref.caustics.receivers import eye_buffers, receiver_set
+    from refraction_ref.caustics.receivers import ReceiverHitMode, eye_buffers, receiver_set
+    from refraction_ref.caustics.shade import ReceiverLighting, shade_rays
 
     sc = rr.load_scene(SCENE, SMALL)
     cam = Camera.from_dict(sc.data["camera"])
@@ -563,13 +576,15 @@ def test_shade_rays_row_kernels_equal_boolean_indexing(on_one_and_two_threads, m
 
     want = _shade_rays_numpy(sc, rs, cam, o, d, mode, eyebuf, maps, vis, direct)
     assert 0 < (want[0].sum(axis=1) > 0).sum() and want[1].std() > 0
-    a, b = on_one_and_two_threads(lambda: shade_rays(sc, rs, cam, o, d, mode, eyebuf, maps, vis, direct))
+    lighting = ReceiverLighting(rs, sc.data["lights"], maps, vis)
+    hits = ReceiverHitMode(mode, cam, eyebuf)
+    a, b = on_one_and_two_threads(lambda: shade_rays(sc, lighting, hits, o, d, direct))
     for got in (a, b):
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
-def _shadow_map_margin_numpy(lcam, zmin, points, bias, tie=0.0):
-    """shadow_map_margin as it was written (NumPy), the reference of its kernel."""
+def shadow_map_margin_numpy(lcam, zmin, points, bias, tie=0.0):
+    """shadow_map_margin in NumPy, the reference of its kernel."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     zmin = np.asarray(zmin, dtype=np.float64)
     H, W = zmin.shape
@@ -609,10 +624,10 @@ def test_shadow_map_margin_kernel_equals_numpy(on_one_and_two_threads, ortho):
     p[::500] = np.nan
     p[1::500] = [0.3, 5.0, 0.2]  # behind the light
     for tie in (0.0, 5e-3, 0.3):
-        want = _shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
+        want = shadow_map_margin_numpy(lcam, zmin, p, 0.01, tie)
         assert (want > 0).sum() > 100 and (want == -np.inf).sum() > 100
         if tie >= 0.3:
             assert (want == 0).sum() > 100
-        a, b = on_one_and_two_threads(lambda: shade.shadow_map_margin(lcam, zmin, p, 0.01, tie))
+        a, b = on_one_and_two_threads(lambda: shadow.shadow_map_margin(lcam, zmin, p, 0.01, tie))
         for got in (a, b):
             assert np.array_equal(got, want)
