@@ -2,10 +2,11 @@
 
 ``knobs`` (the ``caustics`` block: map size, gathering, the level map's
 placement, shadows and ambient) -> ``light`` (the light's camera and photon
-flux) -> ``receivers`` (the receivers' triangle soup, caustic-map frames;
-eye-space march of Krüger et al. 2006 or Embree) -> ``splat`` (bilinear
-splat, Gaussian gathering of Wyman and Davis 2006) -> ``shade`` (direct
-light with a shadow test plus caustics), and ``pipeline``: the generic
+flux) -> ``receivers`` (the receivers' triangle soup, caustic-map frames and
+hits: ``eyespace``, the eye-space march of Krüger et al. 2006, or
+``exact_hits``, Embree) -> ``splat`` (bilinear splat, Gaussian gathering of
+Wyman and Davis 2006) -> ``shade`` (direct light with a shadow test,
+``shadow``, plus caustics), and ``pipeline``: the generic
 stages (receivers, receiver hits, splat, gather) that the image-space
 method (:mod:`refraction_ref.imagespace.caustics`), the volumetric method
 and the exact photon reference (:mod:`refraction_ref.exact.caustics`) put

@@ -151,9 +151,18 @@ def _finite_rows32(o, d, a, b, ii, o32, d32, t, face):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _mt_kernel(V, F, o, d, ii, prim, tfar, t, face):
-    # the float64 Moller-Trumbore distance on the triangle Embree found, for rays ii: the
-    # NumPy expressions (np.cross; einsum('ij,ij->i'), whose order dot3 keeps),
-    # operation for operation; compiled nogil, so the chunks' threads run it at once
+    """The float64 Möller-Trumbore distance ``t = (e2 . q) / (e1 . p)`` on the triangle Embree found.
+
+    For rays ``ii``: ``p = d x e2``, ``q = (o - a) x e1`` (``np.cross``; the dot products in
+    ``einsum('ij,ij->i')``'s order, :func:`~refraction_ref.kernels.dot3`), Embree's own
+    ``tfar`` where that is not finite and positive; compiled nogil, so the chunks' threads
+    run it at once.
+
+    References
+    ----------
+    .. [1] T. Möller, B. Trumbore, "Fast, Minimum Storage Ray-Triangle
+       Intersection", Journal of Graphics Tools 2(1), 1997.
+    """
     for m in range(ii.shape[0]):
         f = np.int64(prim[m])
         if f < 0:

@@ -190,7 +190,16 @@ class _ClippedRay(NamedTuple):
 
 @nb.njit(cache=True, inline="always")
 def _march_sample(m, ray, view):
-    """Sample ``m`` of ``ray.n`` of a clipped ray: its parameter ``t`` and (col, row, depth) on screen."""
+    """Sample ``m`` of ``ray.n`` of a clipped ray: its parameter ``t`` and (col, row, depth) on screen.
+
+    Uniform on screen: perspective-correct along the ray (``1/depth`` linear in ``u = m / n``),
+    or uniform in ``t`` for an orthographic view.
+
+    References
+    ----------
+    .. [1] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
+       Accurate Photon Tracing on GPUs", EGSR 2006 (the photon's line in the image).
+    """
     u = m / ray.n
     if ray.persp:  # perspective-correct: 1/depth is linear in screen space
         s = (u / ray.dB) / ((1.0 - u) / ray.dA + u / ray.dB)
