@@ -72,10 +72,12 @@ import fnmatch
 
 import numpy as np
 
+from .report import fmt_share
+
 __all__ = ["TOLERANCES", "tolerance_for", "judge", "informative", "nonfinite_mismatch", "finiteness",
            "FINITENESS", "SNAP_SLOPE", "FLOAT32_SNAP_SLOPE", "FLOAT32_SNAP_FRACTION", "neighbour_step",
            "flux_error", "FLUX", "VOLUME_FLUX", "RADIANCE_FLOOR",
-           "DEFAULT", "DEFAULT_INT", "fmt_share", "fmt_percent"]
+           "DEFAULT", "DEFAULT_INT", "elementwise", "fold_mask"]
 
 _TIE = ("a fragment exactly on a slice boundary rounds either way: one bit moves by one slice, anywhere "
         "(counted over the non-empty words); fragments appear or vanish at silhouettes (edge ties)")
@@ -426,8 +428,26 @@ def informative(c, g, over):
     return m
 
 
-def _elementwise(c, g, spec, batches):
-    """Per element: failing mask (over the array's elements, or its vectors for ``angle``), error, detail."""
+def elementwise(c, g, spec, batches):
+    """Per element: failing mask (over the array's elements, or its vectors for ``angle``), error, detail.
+
+    Parameters
+    ----------
+    c, g : ndarray
+        The candidate's and the golden's arrays (one shape).
+    spec : dict
+        The tolerance (its ``kind`` and that kind's entries).
+    batches : ndarray, optional
+        The golden's batches (``ztest``).
+
+    Returns
+    -------
+    bad : bool ndarray
+        The failing elements, before any allowance.
+    error : dict
+        The measured error.
+    detail : str
+    """
     kind = spec["kind"]
     if kind == "exact":
         bad = (c != g) if g.dtype.kind not in "fc" else ~((c == g) | (np.isnan(c) & np.isnan(g)))
@@ -524,52 +544,22 @@ def neighbour_step(g):
     return out
 
 
-def _fold(a, shape):
-    """Reduce a per-element mask to ``shape`` (the failing mask's: vectors fold their last axis) with any()."""
+def fold_mask(a, shape):
+    """Reduce a per-element mask to ``shape`` (the failing mask's: vectors fold their last axis) with any().
+
+    Parameters
+    ----------
+    a : bool ndarray
+    shape : tuple of int
+
+    Returns
+    -------
+    bool ndarray
+        Broadcast to ``shape``.
+    """
     while a.ndim > len(shape):
         a = a.any(axis=-1)
     return np.broadcast_to(a, shape)
-
-
-def fmt_percent(share, whole=False):
-    """A percentage as a report prints it: two significant digits below 10, whole numbers above (never
-    ``1e+02``), and more digits where a share short of all would round to 100.
-
-    Parameters
-    ----------
-    share : float
-        Per cent, >= 0.
-    whole : bool
-        The share is all of it (100 % may be printed).
-
-    Returns
-    -------
-    str
-    """
-    if share < 10:
-        return f"{share:.2g}"
-    pct, digits = f"{share:.0f}", 0
-    while not whole and float(pct) >= 100:
-        digits += 1
-        pct = f"{share:.{digits}f}"
-    return pct
-
-
-def fmt_share(n, total):
-    """A count and its share, never rounded to zero: ``"3 of 262144 (0.0011 %)"``.
-
-    Parameters
-    ----------
-    n, total : int
-        Elements counted and elements they are counted over.
-
-    Returns
-    -------
-    str
-    """
-    n, total = int(n), int(total)
-    pct = "0" if n == 0 else fmt_percent(100.0 * n / max(total, 1), whole=n >= total)
-    return f"{n} of {total} ({pct} %)"
 
 
 def _flux_axes(g):
@@ -713,20 +703,20 @@ def judge(cand, gold, spec, batches=None, ambiguous=None, judged=None):
     allowed = float(spec.get("fraction", 0.0))
     c = np.asarray(cand)
     g = np.asarray(gold)
-    bad, err, detail = _elementwise(c, g, spec, batches)
-    info = _fold(informative(c, g, spec.get("over", "all")), bad.shape) | bad
+    bad, err, detail = elementwise(c, g, spec, batches)
+    info = fold_mask(informative(c, g, spec.get("over", "all")), bad.shape) | bad
     if judged is not None:
-        jm = _fold(np.asarray(judged, bool), bad.shape)
+        jm = fold_mask(np.asarray(judged, bool), bad.shape)
         bad, info = bad & jm, info & jm
         detail += f"; judged where the golden's {spec.get('weight_key', 'weight')} is above " \
                   f"{spec.get('floor', 0):g} of its maximum: {int(np.count_nonzero(jm))} of {jm.size} elements"
-    amb = np.zeros(bad.shape, bool) if ambiguous is None else _fold(np.asarray(ambiguous, bool), bad.shape)
+    amb = np.zeros(bad.shape, bool) if ambiguous is None else fold_mask(np.asarray(ambiguous, bool), bad.shape)
     located = bad & ~amb
     nonfinite = nonfinite_mismatch(c, g)
     snap = None
     if spec.get("snap_slope") and spec["kind"] == "close":
         # the located failures within the wider term count against snap_fraction, the rest against fraction
-        hard = _elementwise(c, g, dict(spec, slope=spec["snap_slope"]), batches)[0]
+        hard = elementwise(c, g, dict(spec, slope=spec["snap_slope"]), batches)[0]
         if judged is not None:
             hard = hard & jm
         snap = located & ~hard

@@ -19,8 +19,8 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.golden import build
-from refraction_ref.golden.check import _changes, _hit_explanations, _photon_explanations, _popcount, \
-    _trace_explanations
+from refraction_ref.golden.masks import neighbour_changes, popcount
+from refraction_ref.golden.replay import hit_explanations, photon_explanations, trace_explanations
 from refraction_ref.golden.tolerances import (FLOAT32_SNAP_FRACTION, FLOAT32_SNAP_SLOPE, SNAP_SLOPE, judge,
                                               neighbour_step, tolerance_for)
 
@@ -78,7 +78,7 @@ def test_positions_that_follow_from_the_candidates_own_ldi_pass(suite, tmp_path)
     fail, and a trace error on top of them fails however the LDI moved."""
     g = _gold(suite, EYE)
     a = dict(g, **{"stage.peel.ldi": _ulps(g["stage.peel.ldi"], 1)})
-    ex = _trace_explanations(suite, EYE, g, a, _all_passed(a))
+    ex = trace_explanations(suite, EYE, g, a, _all_passed(a))
     assert set(ex) == {"exit_pos", "path_length", "stage.trace.exit_pos", "stage.trace.path_pos",
                        "stage.trace.path_length"}
     for k, v in ex.items():
@@ -104,10 +104,10 @@ def test_photons_that_follow_from_the_candidates_own_light_ldi_pass(suite, tmp_p
     g = _gold(suite, LIGHT)
     # the light's texels are larger than the eye's pixels (the normals' baseline longer): a few more ulps
     a = dict(g, **{"stage.photon_trace.ldi_0": _ulps(g["stage.photon_trace.ldi_0"], 2, 6)})
-    ex = _photon_explanations(suite, LIGHT, g, a, _all_passed(a), 0)
+    ex = photon_explanations(suite, LIGHT, g, a, _all_passed(a), 0)
     assert set(ex) == {"stage.photon_trace.exit_pos_0"}
     a["stage.photon_trace.exit_pos_0"] = ex["stage.photon_trace.exit_pos_0"]
-    hx = _hit_explanations(suite, LIGHT, g, a, _all_passed(a), 0)
+    hx = hit_explanations(suite, LIGHT, g, a, _all_passed(a), 0)
     a["stage.receiver_hit.hit_pos_0"] = hx["stage.receiver_hit.hit_pos_0"]
     res = _check(suite, tmp_path, LIGHT, a)
     assert res.ok, (res.failing_keys, res.earliest_failing_stage)
@@ -195,8 +195,8 @@ def test_a_fragment_lost_inside_a_surface_fails_voxelize_a_silhouette_tie_passes
     res = _check(suite, tmp_path, EYE, {"stage.voxelize.bits": bits})
     assert res.earliest_failing_stage == "voxelize", res.failing_keys
     # one pixel beside the outline takes its covered neighbour's words: its count is the neighbour's
-    dc = _popcount(g["stage.voxelize.bits"])
-    edge = np.argwhere((dc == 0) & _changes(dc > 0))
+    dc = popcount(g["stage.voxelize.bits"])
+    edge = np.argwhere((dc == 0) & neighbour_changes(dc > 0))
     i, j = edge[len(edge) // 2]
     nb = [(i + a, j + b) for a in (-1, 0, 1) for b in (-1, 0, 1) if dc[i + a, j + b] > 0]
     tie = g["stage.voxelize.bits"].copy()

@@ -1,4 +1,4 @@
-"""``check``'s judging finds the bugs a port really makes (issue 29): a 1 % scale error of a map, a different
+"""``check``'s judging finds the bugs a port really makes: a 1 % scale error of a map, a different
 photon count, a shifted Monte-Carlo map, a wrong receiver face, an index, near-empty voxels, a key no rule names.
 
 The first tests need no golden suite (synthetic arrays through :func:`judge` and its helpers); the rest build
@@ -16,9 +16,10 @@ import pytest
 
 import refraction_ref as rr
 from refraction_ref.golden import build
-from refraction_ref.golden.check import align_photons
+from refraction_ref.golden.photons import align_photons
 from refraction_ref.golden.tolerances import (DEFAULT, DEFAULT_INT, FLUX, RADIANCE_FLOOR, VOLUME_FLUX, flux_error,
-                                              fmt_share, judge, moments_test, tolerance_for)
+                                              judge, moments_test, tolerance_for)
+from refraction_ref.golden.report import fmt_percent, fmt_share
 
 
 # --------------------------------------------------------------------- no suite
@@ -29,7 +30,6 @@ def test_a_share_never_reads_zero():
     assert fmt_share(13768, 13768) == "13768 of 13768 (100 %)"
     assert fmt_share(12480, 13768) == "12480 of 13768 (91 %)"
     assert fmt_share(9999, 10000) == "9999 of 10000 (99.99 %)"
-    from refraction_ref.golden.tolerances import fmt_percent
     assert fmt_percent(100.0, whole=True) == "100" and fmt_percent(99.6) == "99.6" and fmt_percent(0.5) == "0.5"
 
 
@@ -100,9 +100,9 @@ def test_direction_is_judged_only_where_there_is_radiance():
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     spec = tolerance_for("direction")
     assert spec["weight_key"] == "radiance" and spec["floor"] == RADIANCE_FLOOR
-    from refraction_ref.golden.check import _weight_mask
+    from refraction_ref.golden.masks import weight_mask
 
-    m = _weight_mask("stage.smooth.direction", spec, {"stage.smooth.direction": d, "stage.smooth.radiance": rad})
+    m = weight_mask("stage.smooth.direction", spec, {"stage.smooth.direction": d, "stage.smooth.radiance": rad})
     assert m.shape == (8, 8, 8, 1) and not m[:4].any() and m[4:].all()
     c = d.copy()
     c[:4] = -c[:4]  # flipped where empty
@@ -252,7 +252,7 @@ def _ties(suite, g):
     """Per photon of light 0: a neighbouring receiver face across a shared edge near its hit (or -1)."""
     from refraction_ref.camera import Camera
     from refraction_ref.caustics.receivers import receiver_soup
-    from refraction_ref.golden.check import face_ties
+    from refraction_ref.golden.masks import face_ties
 
     scene = rr.load_scene(os.path.join(suite, "is_caustics_sphere", "scene.json"))
     tris = receiver_soup(scene).tris
@@ -290,9 +290,9 @@ def test_a_failing_row_never_reads_zero_percent(suite, tmp_path):
     case = "is_caustics_sphere"
     g = _gold(suite, case)
     tri = g["stage.receiver_depth.triangle"].copy()
-    from refraction_ref.golden.check import _changes
+    from refraction_ref.golden.masks import neighbour_changes
 
-    ii, jj = np.nonzero((tri >= 0) & ~_changes(tri))
+    ii, jj = np.nonzero((tri >= 0) & ~neighbour_changes(tri))
     tri[ii[len(ii) // 2], jj[len(ii) // 2]] = tri.max() + 1  # one interior pixel names a wrong triangle
     out = _check(suite, tmp_path, case, {"stage.receiver_depth.triangle": tri})
     row = next(line for line in out.text.splitlines() if line.startswith("| `stage.receiver_depth.triangle`"))

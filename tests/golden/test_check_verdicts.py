@@ -20,7 +20,8 @@ from refraction_ref import cli
 from refraction_ref.camera import Camera
 from refraction_ref.golden import build
 from refraction_ref.golden.build import COMPLETE
-from refraction_ref.golden.check import CheckError, _changes
+from refraction_ref.golden.check import CheckError
+from refraction_ref.golden.masks import neighbour_changes
 from refraction_ref.meshes import scene_geometry
 from refraction_ref.raster import raster_setup, rasterize
 
@@ -54,7 +55,7 @@ def _run(suite, cand, **kw):
 def _interior(gold):
     """Covered pixels whose 3x3 neighbourhood has one status and one depth complexity (no silhouette)."""
     st, dc = gold["status"], gold["depth_complexity"]
-    return (st != 0) & ~_changes(st) & ~_changes(dc)
+    return (st != 0) & ~neighbour_changes(st) & ~neighbour_changes(dc)
 
 
 # --------------------------------------------------------------------- verdicts that cannot pass by accident
@@ -180,7 +181,7 @@ def test_a_scatter_of_wrong_interior_status_values_fails_and_is_located(suite, g
 
 def test_a_silhouette_difference_is_tolerated(suite, gold, tmp_path):
     st, hit = gold["status"].copy(), gold["hit"].copy()
-    edge = (st == 0) & _changes(st != 0)  # pixels just outside the silhouette
+    edge = (st == 0) & neighbour_changes(st != 0)  # pixels just outside the silhouette
     ii, jj = np.nonzero(edge)
     st[ii[:10], jj[:10]] = 1
     hit[ii[:10], jj[:10]] = True

@@ -241,7 +241,8 @@ def test_report_rows_and_panels_show_what_failed(suite, tmp_path):
     (a ``|c|`` in a detail is escaped) and the panels show the angle and the differing bits."""
     import imageio.v3 as iio
 
-    from refraction_ref.golden.check import _panel, _popcount
+    from refraction_ref.golden.masks import popcount
+    from refraction_ref.golden.panels import failure_panel
 
     case = "is_diamond_2_4"
 
@@ -264,7 +265,7 @@ def test_report_rows_and_panels_show_what_failed(suite, tmp_path):
     with np.load(os.path.join(cand, case, "result.npz")) as z:
         c_dir, c_bits = z["exit_dir"], z["stage.voxelize.bits"]
     # the bit panel's difference is the popcount of the XOR: one bit, in one pixel
-    diff = _popcount(c_bits ^ g_bits)
+    diff = popcount(c_bits ^ g_bits)
     assert diff.sum() == 1 and diff[g_bits.shape[0] // 2, g_bits.shape[1] // 2] == 1
-    p = _panel(str(tmp_path / "dir.png"), "exit_dir", c_dir, g_dir, None, "angle")
+    p = failure_panel(str(tmp_path / "dir.png"), "exit_dir", c_dir, g_dir, None, "angle")
     assert iio.imread(p).ndim == 3
