@@ -21,7 +21,7 @@ import pytest
 
 from refraction_ref.analytic import sphere_refraction
 from refraction_ref.camera import Camera
-from refraction_ref.exact import trace_exact
+from refraction_ref.exact import ExactMesh, trace_exact
 from refraction_ref.imagespace.depth_bounds import depth_bounds
 from refraction_ref.imagespace.search_bounds import search_bounds
 from refraction_ref.imagespace.trace import exit_thresholds, trace_layers
@@ -56,10 +56,11 @@ def _imagespace(ior=1.5, **kw):
     return trace_layers(*layers, None, cam, ior=ior, **kw)
 
 
-def _exact(ior=1.5, **kw):
+def _exact(ior=1.5, outside_ior=1.0, **kw):
     v, f, cam, _ = _setup()
     o, d = cam.primary_rays()
-    r = trace_exact(v, f, np.zeros(len(f), int), [ior], [[0.0, 0.0, 0.0]], o.reshape(-1, 3), d.reshape(-1, 3), **kw)
+    mesh = ExactMesh(v, f, np.zeros(len(f), int), [ior], [[0.0, 0.0, 0.0]], outside_ior=outside_ior)
+    r = trace_exact(mesh, o.reshape(-1, 3), d.reshape(-1, 3), **kw)
     return r, d.reshape(-1, 3)
 
 

@@ -4,7 +4,9 @@
 module              what it holds
 ==================  ==============================================================
 :mod:`.trace`       the multi-interface Snell tracer through the real triangles
-                    (:func:`trace_exact`) and the mesh normals it refracts with
+                    (:func:`trace_exact`, :class:`ExactMesh`)
+:mod:`.bounce`      its kernels: one bounce of the rays still travelling
+:mod:`.normals`     the mesh normals it refracts with (:func:`mesh_normals`)
 :mod:`.knobs`       the ``exact`` knob block (cheap: no kernels; scene loading reads it)
 :mod:`.pipeline`    ``--method exact``: its stages, assembly and :func:`render_exact`
 :mod:`.caustics`    the exact photon reference's caustic stages (mesh scenes)
@@ -28,6 +30,7 @@ from importlib import import_module
 
 __all__ = [
     "trace_exact",
+    "ExactMesh",
     "area_weighted_vertex_normals",
     "MeshNormals",
     "mesh_normals",
@@ -42,17 +45,19 @@ __all__ = [
     "trace_water_photons",
     "exact_caustic_stages",
     "EXACT_DEFAULTS",
+    "ExactKnobs",
+    "exact_knobs",
 ]
 
 #: public name -> the module of this package that defines it
 _WHERE = {
-    **dict.fromkeys(("trace_exact", "area_weighted_vertex_normals", "MeshNormals", "mesh_normals",
-                     "STATUS_MISSED", "STATUS_EXITED", "STATUS_BOUNCE_LIMIT", "STATUS_BOUNCE_LIMIT_TIR",
-                     "STATUS_LOST"), "trace"),
+    **dict.fromkeys(("trace_exact", "ExactMesh", "STATUS_MISSED", "STATUS_EXITED", "STATUS_BOUNCE_LIMIT",
+                     "STATUS_BOUNCE_LIMIT_TIR", "STATUS_LOST"), "trace"),
+    **dict.fromkeys(("area_weighted_vertex_normals", "MeshNormals", "mesh_normals"), "normals"),
     **dict.fromkeys(("render_exact", "render_water_exact", "shading_normals"), "pipeline"),
     "trace_water_photons": "water",
     "exact_caustic_stages": "caustics",
-    "EXACT_DEFAULTS": "knobs",
+    **dict.fromkeys(("EXACT_DEFAULTS", "ExactKnobs", "exact_knobs"), "knobs"),
 }
 
 

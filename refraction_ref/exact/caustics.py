@@ -42,15 +42,17 @@ import numpy as np
 
 from ..caustics.light import window_samples
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
-                                 put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
+                                 receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
 from ..caustics.receivers import IndexedTriangles, hit_exact
-from ..caustics.shade import exact_visibility, take_rows
+from ..caustics.shade import exact_visibility
 from ..embree import mesh_scene
 from ..environment import environment_lookup
 from ..graph import Stage
+from ..kernels import put_rows, take_rows
 from ..lights import light_camera
 from ..status import EXITED
-from .trace import trace_exact
+from .knobs import exact_knobs
+from .trace import ExactMesh, trace_exact
 
 __all__ = ["exact_caustic_stages"]
 
@@ -104,20 +106,19 @@ def _distance_kernel(hp, o, out):
 
 def _st_photon_trace_exact(ctx):
     d = ctx.scene.data
-    pe = d["exact"]
+    knobs = exact_knobs(d, "photons", "photon_seed", "max_bounces")
     g = ctx.buf["geometry"]
     geom = g["geom"]
-    n = int(pe["photons"])
+    n = knobs.photons
     out = {"lights": [], **dict.fromkeys(photon_buffer_names(len(d["lights"]), False))}
+    mesh = ExactMesh.of(geom, g["normals"], g["smooth"], d["outside_ior"])
     for l, light in enumerate(d["lights"]):
         if not len(geom.faces):
             out["lights"].append(None)
             continue
         lcam = light_camera(light, geom.vertices, n)
-        o, dd, flux0, half = window_samples(lcam, n, int(pe["photon_seed"]) + l)
-        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, dd,
-                         normals=g["normals"], smooth=g["smooth"],
-                         outside_ior=float(d["outside_ior"]), max_bounces=int(pe["max_bounces"]))
+        o, dd, flux0, half = window_samples(lcam, n, knobs.photon_seed + l)
+        tr = trace_exact(mesh, o, dd, max_bounces=knobs.max_bounces)
         st = tr["status"].astype(np.int8)
         ex = np.flatnonzero(st == EXITED)
         # the exited photons' rows, gathered on every thread; the buffers are those arrays

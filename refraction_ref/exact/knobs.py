@@ -100,34 +100,44 @@ validate_exact = BLOCK.validate
 
 
 class ExactKnobs(NamedTuple):
-    """The checked ``exact`` block as one typed value (:func:`exact_knobs`); fields as :data:`KNOBS`."""
+    """The checked ``exact`` block as one typed value (:func:`exact_knobs`); fields as :data:`KNOBS`.
 
-    normals: str
-    crease_deg: float
-    max_bounces: int
-    photons: int
-    photon_seed: int
-    record: int
-    water_samples: int
+    A field a stage did not ask for is None (a stage reads only the knobs its ``Stage.reads`` declares).
+    """
+
+    normals: str | None = None
+    crease_deg: float | None = None
+    max_bounces: int | None = None
+    photons: int | None = None
+    photon_seed: int | None = None
+    record: int | None = None
+    water_samples: int | None = None
 
 
-def exact_knobs(data=None):
+#: how each knob is typed for the kernels
+_TYPES = {"normals": str, "crease_deg": float, "max_bounces": int, "photons": int, "photon_seed": int,
+          "record": int, "water_samples": int}
+
+
+def exact_knobs(data=None, *names):
     """The ``exact`` block of a merged, checked scene as :class:`ExactKnobs`.
 
     Parameters
     ----------
     data : dict, optional
         The merged scene (``Scene.data``); None gives the declared defaults.
+    *names : str
+        The knobs to read (a stage names those its ``Stage.reads`` declares); none: every knob.
 
     Returns
     -------
     ExactKnobs
-        Numbers as the kernels take them (``crease_deg`` a float, the counts ints).
+        Numbers as the kernels take them (``crease_deg`` a float, the counts ints); the knobs not
+        named are None.
 
     References
     ----------
     .. [1] docs/oracle.md, "### ``exact`` block".
     """
     blk = EXACT_DEFAULTS if data is None else data["exact"]
-    return ExactKnobs(str(blk["normals"]), float(blk["crease_deg"]), int(blk["max_bounces"]), int(blk["photons"]),
-                      int(blk["photon_seed"]), int(blk["record"]), int(blk["water_samples"]))
+    return ExactKnobs(**{name: _TYPES[name](blk[name]) for name in (names or ExactKnobs._fields)})

@@ -42,7 +42,7 @@ import numpy as np
 from ..camera import Camera
 from ..caustics.pipeline import caustic_arrays, has_caustics, merge_caustics, skip_reason
 from ..environment import environment_lookup
-from ..graph import Method, Stage, register_method, run_graph
+from ..graph import Method, Stage, method_renderer, register_method
 from ..levelmap.pipeline import IMAGE_BUFFERS, check_water_scene, shade_stage, shared_stages, water_arrays
 from ..caustics.boxes import frame_of
 from ..meshes import eye_inside, file_vertex_normals, load_mesh, rotation_matrix, scene_geometry
@@ -52,7 +52,9 @@ from ..vec3 import affine
 from ..warm import warmer
 from . import water
 from .caustics import exact_caustic_stages
-from .trace import mesh_normals, trace_exact
+from .knobs import exact_knobs
+from .normals import mesh_normals
+from .trace import ExactMesh, trace_exact
 
 __all__ = ["render_exact", "render_water_exact", "shading_normals", "check_memory", "METHOD"]
 
@@ -78,7 +80,7 @@ def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
     vn : (V, 3) ndarray, optional
         The area-weighted vertex normals when already computed.
     mesh : MeshNormals, optional
-        The :class:`~refraction_ref.exact.trace.MeshNormals` of ``geom`` with corner
+        The :class:`~refraction_ref.exact.normals.MeshNormals` of ``geom`` with corner
         normals at ``crease_deg`` when already computed (the ``geometry`` stage), else
         computed here (on every thread, bit-identical to the serial functions of
         :mod:`refraction_ref.meshes`).
@@ -86,11 +88,11 @@ def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
     Returns
     -------
     normals : (V, 3) or (F, 3, 3) ndarray or None
-        What :func:`~refraction_ref.exact.trace.trace_exact` takes as ``normals``:
+        What :class:`~refraction_ref.exact.trace.ExactMesh` takes as ``normals``:
         the area-weighted vertex normals (``smooth``; ``vn`` when given), per-corner normals
         (``crease``, ``file``) or None (``face``).
     smooth : bool
-        ``trace_exact``'s ``smooth``: interpolate ``normals`` (False: face normals).
+        ``ExactMesh``'s ``smooth``: interpolate ``normals`` (False: face normals).
     rule : str
         The rule applied, object by object, for the plan note.
     """
@@ -142,23 +144,49 @@ def shading_normals(scene, geom, mode, crease_deg, vn=None, mesh=None):
 
 
 def _st_geometry(ctx):
+    """The objects' triangles and the shading normals ``exact.normals`` asks for.
+
+    References
+    ----------
+    .. [1] docs/oracle.md, Conventions (vertex and shading normals); Max (1999), Hoppe et al. (1994)
+       (:mod:`refraction_ref.exact.normals`).
+    """
     geom = scene_geometry(ctx.scene)
     ctx.stats["triangles"] = int(len(geom.faces))
-    p = ctx.scene.data["exact"]
+    knobs = exact_knobs(ctx.scene.data, "normals", "crease_deg")
     # vertex normals, crease normals and edge angles in one pass on every thread (exact.mesh_normals)
-    crease = None if p["normals"] in ("face", "smooth") else float(p["crease_deg"])
-    mesh = mesh_normals(geom.vertices, geom.faces, crease) if len(geom.faces) else None
-    vn = mesh.vertex if mesh is not None else None
+    crease = None if knobs.normals in ("face", "smooth") else knobs.crease_deg
+    normals_of_mesh = mesh_normals(geom.vertices, geom.faces, crease) if len(geom.faces) else None
+    vn = normals_of_mesh.vertex if normals_of_mesh is not None else None
     if len(geom.faces):
-        normals, smooth, rule = shading_normals(ctx.scene, geom, p["normals"], float(p["crease_deg"]), vn, mesh)
+        normals, smooth, rule = shading_normals(ctx.scene, geom, knobs.normals, knobs.crease_deg, vn,
+                                                normals_of_mesh)
     else:
-        normals, smooth, rule = None, p["normals"] != "face", "no triangles"
+        normals, smooth, rule = None, knobs.normals != "face", "no triangles"
     return {"geom": geom, "vertex_normals": vn, "normals": normals, "smooth": smooth, "normals_rule": rule}
 
 
+def _untraced(rdir, record):
+    """:func:`~refraction_ref.exact.trace.trace_exact`'s keys for rays through a scene without triangles."""
+    n = len(rdir)
+    traced = {"hit": np.zeros(n, bool), "exit_pos": np.full((n, 3), np.nan), "exit_dir": rdir.copy(),
+              "interfaces": np.zeros(n, np.int16), "path_length": np.zeros(n), "status": np.full(n, MISSED, np.int8),
+              "transmittance": np.ones((n, 3)), "last_dir": rdir.copy()}
+    if record:
+        traced["path_pos"] = np.full((n, record, 3), np.nan)
+        traced["path_dir"] = np.full((n, record, 3), np.nan)
+    return traced
+
+
 def _st_trace(ctx):
+    """Every pixel's primary ray through the real triangles (:func:`~refraction_ref.exact.trace.trace_exact`).
+
+    References
+    ----------
+    .. [1] Chaudhari (2008), §3.6-§3.8 (the quantities reproduced); docs/oracle.md, "Per-pixel keys".
+    """
     d = ctx.scene.data
-    p = d["exact"]
+    knobs = exact_knobs(d, "max_bounces", "record")
     g = ctx.buf["geometry"]
     geom = g["geom"]
     cam = Camera.from_dict(d["camera"])
@@ -168,42 +196,42 @@ def _st_trace(ctx):
                          "every ray in the outside medium. Move camera.eye outside the objects")
     origin, rdir = cam.primary_rays()
     n = H * W
-    K = int(p["record"])
+    K = knobs.record
     if len(geom.faces):
-        kw = {"record": K} if K else {}
-        tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption,
-                         origin.reshape(n, 3), rdir.reshape(n, 3), normals=g["normals"],
-                         smooth=g["smooth"], outside_ior=float(d["outside_ior"]),
-                         max_bounces=int(p["max_bounces"]), progress=ctx.progress, **kw)
+        mesh = ExactMesh.of(geom, g["normals"], g["smooth"], d["outside_ior"])
+        traced = trace_exact(mesh, origin.reshape(n, 3), rdir.reshape(n, 3), max_bounces=knobs.max_bounces,
+                             record=K, progress=ctx.progress)
     else:
-        tr = {"hit": np.zeros(n, bool), "exit_pos": np.full((n, 3), np.nan), "exit_dir": rdir.reshape(n, 3).copy(),
-              "interfaces": np.zeros(n, np.int16), "path_length": np.zeros(n), "status": np.full(n, MISSED, np.int8),
-              "transmittance": np.ones((n, 3)), "last_dir": rdir.reshape(n, 3).copy()}
-        if K:
-            tr["path_pos"] = np.full((n, K, 3), np.nan)
-            tr["path_dir"] = np.full((n, K, 3), np.nan)
+        traced = _untraced(rdir.reshape(n, 3), K)
+    p = d["exact"]  # as the scene gives them, for the note
     ctx.note(f"Embree, up to {p['max_bounces']} bounces; exact.normals={p['normals']}: {g['normals_rule']}")
-    out = {"flat": tr, "ray_origin": origin, "ray_dir": rdir,
-           "hit": tr["hit"].reshape(H, W),
-           "exit_pos": tr["exit_pos"].reshape(H, W, 3),
-           "exit_dir": tr["exit_dir"].reshape(H, W, 3),
-           "interfaces": tr["interfaces"].reshape(H, W).astype(np.int16),
-           "path_length": tr["path_length"].reshape(H, W),
-           "status": tr["status"].reshape(H, W).astype(np.int8),
+    out = {"flat": traced, "ray_origin": origin, "ray_dir": rdir,
+           "hit": traced["hit"].reshape(H, W),
+           "exit_pos": traced["exit_pos"].reshape(H, W, 3),
+           "exit_dir": traced["exit_dir"].reshape(H, W, 3),
+           "interfaces": traced["interfaces"].reshape(H, W).astype(np.int16),
+           "path_length": traced["path_length"].reshape(H, W),
+           "status": traced["status"].reshape(H, W).astype(np.int8),
            "path_pos": None, "path_dir": None}
-    if K and "path_pos" in tr:
-        out["path_pos"] = tr["path_pos"].reshape(H, W, K, 3)
-        out["path_dir"] = tr["path_dir"].reshape(H, W, K, 3)
+    if K and "path_pos" in traced:
+        out["path_pos"] = traced["path_pos"].reshape(H, W, K, 3)
+        out["path_dir"] = traced["path_dir"].reshape(H, W, K, 3)
     return out
 
 
 def _st_shade(ctx):
+    """Environment look-up along each ray's last direction, Beer-Lambert per segment.
+
+    References
+    ----------
+    .. [1] Chaudhari (2008), §3.8 (absorption); docs/oracle.md, "Per-pixel keys".
+    """
     geom = ctx.buf["geometry"]["geom"]
-    tr = ctx.buf["trace"]["flat"]
+    traced = ctx.buf["trace"]["flat"]
     H, W = ctx.buf["trace"]["status"].shape
-    image = environment_lookup(ctx.scene.data["environment"], tr["last_dir"], ctx.scene.base_dir)
+    image = environment_lookup(ctx.scene.data["environment"], traced["last_dir"], ctx.scene.base_dir)
     if np.any(geom.absorption > 0):
-        image = (image * tr["transmittance"]).astype(np.float32)
+        image = (image * traced["transmittance"]).astype(np.float32)
         ctx.note("environment look-up; Beer-Lambert per segment")
     else:
         ctx.note("environment look-up; absorption is zero")
@@ -226,8 +254,14 @@ def _mesh_stages():
 
 # --------------------------------------------------------------------- water scenes
 def _st_water_trace(ctx):
+    """Exact water photons: jittered samples of the analytic surface, Embree first hits, per light.
+
+    References
+    ----------
+    .. [1] Tipprasert (2006), §2.6, §4.5 (the quantities reproduced; :mod:`refraction_ref.exact.water`).
+    """
     d = ctx.scene.data
-    p = d["exact"]
+    knobs = exact_knobs(d, "water_samples", "photon_seed")
     w = ctx.buf["water"]
     pairs = ctx.buf["level_map"]["pairs"]
     wctx = {"mesh": w["mesh"], "vols": w["vols"], "receivers": ctx.buf["planes"]["receivers"], "pairs": pairs,
@@ -235,10 +269,10 @@ def _st_water_trace(ctx):
     R = len(pairs)
     out = [np.zeros(pairs[r][0].box.size) for r in range(R)]
     # through the module (tests replace water.trace_water_photons by a serial reference)
-    stats = [water.trace_water_photons(ctx.scene, wctx, l, int(p["water_samples"]), int(p["photon_seed"]), out,
-                                       ctx.progress) for l in range(len(d["lights"]))]
+    M = knobs.water_samples
+    stats = [water.trace_water_photons(ctx.scene, wctx, l, M, knobs.photon_seed, out, ctx.progress)
+             for l in range(len(d["lights"]))]
     ctx.stats["water_stats"] = stats
-    M = int(p["water_samples"])
     ctx.note(f"{M}x{M} jittered samples of the analytic surface per light, Embree first hits")
     res = {}
     for r in range(R):
@@ -349,57 +383,11 @@ METHOD = register_method(Method(
         "volume scenes the ray equation by DOP853, converged"))
 
 
-def render_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
-    """Trace every pixel's primary ray exactly (Embree) and shade like the image-space method.
+render_exact = method_renderer(
+    METHOD, "render_exact",
+    "Trace every pixel's primary ray exactly (Embree; a water scene: the exact water reference; a volume "
+    "scene: the converged graded-index reference).")
 
-    Parameters
-    ----------
-    scene : Scene
-        A mesh scene, or a scene with ``water`` (the exact water reference).
-    cache : dict, optional
-        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
-    keep : str or sequence of str, optional
-        Stage buffers to return as ``stage.<stage>.<buffer>``.
-    warm : bool, default True
-        Compile (or load) the kernels on a tiny copy of the scene first, so
-        that ``timings_ms`` exclude JIT time.
-    progress : bool, default False
-        Show progress bars.
-
-    Returns
-    -------
-    arrays, info : dict, dict
-        Same keys as :func:`~refraction_ref.imagespace.pipeline.render_imagespace`
-        (for a water scene: as the level map).
-    """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
-
-
-def render_water_exact(scene, *, cache=None, keep=None, warm=True, progress=False):
-    """Exact reference caustics maps for a water scene (same keys as the level map).
-
-    The exact method's graph for water scenes: the level map's ``water``,
-    ``planes`` and ``level_map`` stages, then ``trace``
-    (:func:`~refraction_ref.exact.water.trace_water_photons` per light) and ``image``.
-
-    Parameters
-    ----------
-    scene : Scene
-        A scene with a ``water`` block and at least one light.
-    cache : dict, optional
-        Stage cache shared between renders (:func:`~refraction_ref.graph.run_graph`).
-    keep : str or sequence of str, optional
-        Stage buffers to return as ``stage.<stage>.<buffer>``.
-    warm : bool, default True
-        Compile (or load) the kernels on a tiny copy of the scene first, so
-        that ``timings_ms`` exclude JIT time.
-    progress : bool, default False
-        Show progress bars.
-
-    Returns
-    -------
-    arrays, info : dict, dict
-        ``caustic_map_r``, ``caustic_frame_r``, ``image``, ``object_mask``;
-        ``timings_ms``, ``plan``, ``stats``.
-    """
-    return render_exact(scene, cache=cache, keep=keep, warm=warm, progress=progress)
+render_water_exact = method_renderer(
+    METHOD, "render_water_exact",
+    "Exact reference caustics maps for a water scene (same keys as the level map): the exact method's graph.")

@@ -41,15 +41,32 @@ from ..caustics.boxes import to_map
 from ..levelmap.water import incident_directions, surface_normals, wave_gradient, wave_height
 from ..vec3 import dot
 
-__all__ = ["trace_water_photons"]
+__all__ = ["trace_water_photons", "refract_rows", "CHUNK"]
 
-_CHUNK = 1 << 18
+#: samples per chunk: a chunk is ``max(1, CHUNK // M)`` rows of the ``M x M`` grid of samples
+CHUNK = 1 << 18
 
 
 @nb.njit(cache=True, nogil=True)
-def _refract_rows(d, n, eta, out, tir):
+def refract_rows(d, n, eta, out, tir):
     """:func:`refraction_ref.optics.refract` with one ``eta``, serial and without the GIL
-    (it runs inside the threads of :func:`refraction_ref.embree.run_chunks`)."""
+    (it runs inside the threads of :func:`refraction_ref.embree.run_chunks`).
+
+    Parameters
+    ----------
+    d, n : (N, 3) float64
+        Unit directions and unit normals (against ``d``).
+    eta : float
+        ``n1 / n2``.
+    out : (N, 3) float64
+        The refracted (or, under TIR, reflected) directions, written.
+    tir : (N,) bool
+        Total internal reflection, written.
+
+    References
+    ----------
+    .. [1] Tipprasert (2006), eq. 2-8 (Snell's law at the water surface).
+    """
     for i in range(d.shape[0]):
         tx, ty, tz, t = refract3(d[i, 0], d[i, 1], d[i, 2], n[i, 0], n[i, 1], n[i, 2], eta)
         out[i, 0] = tx
@@ -194,7 +211,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
     ready = {}  # chunk -> its splats, waiting for the chunks before it
     held = {}  # thread -> the arrays of its last chunk
     summing = threading.Lock()
-    rows_per = max(1, _CHUNK // M)
+    rows_per = max(1, CHUNK // M)
     turns = _Turns()
 
     def chunk(k):
@@ -214,7 +231,7 @@ def trace_water_photons(scene, ctx, light_index, samples, seed, out, progress=Fa
         flux = e_perp * np.maximum(-np.einsum("ij,ij->i", inc, nt), 0.0) * dA
         t = np.empty_like(inc)
         tir = np.empty(len(inc), dtype=np.bool_)
-        _refract_rows(np.ascontiguousarray(inc), np.ascontiguousarray(surface_normals(water, x, z)), float(eta), t,
+        refract_rows(np.ascontiguousarray(inc), np.ascontiguousarray(surface_normals(water, x, z)), float(eta), t,
                       tir)
         ok = (flux > 0) & ~tir & (t[:, 1] < 0)
         if not ok.any():

@@ -19,6 +19,7 @@ from refraction_ref.exact import (
     STATUS_BOUNCE_LIMIT_TIR,
     STATUS_EXITED,
     STATUS_MISSED,
+    ExactMesh,
     area_weighted_vertex_normals,
     trace_exact,
 )
@@ -34,9 +35,10 @@ def _ico(sub, radius=0.5):
     return v, f
 
 
-def _trace_single(v, f, ior, origins, dirs, absorption=(0.0, 0.0, 0.0), **kw):
-    return trace_exact(v, f, np.zeros(len(f), dtype=int), [ior], [absorption],
-                       origins, dirs, **kw)
+def _trace_single(v, f, ior, origins, dirs, absorption=(0.0, 0.0, 0.0), normals=None, smooth=True,
+                  outside_ior=1.0, **kw):
+    mesh = ExactMesh(v, f, np.zeros(len(f), dtype=int), [ior], [absorption], normals, smooth, outside_ior)
+    return trace_exact(mesh, origins, dirs, **kw)
 
 
 def _parallel_grid(direction, half_width, n, distance=2.0):
@@ -273,7 +275,7 @@ def test_two_objects_media_bookkeeping():
     fo = np.repeat([0, 1], len(f))
     o = np.array([[0.0, 0.0, -2.0]])
     d = np.array([[0.0, 0.0, 1.0]])  # through both poles (mesh vertices on the sphere)
-    r = trace_exact(verts, faces, fo, [1.5, 1.3], [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]], o, d)
+    r = trace_exact(ExactMesh(verts, faces, fo, [1.5, 1.3], [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]]), o, d)
     assert r["status"][0] == STATUS_EXITED and r["interfaces"][0] == 4
     np.testing.assert_allclose(r["path_length"][0], 2.0, atol=1e-12)
     np.testing.assert_allclose(r["transmittance"][0], [math.exp(-1.5), math.exp(-2 * 1.3), 1.0], rtol=1e-12)
@@ -337,7 +339,7 @@ def _bunny_rays(n=48):
 def test_deterministic_and_chunk_independent():
     v, f, o, d = _bunny_rays()
     fo = np.zeros(len(f), dtype=int)
-    args = (v, f, fo, [1.5], [[0.5, 0.2, 0.1]], o, d)
+    args = (ExactMesh(v, f, fo, [1.5], [[0.5, 0.2, 0.1]]), o, d)
     a = trace_exact(*args)
     b = trace_exact(*args)
     c = trace_exact(*args, chunk_size=257)
@@ -383,6 +385,12 @@ def _good():
                 origins=np.array([[0.0, 0.0, -2.0]]), dirs=np.array([[0.0, 0.0, 1.0]]))
 
 
+def _trace_kw(origins, dirs, normals=None, smooth=True, outside_ior=1.0, max_bounces=64, **mesh):
+    """``trace_exact`` of :func:`_good`'s keywords (the mesh's and the rays')."""
+    return trace_exact(ExactMesh(**mesh, normals=normals, smooth=smooth, outside_ior=outside_ior), origins, dirs,
+                       max_bounces=max_bounces)
+
+
 def _with(**kw):
     g = _good()
     for k, val in kw.items():
@@ -411,17 +419,17 @@ def _nan_vertex(v):
 ])
 def test_input_validation(bad, match):
     with pytest.raises(ValueError, match=match):
-        trace_exact(**bad)
+        _trace_kw(**bad)
 
 
 def test_input_validation_keywords():
     g = _good()
     with pytest.raises(ValueError, match="outside_ior"):
-        trace_exact(**g, outside_ior=0.0)
+        _trace_kw(**g, outside_ior=0.0)
     with pytest.raises(ValueError, match="max_bounces"):
-        trace_exact(**g, max_bounces=-1)
+        _trace_kw(**g, max_bounces=-1)
     with pytest.raises(ValueError, match="normals must have shape"):
-        trace_exact(**g, normals=np.zeros((3, 3)))
+        _trace_kw(**g, normals=np.zeros((3, 3)))
 
 
 def test_smooth_normals_never_break_the_geometry():
@@ -471,8 +479,7 @@ def test_geometry_stage_normals_feed_trace_exact(mode):
         assert nrm.shape == (len(geom.faces), 3, 3)
     o = res.arrays["ray_origin"].reshape(-1, 3)
     d = res.arrays["ray_dir"].reshape(-1, 3)
-    tr = trace_exact(geom.vertices, geom.faces, geom.face_object, geom.ior, geom.absorption, o, d,
-                     normals=nrm, smooth=mode != "face")
+    tr = trace_exact(ExactMesh.of(geom, nrm, mode != "face"), o, d)
     np.testing.assert_array_equal(tr["exit_dir"], res.arrays["exit_dir"].reshape(-1, 3))
     note = next(p["why"] for p in res.meta["plan"] if p["stage"] == "trace")
     assert f"exact.normals={mode}" in note

@@ -24,7 +24,7 @@ import pytest
 import trimesh
 
 import refraction_ref as rr
-from refraction_ref.exact import STATUS_EXITED, trace_exact
+from refraction_ref.exact import STATUS_EXITED, ExactMesh, trace_exact
 from refraction_ref.exact.knobs import EXACT_DEFAULTS
 from refraction_ref.meshes import (corner_normals, crease_edge_angles, file_vertex_normals, load_mesh, rotation_matrix,
                                    vertex_normals)
@@ -171,7 +171,7 @@ def test_cube_is_no_lens_with_the_default_normals(rotate):
         th_t = math.asin(math.sin(th) / IOR)
         shift = np.linalg.norm(np.cross(ex_pos[k] - o[k], d[k]))
         assert abs(shift - ext[0] * math.sin(th - th_t) / math.cos(th_t)) < POS_TOL
-    # the bug of the old default: smooth normals turn the same rays, the cube acts as a lens
+    # smooth normals (exact.normals=smooth) turn the same rays: the cube acts as a lens
     sm = _render(mesh, rotate, normals="smooth")
     turn = _angle(sm.arrays["exit_dir"].reshape(-1, 3)[ks], d[ks])
     # measured (40x40 pixels): median 28.3 deg head-on, 20.5 deg oblique; smallest 1.6 / 1.2 deg
@@ -215,12 +215,11 @@ def _through_prism(theta1_deg, normals_mode="default"):
     hit = np.array([0.0, v[:, 1].max(), 0.0]) - 0.45 * t_left  # on the left face (length 1), below the apex
     o = hit - 2.0 * d
     if normals_mode == "default":
-        kw = {"normals": corner_normals(v, f, EXACT_DEFAULTS["crease_deg"]), "smooth": True}
-    elif normals_mode == "face":
-        kw = {"smooth": False}
+        normals, smooth = corner_normals(v, f, EXACT_DEFAULTS["crease_deg"]), True
     else:
-        kw = {"smooth": True}
-    r = trace_exact(v, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]], o[None], d[None], record=2, **kw)
+        normals, smooth = None, normals_mode != "face"
+    mesh = ExactMesh(v, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]], normals, smooth)
+    r = trace_exact(mesh, o[None], d[None], record=2)
     return d, r
 
 
@@ -339,8 +338,8 @@ def test_file_normals_are_used_and_turned_with_the_object(tmp_path):
     vw = v @ R.T
     o = res.arrays["ray_origin"].reshape(-1, 3)
     d = res.arrays["ray_dir"].reshape(-1, 3)
-    ref = trace_exact(vw, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]], o, d,
-                      normals=vw / np.linalg.norm(vw, axis=1, keepdims=True), smooth=True)
+    ref = trace_exact(ExactMesh(vw, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]],
+                                vw / np.linalg.norm(vw, axis=1, keepdims=True), True), o, d)
     ex = ref["status"] == STATUS_EXITED
     assert ex.sum() > 100
     np.testing.assert_array_equal(res.arrays["status"].ravel(), ref["status"])
@@ -364,16 +363,11 @@ def test_trace_exact_accepts_per_corner_normals():
     src = 3.0 * src / np.linalg.norm(src, axis=1, keepdims=True)
     d = rng.uniform(-0.4, 0.4, (500, 3)) - src
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    args = (v, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]], src, d)
+    mesh = ExactMesh(v, f, np.zeros(len(f), int), [IOR], [[0.0, 0.0, 0.0]])
     vn = vertex_normals(v, f)
-    a = trace_exact(*args, normals=vn, smooth=True)
-    b = trace_exact(*args, normals=vn[f], smooth=True)  # per corner, the same values: bit for bit
-    with pytest.warns(DeprecationWarning, match="vertex_normals"):  # the former name still works
-        c = trace_exact(*args, vertex_normals=vn, smooth=True)
+    a = trace_exact(mesh._replace(normals=vn), src, d)
+    b = trace_exact(mesh._replace(normals=vn[f]), src, d)  # per corner, the same values: bit for bit
     for key in ("exit_dir", "exit_pos", "status", "path_length"):
         np.testing.assert_array_equal(a[key], b[key])
-        np.testing.assert_array_equal(a[key], c[key])
-    with pytest.raises(ValueError, match="not both"), pytest.warns(DeprecationWarning):
-        trace_exact(*args, normals=vn, vertex_normals=vn)
     with pytest.raises(ValueError, match="normals must have shape"):
-        trace_exact(*args, normals=np.zeros((len(f), 3)))
+        trace_exact(mesh._replace(normals=np.zeros((len(f), 3))), src, d)

@@ -1,14 +1,14 @@
 """The exact reference on several threads: bit-identical whatever the thread count, and equal
-to the NumPy tracer it replaced.
+to a vectorised NumPy tracer.
 
 Each bounce of :func:`refraction_ref.exact.trace_exact` splits its rays into
 fixed chunks that the threads of one pool take in turn (Embree query, then a
 GIL-free Numba kernel for the float64 bounce); the exact water reference and
 the exact shadow rays use the same pool. Small ``chunk_size`` / water chunks
 make even these small scenes use several chunks per bounce. ``_trace_numpy``
-and ``_water_numpy`` below are the NumPy code of earlier versions, kept here
-as the references the new code is checked against (measured: bit-identical;
-the tolerance is 1e-12).
+and ``_water_numpy`` below are vectorised NumPy forms of the same computations,
+the references the kernels are checked against (measured: bit-identical; the
+tolerance is 1e-12).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import pytest
 import refraction_ref as rr
 from refraction_ref import embree, optics
 from refraction_ref.analytic import icosphere_mesh
-from refraction_ref.exact import area_weighted_vertex_normals, trace_exact
+from refraction_ref.exact import ExactMesh, area_weighted_vertex_normals, trace_exact
 from refraction_ref.exact import water as exact_water
 from refraction_ref.meshes import corner_normals, load_mesh
 from refraction_ref.status import EXITED, LIMIT, LOST, MISSED, TIR
@@ -55,7 +55,7 @@ def _two_objects():
 
 
 # ---------------------------------------------------------------------------
-# the NumPy tracer of earlier versions (the reference of the kernels)
+# the NumPy tracer (the reference of the kernels)
 # ---------------------------------------------------------------------------
 
 def _dot(a, b):
@@ -67,9 +67,17 @@ def _unit(a):
         return a / np.linalg.norm(a, axis=1, keepdims=True)
 
 
+def _trace(mesh_kw, origins, dirs, **kw):
+    """:func:`trace_exact` of :class:`ExactMesh`'s fields ``mesh_kw`` (and ``normals``, ``smooth``,
+    ``outside_ior`` among ``kw``) and the tracer's own keywords."""
+    kw = dict(kw)
+    mesh = ExactMesh(**mesh_kw, **{k: kw.pop(k) for k in ("normals", "smooth", "outside_ior") if k in kw})
+    return trace_exact(mesh, origins, dirs, **kw)
+
+
 def _trace_numpy(vertices, faces, face_object, object_ior, object_absorption, origins, dirs, *,
                  normals=None, smooth=True, outside_ior=1.0, max_bounces=64, record=0):
-    """``trace_exact`` as the vectorised NumPy loop it was (one Embree call per bounce)."""
+    """``trace_exact`` as a vectorised NumPy loop (one Embree call per bounce): the reference of its kernels."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
     fo = np.asarray(face_object, np.int64)
@@ -221,14 +229,14 @@ def test_trace_identical_on_one_and_two_threads_and_to_numpy(extra, on_one_and_t
     extra = dict(extra)
     if extra.pop("corner", False):
         extra["normals"] = corner_normals(kw["vertices"], kw["faces"], 30.0)
-    a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=512, **extra))
+    a, b = on_one_and_two_threads(lambda: _trace(kw, o, d, chunk_size=512, **extra))
     same_arrays(a, b)
     st = np.bincount(a["status"], minlength=5)
     assert st[MISSED] > 0 and st[EXITED] > 0
     assert np.any(a["transmittance"] < 1.0)
     _close(_trace_numpy(**kw, origins=o, dirs=d, **extra), a)
     # the chunk size does not matter either
-    same_arrays(a, trace_exact(**kw, origins=o, dirs=d, chunk_size=100_000, **extra))
+    same_arrays(a, _trace(kw, o, d, chunk_size=100_000, **extra))
 
 
 def test_tir_heavy_sphere_identical_on_one_and_two_threads(on_one_and_two_threads, same_arrays):
@@ -237,8 +245,7 @@ def test_tir_heavy_sphere_identical_on_one_and_two_threads(on_one_and_two_thread
     kw = dict(vertices=v, faces=f, face_object=np.zeros(len(f), np.int64), object_ior=[2.4],
               object_absorption=[[0.2, 0.4, 0.8]])
     o, d = _rays(8000, 2, r=0.5)
-    a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=256, max_bounces=40,
-                                                      record=3))
+    a, b = on_one_and_two_threads(lambda: _trace(kw, o, d, chunk_size=256, max_bounces=40, record=3))
     same_arrays(a, b)
     assert np.sum(a["status"] == TIR) > 0 and a["bounces"].max() == 40
     _close(_trace_numpy(**kw, origins=o, dirs=d, max_bounces=40, record=3), a)
@@ -258,7 +265,7 @@ def test_grazing_rays_take_embrees_distance_identically(on_one_and_two_threads, 
     o[n // 2:, 2] = rng.uniform(-0.5, 0.5, n - n // 2)
     d = np.c_[np.ones(n), rng.normal(0.0, 1e-9, n), np.zeros(n)]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    a, b = on_one_and_two_threads(lambda: trace_exact(**kw, origins=o, dirs=d, chunk_size=300, record=2))
+    a, b = on_one_and_two_threads(lambda: _trace(kw, o, d, chunk_size=300, record=2))
     same_arrays(a, b)
     _close(_trace_numpy(**kw, origins=o, dirs=d, record=2), a)
 
@@ -305,7 +312,7 @@ def _water_maps(scene):
 
 
 def test_exact_water_identical_on_one_and_two_threads(on_one_and_two_threads, monkeypatch, same_arrays):
-    monkeypatch.setattr(exact_water, "_CHUNK", 160 * 12)  # 12 rows a chunk: 14 chunks per light
+    monkeypatch.setattr(exact_water, "CHUNK", 160 * 12)  # 12 rows a chunk: 14 chunks per light
     scene = _water_scene()
     (a, sa), (b, sb) = on_one_and_two_threads(lambda: _water_maps(scene))
     same_arrays(a, b)
@@ -314,7 +321,7 @@ def test_exact_water_identical_on_one_and_two_threads(on_one_and_two_threads, mo
 
 
 def _water_numpy(scene, ctx, light_index, samples, seed, out, chunk):
-    """The water photons as the serial NumPy loop of earlier versions (one chunk of rows at a time)."""
+    """The water photons as a serial NumPy loop (one chunk of rows at a time): the reference of the kernels."""
     from refraction_ref.levelmap.planes import to_map
     from refraction_ref.levelmap.water import incident_directions, surface_normals, wave_gradient, wave_height
 
@@ -365,7 +372,7 @@ def _water_numpy(scene, ctx, light_index, samples, seed, out, chunk):
 
 def test_exact_water_matches_the_serial_numpy_loop(monkeypatch):
     chunk = 160 * 12
-    monkeypatch.setattr(exact_water, "_CHUNK", chunk)
+    monkeypatch.setattr(exact_water, "CHUNK", chunk)
     scene = _water_scene()
     numba_before = numba.get_num_threads()
     try:
@@ -388,7 +395,7 @@ def test_refract_rows_is_optics_refract():
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     t, tir = optics.refract(d, n, 1.33)  # water to air: some TIR
     t2, tir2 = np.empty_like(d), np.empty(5000, bool)
-    exact_water._refract_rows(d, n, 1.33, t2, tir2)
+    exact_water.refract_rows(d, n, 1.33, t2, tir2)
     assert np.array_equal(t, t2) and np.array_equal(tir, tir2) and tir.any()
 
 
