@@ -25,7 +25,7 @@ Exactly the one the method samples: the packed float32 array
 :func:`~refraction_ref.volumetric.gradient.gradient_field` (n at voxel
 centres, its gradient by central differences, one-sided on the faces;
 eq. 3) read at any point by
-:func:`~refraction_ref.volumetric.march.sample_field`: trilinear between
+:func:`~refraction_ref.volumetric.grid.sample_field`: trilinear between
 voxel centres, clamped to the outermost centres. The gradient is thus the
 interpolated central difference, not the derivative of the interpolated n
 (that one jumps at every voxel face, and the method never uses it), so
@@ -34,15 +34,14 @@ reported (``drift``), as the march reports its own.
 
 The solver
 ----------
-scipy's DOP853 (``scipy.integrate.solve_ivp(method="DOP853")``): its
-tableau (``scipy.integrate._ivp.dop853_coefficients``), its error norm (the
-5th- and 3rd-order estimates combined, Hairer et al. II.10), its initial step
-(Hairer et al. II.4) and its step controller (safety 0.9, factors 0.2 to 10,
-exponent -1/8), the per-component scale ``atol + rtol max(|y|, |y_new|)``,
-written out in Numba so that every ray runs on every thread without
-Python in the loop. :func:`trace_rays_scipy` integrates the same rays with
-``solve_ivp`` itself (a terminal event at the box) and
-``tests/exact/test_grin_reference.py`` checks that both agree. Steps are also
+scipy's DOP853 (``scipy.integrate.solve_ivp(method="DOP853")``) written out
+in Numba (:mod:`refraction_ref.exact.dop853`: its tableau, error norm,
+initial step and the right-hand side), so that every ray runs on every
+thread without Python in the loop; this module holds scipy's step controller
+(safety 0.9, factors 0.2 to 10, exponent -1/8), the events and the paths.
+:func:`trace_rays_scipy` integrates the same rays with ``solve_ivp`` itself
+(a terminal event at the box) and ``tests/exact/test_grin_reference.py``
+checks that both agree. Steps are also
 capped at ``max_step`` voxels, so that the polyline of accepted steps
 resolves what is evaluated along the path (the material level set,
 extinction voxel by voxel, receivers).
@@ -61,13 +60,13 @@ Entry and exit rules (the method's, :mod:`refraction_ref.volumetric`)
   face, and the exit direction is ``v / |v|`` there (no refraction at the
   box: the index is continuous there, as for the method).
 * A step whose chord meets a receiver triangle (the march's
-  ``_segment_receiver``) is redone to the curved path's crossing of the
+  ``segment_receiver``) is redone to the curved path's crossing of the
   triangle's plane; a photon that leaves the box goes on straight to the
-  first receiver outside it (the march's ``_exit_receivers``).
+  first receiver outside it (the march's ``exit_receivers``).
 * "Met refractive material" (the photons' ``touched``, the viewing ray's
   ``hit``) and the viewing ray's ``interfaces`` and ``path_length`` are the
   method's half-contrast level set
-  (:func:`~refraction_ref.volumetric.march.half_contrast`), tested at every
+  (:func:`~refraction_ref.volumetric.grid.half_contrast`), tested at every
   accepted step's end (the start included); ``path_length`` splits a step
   that crosses the level linearly in n.
 * Transmittance: ``exp(-integral of kappa)`` along the chords of the accepted
@@ -106,71 +105,23 @@ import numba as nb
 import numpy as np
 
 from ..status import EXITED, LIMIT, LOST, MISSED
-from ..volumetric.march import (_exit_receivers, _geometry, _segment_receiver, _skipped_attenuation,
-                                half_contrast, receiver_tuple, sample_field)
+from ..volumetric.extinction import skipped_attenuation
+from ..volumetric.grid import half_contrast, volume_box
+from ..volumetric.receivers import exit_receivers, receiver_tuple, segment_receiver
 from ..volumetric.view import box_entry_one
+from .dop853 import (ATOL, FIELD_LUNEBURG, FIELD_SAMPLED, MAX_STEP, RTOL, GrinTolerances, GrinVolume,
+                     dop853_error_norm, dop853_initial_step, dop853_step, dop853_tableau, grin_field, ray_rhs,
+                     sample_index, trace_rays_scipy)
 
-__all__ = ["trace_rays", "trace_photons", "trace_view", "trace_rays_scipy", "tolerance_sweep", "RTOL", "ATOL",
-           "MAX_STEP", "RECEIVED", "FIELD_SAMPLED", "FIELD_LUNEBURG"]
-
-#: the converged tolerance (``benchmarks/results/grin_error_vs_time.md``, "Convergence of the reference"):
-#: tightening it to 1e-12 moves no photon exit of the 64^3 Luneburg lens or GRIN blob by more than 3e-6 world
-#: units (1e-4 voxel)
-RTOL = 1e-10
-#: absolute tolerance on positions (world units) and on v (index units)
-ATOL = 1e-12
-#: longest accepted step, in voxels of the smallest side: the polyline on which the level set,
-#: extinction and receivers are evaluated (it never lengthens a step the tolerance asks)
-MAX_STEP = 0.25
+__all__ = ["trace_rays", "trace_photons", "trace_view", "trace_rays_scipy", "tolerance_sweep", "GrinVolume",
+           "GrinTolerances", "RTOL", "ATOL", "MAX_STEP", "RECEIVED", "FIELD_SAMPLED", "FIELD_LUNEBURG"]
 
 #: a photon stopped on a receiver inside the volume (the march's ``PHOTON_RECEIVED``)
 RECEIVED = 5
 
-#: ``kind`` of the field: the method's sampled volume (:func:`~refraction_ref.volumetric.march.sample_field`)
-FIELD_SAMPLED = 0
-#: ``kind`` of the field: the closed-form Luneburg lens ``n = sqrt(2 - r^2 / R^2)``, 1 outside (tests)
-FIELD_LUNEBURG = 1
 
-try:  # scipy's own DOP853 tableau, so that the Numba integrator is scipy's method
-    from scipy.integrate._ivp import dop853_coefficients as _dc
-except ImportError:  # pragma: no cover - scipy moved it
-    _dc = None
-
-
-def _tableau():
-    if _dc is None:  # pragma: no cover
-        raise ImportError("scipy.integrate._ivp.dop853_coefficients is needed for the DOP853 tableau")
-    ns = int(_dc.N_STAGES)
-    return _Tab(np.ascontiguousarray(_dc.A[:ns, :ns], dtype=np.float64), np.ascontiguousarray(_dc.B, np.float64),
-                np.ascontiguousarray(_dc.C[:ns], np.float64), np.ascontiguousarray(_dc.E3, np.float64),
-                np.ascontiguousarray(_dc.E5, np.float64))
-
-
-class _Tab(NamedTuple):
-    """DOP853's tableau (scipy's arrays): 12 stages, B, C, and the two error estimators (13 entries)."""
-
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    E3: np.ndarray
-    E5: np.ndarray
-
-
-class _Field(NamedTuple):
-    """What the right-hand side reads: the packed field (or a closed form), extinction, the box."""
-
-    kind: int  # FIELD_SAMPLED or FIELD_LUNEBURG
-    field: np.ndarray  # (nx, ny, nz, 4) float32: n and grad n (FIELD_SAMPLED)
-    prm: np.ndarray  # (4,) float64: centre and radius (FIELD_LUNEBURG)
-    ext: np.ndarray  # (nx, ny, nz, 3) float32 kappa; read when has_ext
-    has_ext: int
-    lo: np.ndarray
-    hi: np.ndarray
-    ih: np.ndarray
-
-
-class _Cfg(NamedTuple):
-    """Tolerances, the step cap and budget, the material level set and the lost rule."""
+class GrinSettings(NamedTuple):
+    """Tolerances, the step cap and budget, the material level set and the lost rule (the kernels' scalars)."""
 
     rtol: float
     atol: float
@@ -181,7 +132,7 @@ class _Cfg(NamedTuple):
     lost_rel: int  # 1: |v| <= 1e-12 n is lost (photons); 0: |v| <= 1e-12 (viewing rays)
 
 
-class _Out(NamedTuple):
+class GrinPaths(NamedTuple):
     """Per-ray results (:func:`trace_rays`, Returns)."""
 
     status: np.ndarray  # (R,) int8
@@ -191,112 +142,11 @@ class _Out(NamedTuple):
     tau: np.ndarray  # (R, 3) optical depth
     met: np.ndarray  # (R,) bool
     crossings: np.ndarray  # (R,) int32
-    path_len: np.ndarray  # (R,)
+    path_length: np.ndarray  # (R,)
     length: np.ndarray  # (R,) parameter s at the end
     steps: np.ndarray  # (R,) int32 accepted steps
     rejected: np.ndarray  # (R,) int32 rejected steps
     drift: np.ndarray  # (R,) max ||v| - n| / n
-
-
-# --------------------------------------------------------------------- right-hand side
-@nb.njit(cache=True)
-def _sample(fk, x, y, z):
-    """``(n, dn/dx, dn/dy, dn/dz)`` at a world point: the method's trilinear field, or the closed-form lens."""
-    if fk.kind == 0:
-        return sample_field(fk.field, fk.lo, fk.ih, x, y, z)
-    p = fk.prm
-    dx, dy, dz = x - p[0], y - p[1], z - p[2]
-    R2 = p[3] * p[3]
-    r2 = (dx * dx + dy * dy + dz * dz) / R2
-    if r2 >= 1.0:
-        return 1.0, 0.0, 0.0, 0.0
-    n = math.sqrt(2.0 - r2)
-    c = -1.0 / (R2 * n)  # grad sqrt(2 - r^2/R^2) = -(x - c) / (R^2 n)
-    return n, c * dx, c * dy, c * dz
-
-
-@nb.njit(cache=True)
-def _rhs(fk, y, out):
-    """``out = (v / n, grad n)`` at state ``y = (x, v)``; returns n (Sun et al. 2008, eqs. 2-3)."""
-    n, gx, gy, gz = _sample(fk, y[0], y[1], y[2])
-    out[0] = y[3] / n
-    out[1] = y[4] / n
-    out[2] = y[5] / n
-    out[3] = gx
-    out[4] = gy
-    out[5] = gz
-    return n
-
-
-@nb.njit(cache=True)
-def _rk_step(fk, tab, y, f, h, K, tmp, ynew):
-    """One DOP853 step of size h from (y, f = rhs(y)) into ``ynew``; K[12] = rhs(ynew). Returns n(ynew).
-
-    scipy's ``rk_step``: stage s at ``y + h sum_j A[s, j] K[j]``, the solution ``y + h sum_j B[j] K[j]``.
-    """
-    A, B = tab.A, tab.B
-    for c in range(6):
-        K[0, c] = f[c]
-    for s in range(1, 12):
-        for c in range(6):
-            acc = 0.0
-            for j in range(s):
-                acc += K[j, c] * A[s, j]
-            tmp[c] = y[c] + acc * h
-        _rhs(fk, tmp, K[s])
-    for c in range(6):
-        acc = 0.0
-        for j in range(12):
-            acc += K[j, c] * B[j]
-        ynew[c] = y[c] + h * acc
-    return _rhs(fk, ynew, K[12])
-
-
-@nb.njit(cache=True)
-def _error_norm(tab, K, h, y, ynew, rtol, atol):
-    """scipy's ``DOP853._estimate_error_norm``: ``|h| e5^2 / sqrt((e5^2 + 0.01 e3^2) 6)`` in scaled RMS."""
-    e5 = 0.0
-    e3 = 0.0
-    for c in range(6):
-        sc = atol + max(abs(y[c]), abs(ynew[c])) * rtol
-        a5 = 0.0
-        a3 = 0.0
-        for j in range(13):
-            a5 += K[j, c] * tab.E5[j]
-            a3 += K[j, c] * tab.E3[j]
-        e5 += (a5 / sc) ** 2
-        e3 += (a3 / sc) ** 2
-    if e5 == 0.0 and e3 == 0.0:
-        return 0.0
-    return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 6.0)
-
-
-@nb.njit(cache=True)
-def _initial_step(fk, y0, f0, bound, max_step, rtol, atol, tmp, f1):
-    """scipy's ``select_initial_step`` for an error estimator of order 7 (Hairer et al. II.4)."""
-    d0 = 0.0
-    d1 = 0.0
-    for c in range(6):
-        sc = atol + abs(y0[c]) * rtol
-        d0 += (y0[c] / sc) ** 2
-        d1 += (f0[c] / sc) ** 2
-    d0 = math.sqrt(d0 / 6.0)
-    d1 = math.sqrt(d1 / 6.0)
-    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-    h0 = min(h0, bound)
-    for c in range(6):
-        tmp[c] = y0[c] + h0 * f0[c]
-    _rhs(fk, tmp, f1)
-    d2 = 0.0
-    for c in range(6):
-        sc = atol + abs(y0[c]) * rtol
-        d2 += ((f1[c] - f0[c]) / sc) ** 2
-    d2 = math.sqrt(d2 / 6.0) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
-    return min(100.0 * h0, min(h1, min(bound, max_step)))
 
 
 # --------------------------------------------------------------------- events
@@ -309,23 +159,23 @@ def _box_excess(lo, hi, y):
     return e
 
 
-class _Work(NamedTuple):
+class GrinScratch(NamedTuple):
     """One ray's scratch: the stages of the root-finding steps, two states, the receiver plane."""
 
     K: np.ndarray  # (13, 6)
     tmp: np.ndarray  # (6,)
     yt: np.ndarray  # (6,)
-    pl: np.ndarray  # (8,): the triangle's normal (0:3), the sign making the start side negative (4), a vertex (5:8)
+    plane: np.ndarray  # (8,): the triangle's normal (0:3), the sign making the start side negative (4), a vertex (5:8)
 
 
 @nb.njit(cache=True)
 def _event_value(mode, fk, tab, y, f, h, w):
     """The event function after a step h from y: box excess (mode 1) or signed plane distance (mode 2)."""
-    yt, pl = w.yt, w.pl
-    _rk_step(fk, tab, y, f, h, w.K, w.tmp, yt)
+    yt, plane = w.yt, w.plane
+    dop853_step(fk, tab, y, f, h, w.K, w.tmp, yt)
     if mode == 1:
         return _box_excess(fk.lo, fk.hi, yt)
-    return pl[4] * ((yt[0] - pl[5]) * pl[0] + (yt[1] - pl[6]) * pl[1] + (yt[2] - pl[7]) * pl[2])
+    return plane[4] * ((yt[0] - plane[5]) * plane[0] + (yt[1] - plane[6]) * plane[1] + (yt[2] - plane[7]) * plane[2])
 
 
 @nb.njit(cache=True)
@@ -431,8 +281,8 @@ def _accepted_step(fk, tab, cfg, y, f, s, h_abs, K, tmp, ynew):
             s_new = cfg.s_max
         h = s_new - s
         h_abs = abs(h)
-        n1 = _rk_step(fk, tab, y, f, h, K, tmp, ynew)
-        en = _error_norm(tab, K, h, y, ynew, rtol, atol)
+        n1 = dop853_step(fk, tab, y, f, h, K, tmp, ynew)
+        en = dop853_error_norm(tab, K, h, y, ynew, rtol, atol)
         if en < 1.0:
             factor = 10.0 if en == 0.0 else min(10.0, 0.9 * en ** (-1.0 / 8.0))
             if rejected:
@@ -451,7 +301,7 @@ def _events(fk, tab, recv, y, f, h, ynew, n1, w):
     event 0 none, 1 the box face (``ynew`` put on the face), 2 a receiver triangle (the curved path's
     crossing of its plane).
     """
-    lo, hi, pl = fk.lo, fk.hi, w.pl
+    lo, hi, plane = fk.lo, fk.hi, w.plane
     ev = 0
     h_end = h
     hit_q = -1
@@ -459,7 +309,7 @@ def _events(fk, tab, recv, y, f, h, ynew, n1, w):
     if ex > 0.0:
         g0 = min(_box_excess(lo, hi, y), 0.0)
         h_end = _root(1, fk, tab, y, f, (0.0, g0, h, ex), w)
-        n1 = _rk_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
+        n1 = dop853_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
         # put the point on the face it crossed (the root leaves it within a few ulp past it)
         best = -1
         bex = -np.inf
@@ -473,22 +323,22 @@ def _events(fk, tab, recv, y, f, h, ynew, n1, w):
             ynew[a] = min(max(ynew[a], lo[a]), hi[a])
         ev = 1
     if recv.tris.shape[0] > 0:
-        th, q = _segment_receiver(recv, y[0], y[1], y[2], ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2], 1.0)
+        th, q = segment_receiver(recv, y[0], y[1], y[2], ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2], 1.0)
         if q >= 0:
             t = recv.tris
             e1x, e1y, e1z = t[q, 1, 0] - t[q, 0, 0], t[q, 1, 1] - t[q, 0, 1], t[q, 1, 2] - t[q, 0, 2]
             e2x, e2y, e2z = t[q, 2, 0] - t[q, 0, 0], t[q, 2, 1] - t[q, 0, 1], t[q, 2, 2] - t[q, 0, 2]
-            pl[0] = e1y * e2z - e1z * e2y
-            pl[1] = e1z * e2x - e1x * e2z
-            pl[2] = e1x * e2y - e1y * e2x
-            pl[5], pl[6], pl[7] = t[q, 0, 0], t[q, 0, 1], t[q, 0, 2]
-            da = (y[0] - pl[5]) * pl[0] + (y[1] - pl[6]) * pl[1] + (y[2] - pl[7]) * pl[2]
-            db = (ynew[0] - pl[5]) * pl[0] + (ynew[1] - pl[6]) * pl[1] + (ynew[2] - pl[7]) * pl[2]
-            pl[4] = -1.0 if da > 0.0 or (da == 0.0 and db < 0.0) else 1.0
-            ga, gb = pl[4] * da, pl[4] * db
+            plane[0] = e1y * e2z - e1z * e2y
+            plane[1] = e1z * e2x - e1x * e2z
+            plane[2] = e1x * e2y - e1y * e2x
+            plane[5], plane[6], plane[7] = t[q, 0, 0], t[q, 0, 1], t[q, 0, 2]
+            da = (y[0] - plane[5]) * plane[0] + (y[1] - plane[6]) * plane[1] + (y[2] - plane[7]) * plane[2]
+            db = (ynew[0] - plane[5]) * plane[0] + (ynew[1] - plane[6]) * plane[1] + (ynew[2] - plane[7]) * plane[2]
+            plane[4] = -1.0 if da > 0.0 or (da == 0.0 and db < 0.0) else 1.0
+            ga, gb = plane[4] * da, plane[4] * db
             if gb > 0.0 and ga <= 0.0:
                 h_end = _root(2, fk, tab, y, f, (0.0, ga, h_end, gb), w)
-                n1 = _rk_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
+                n1 = dop853_step(fk, tab, y, f, h_end, w.K, w.tmp, ynew)
             ev = 2
             hit_q = q
     return ev, h_end, n1, hit_q
@@ -502,13 +352,13 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     ynew = np.empty(6)
     tmp = np.empty(6)
     K = np.empty((13, 6))
-    w = _Work(np.empty((13, 6)), np.empty(6), np.empty(6), np.zeros(8))
+    w = GrinScratch(np.empty((13, 6)), np.empty(6), np.empty(6), np.zeros(8))
     n_half, side = cfg.n_half, cfg.side
-    n0 = _sample(fk, x0[0], x0[1], x0[2])[0]
+    n0 = sample_index(fk, x0[0], x0[1], x0[2])[0]
     for c in range(3):
         y[c] = x0[c]
         y[3 + c] = n0 * d0[c]
-    n = _rhs(fk, y, f)
+    n = ray_rhs(fk, y, f)
     a_prev = side * (n - n_half)
     inside = a_prev > 0.0
     met = inside
@@ -521,7 +371,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     rej = 0
     status = LIMIT
     hit_q = -1
-    h_abs = _initial_step(fk, y, f, cfg.s_max, cfg.max_step, cfg.rtol, cfg.atol, tmp, ynew)
+    h_abs = dop853_initial_step(fk, y, f, cfg.s_max, cfg.max_step, cfg.rtol, cfg.atol, tmp, ynew)
     while True:
         if not (s < cfg.s_max):
             status = LIMIT
@@ -589,7 +439,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     out.tau[r, 2] = tau_b
     out.met[r] = met
     out.crossings[r] = crossings
-    out.path_len[r] = plen
+    out.path_length[r] = plen
     out.length[r] = s
     out.steps[r] = steps
     out.rejected[r] = rej
@@ -602,62 +452,33 @@ def _trace_kernel(fk, tab, cfg, recv, pos, dirs, out):
         _trace_one(r, fk, tab, cfg, recv, pos[r], dirs[r], out)
 
 
+
 # --------------------------------------------------------------------- Python API
-def _field_tuple(field, bounds, extinction, analytic):
-    """The :class:`_Field` of a volume (its shape sets the voxels, also for a closed-form field) and its box."""
-    shape = np.shape(field)
-    box = _geometry(bounds, shape)
-    if analytic is None:
-        kind, prm = FIELD_SAMPLED, np.zeros(4)
-        fld = np.ascontiguousarray(field, dtype=np.float32)
-    else:
-        name, centre, radius = analytic
-        if name != "luneburg":
-            raise ValueError(f"analytic field {name!r}; only 'luneburg' is known")
-        kind = FIELD_LUNEBURG
-        prm = np.array([*np.asarray(centre, np.float64).reshape(3), float(radius)])
-        fld = np.zeros((2, 2, 2, 4), np.float32)  # not read
-    if extinction is None:
-        ext, has = np.zeros((1, 1, 1, 3), np.float32), 0
-    else:
-        ext = np.ascontiguousarray(extinction, dtype=np.float32)
-        has = int(np.any(ext != 0))
-    return _Field(kind, fld, prm, ext, has, box.lo, box.hi, box.ih), box
-
-
-def trace_rays(field, bounds, pos, dirs, *, rtol=RTOL, atol=ATOL, max_step=MAX_STEP, s_max=None, extinction=None,
-               receivers=None, n_half=np.inf, side=1.0, lost_relative=True, analytic=None):
+def trace_rays(volume, pos, dirs, *, tolerances=GrinTolerances(), s_max=None, receivers=None, level=None,
+               lost_relative=True):
     """Integrate the ray equation from points in the volume box until each ray leaves it (the core).
 
     Parameters
     ----------
-    field : (nx, ny, nz, 4) float32
-        n and its gradient at voxel centres
-        (:func:`~refraction_ref.volumetric.gradient.gradient_field`), read as
-        the method reads it (:func:`~refraction_ref.volumetric.march.sample_field`).
-        Only its shape (the voxels of ``max_step`` and ``s_max``) is read when ``analytic`` is given.
-    bounds : (2, 3) array_like
-        The volume box, world units.
+    volume : GrinVolume
+        The field, the box, extinction (kappa per voxel, per world unit: the optical depth is
+        integrated) or the closed-form lens (:class:`~refraction_ref.exact.dop853.GrinVolume`).
     pos : (R, 3) array_like
         Start points, inside the box or on its faces.
     dirs : (R, 3) array_like
         Unit start directions; the start state is ``v = n(pos) dirs``.
-    rtol, atol : float
-        DOP853's relative and absolute tolerances (scipy's meaning).
-    max_step : float
-        Longest step, in voxels of the smallest side.
+    tolerances : GrinTolerances
+        DOP853's ``rtol``, ``atol`` and the step cap ``max_step`` in voxels of the smallest side
+        (:data:`RTOL`, :data:`ATOL`, :data:`MAX_STEP` by default).
     s_max : float, optional
         Path budget in world units (default: ``8 max(shape)`` voxels).
-    extinction : (nx, ny, nz, 3) array_like, optional
-        kappa per voxel (per world unit): the optical depth is integrated.
     receivers : tuple, optional
-        :func:`~refraction_ref.volumetric.march.receiver_tuple`: a path stops on them (status 5).
-    n_half, side : float
-        The half-contrast level set (:func:`~refraction_ref.volumetric.march.half_contrast`).
+        :func:`~refraction_ref.volumetric.receivers.receiver_tuple`: a path stops on them (status 5).
+    level : (float, float), optional
+        ``(n_half, side)``, the half-contrast level set
+        (:func:`~refraction_ref.volumetric.grid.half_contrast`); default ``(inf, 1)``: none.
     lost_relative : bool
         ``|v| <= 1e-12 n`` is lost (photons); False: ``|v| <= 1e-12`` (viewing rays).
-    analytic : tuple, optional
-        ``("luneburg", centre, R)``: integrate the closed-form lens instead of the volume (tests).
 
     Returns
     -------
@@ -675,49 +496,47 @@ def trace_rays(field, bounds, pos, dirs, *, rtol=RTOL, atol=ATOL, max_step=MAX_S
     ----------
     Sun et al. (2008), §3 eqs. 1-3; Hairer, Norsett, Wanner (1993), §II.4-II.10 (DOP853).
     """
-    fk, box = _field_tuple(field, bounds, extinction, analytic)
+    fk, box = grin_field(volume)
     pos = np.ascontiguousarray(np.asarray(pos, dtype=np.float64).reshape(-1, 3))
     dirs = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
     R = len(pos)
     if s_max is None:
-        s_max = 8.0 * float(max(np.shape(field)[:3])) * box.hmin
-    cfg = _Cfg(float(rtol), float(atol), float(max_step) * box.hmin, float(s_max), float(n_half), float(side),
-               1 if lost_relative else 0)
+        s_max = 8.0 * float(max(np.shape(volume.field)[:3])) * box.hmin
+    n_half, side = (np.inf, 1.0) if level is None else level
+    settings = GrinSettings(float(tolerances.rtol), float(tolerances.atol), float(tolerances.max_step) * box.hmin,
+                            float(s_max), float(n_half), float(side), 1 if lost_relative else 0)
     recv = receiver_tuple() if receivers is None else receivers
-    out = _Out(np.zeros(R, np.int8), np.full((R, 3), np.nan), np.full((R, 3), np.nan), np.full(R, -1, np.int32),
-               np.zeros((R, 3)), np.zeros(R, np.bool_), np.zeros(R, np.int32), np.zeros(R), np.zeros(R),
-               np.zeros(R, np.int32), np.zeros(R, np.int32), np.zeros(R))
+    out = GrinPaths(np.zeros(R, np.int8), np.full((R, 3), np.nan), np.full((R, 3), np.nan),
+                    np.full(R, -1, np.int32), np.zeros((R, 3)), np.zeros(R, np.bool_), np.zeros(R, np.int32),
+                    np.zeros(R), np.zeros(R), np.zeros(R, np.int32), np.zeros(R, np.int32), np.zeros(R))
     if R:
-        _trace_kernel(fk, _tableau(), cfg, recv, pos, dirs, out)
+        _trace_kernel(fk, dop853_tableau(), settings, recv, pos, dirs, out)
     res = {"status": out.status, "end_pos": out.end_pos, "end_dir": out.end_dir, "hit_tri": out.hit_tri,
-           "tau": out.tau, "met": out.met, "crossings": out.crossings, "path_length": out.path_len,
+           "tau": out.tau, "met": out.met, "crossings": out.crossings, "path_length": out.path_length,
            "length": out.length, "steps": out.steps, "rejected": out.rejected, "drift": out.drift}
     res["evals"] = 12 * (out.steps.astype(np.int64) + out.rejected)
     return res
 
 
-def trace_photons(field, bounds, pos, dirs, *, extinction=None, receivers=None, outside_ior=1.0, entry=None,
-                  rtol=RTOL, atol=ATOL, max_step=MAX_STEP, analytic=None):
+def trace_photons(volume, pos, dirs, *, receivers=None, outside_ior=1.0, entry=None, tolerances=GrinTolerances()):
     """Converged photon paths from the method's photon starts: exits, receiver hits, transmittance.
 
     Parameters
     ----------
-    field : (nx, ny, nz, 4) float32
-        The method's packed field (:func:`~refraction_ref.volumetric.gradient.gradient_field`).
-    bounds : (2, 3) array_like
+    volume : GrinVolume
+        The method's packed field (:func:`~refraction_ref.volumetric.gradient.gradient_field`), its box
+        and kappa per voxel (the march's).
     pos, dirs : (P, 3) float64
         The ``photons`` stage's start points and unit directions
         (:func:`~refraction_ref.volumetric.photons.generate_photons`).
-    extinction : (nx, ny, nz, 3) array_like, optional
-        kappa per voxel (the march's).
     receivers : tuple, optional
-        :func:`~refraction_ref.volumetric.march.receiver_tuple` of the scene's receivers.
+        :func:`~refraction_ref.volumetric.receivers.receiver_tuple` of the scene's receivers.
     outside_ior : float
-        The index outside the objects (the material level set, :func:`~refraction_ref.volumetric.march.half_contrast`).
+        The index outside the objects (the material level set, :func:`~refraction_ref.volumetric.grid.half_contrast`).
     entry : (P, 3) float64, optional
         Where each photon's texel ray entered the volume when it starts on a proxy: its transmittance
         starts with the straight segment skipped (the march's rule, eq. 6).
-    rtol, atol, max_step, analytic
+    tolerances : GrinTolerances
         As :func:`trace_rays`.
 
     Returns
@@ -735,19 +554,19 @@ def trace_photons(field, bounds, pos, dirs, *, extinction=None, receivers=None, 
     Sun et al. (2008), §4.3 (photon starts), §4.4 eqs. 4-6 (the march this converges), §6.2.2 Fig. 9
     (receivers).
     """
-    n_half, side = half_contrast(field, float(outside_ior)) if analytic is None else (np.inf, 1.0)
+    field, bounds, extinction, analytic = volume
+    level = half_contrast(field, float(outside_ior)) if analytic is None else (np.inf, 1.0)
     pos = np.ascontiguousarray(pos, dtype=np.float64).reshape(-1, 3)
     dirs = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     P = len(pos)
     recv = receiver_tuple() if receivers is None else receivers
-    res = trace_rays(field, bounds, pos, dirs, rtol=rtol, atol=atol, max_step=max_step, extinction=extinction,
-                     receivers=recv, n_half=n_half, side=side, lost_relative=True, analytic=analytic)
+    res = trace_rays(volume, pos, dirs, tolerances=tolerances, receivers=recv, level=level, lost_relative=True)
     st = res["status"]
     trans = np.exp(-res["tau"])
     if entry is not None and P and extinction is not None:
-        box = _geometry(bounds, field.shape)
+        box = volume_box(bounds, field.shape)
         pre = np.empty((P, 3))
-        _skipped_attenuation(np.ascontiguousarray(extinction, dtype=np.float32), box.lo, box.ih,
+        skipped_attenuation(np.ascontiguousarray(extinction, dtype=np.float32), box.lo, box.ih,
                              np.ascontiguousarray(entry, dtype=np.float64), pos, pre)
         trans = trans * pre
     ex = st == EXITED
@@ -758,10 +577,10 @@ def trace_photons(field, bounds, pos, dirs, *, extinction=None, receivers=None, 
     rc = st == RECEIVED
     hit_pos[rc] = res["end_pos"][rc]
     if P and recv.tris.shape[0]:
-        box = _geometry(bounds, field.shape)
+        box = volume_box(bounds, field.shape)
         sel = np.flatnonzero(ex).astype(np.int64)
         reach = 1e6 * (1.0 + float(np.abs(box.lo).max() + np.abs(box.hi).max()))
-        _exit_receivers(sel, exit_pos, exit_dir, recv, reach, hit_pos, hit_tri)
+        exit_receivers(sel, exit_pos, exit_dir, recv, reach, hit_pos, hit_tri)
     hit_trans = np.where((ex | rc)[:, None], trans, np.nan)
     tri = hit_tri.astype(np.int64)
     hit_receiver = np.where(tri >= 0, np.searchsorted(recv.start, tri, side="right") - 1, -1).astype(np.int32)
@@ -772,23 +591,19 @@ def trace_photons(field, bounds, pos, dirs, *, extinction=None, receivers=None, 
             "drift_max": float(res["drift"].max()) if P else 0.0}
 
 
-def trace_view(field, bounds, origins, dirs, *, extinction=None, outside_ior=1.0, n_range=None, rtol=RTOL,
-               atol=ATOL, max_step=MAX_STEP, analytic=None):
+def trace_view(volume, origins, dirs, *, outside_ior=1.0, n_range=None, tolerances=GrinTolerances()):
     """Converged viewing rays: each primary ray through the volume box, the viewing pass's per-pixel keys.
 
     Parameters
     ----------
-    field : (nx, ny, nz, 4) float32
-        The method's packed field.
-    bounds : (2, 3) array_like
+    volume : GrinVolume
+        The method's packed field, its box and kappa per voxel (``transmittance`` along the path).
     origins, dirs : (R, 3) float64
         Primary rays (:meth:`~refraction_ref.camera.Camera.primary_rays`).
-    extinction : (nx, ny, nz, 3) array_like, optional
-        kappa per voxel: ``transmittance`` along the path.
     outside_ior : float
     n_range : (float, float), optional
         Minimum and maximum of the index, as the viewing pass takes them (default: the field's).
-    rtol, atol, max_step, analytic
+    tolerances : GrinTolerances
         As :func:`trace_rays`; the path budget is the viewing pass's, ``4 (nx + ny + nz)`` voxels.
 
     Returns
@@ -805,10 +620,11 @@ def trace_view(field, bounds, origins, dirs, *, extinction=None, outside_ior=1.0
     ----------
     Sun et al. (2008), §4.5 (viewing rays), eqs. 2-3 and 6.
     """
+    field, bounds, _, analytic = volume
     org = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     R = len(org)
-    box = _geometry(bounds, field.shape)
+    box = volume_box(bounds, field.shape)
     if analytic is not None:
         n_half, side = np.inf, 1.0
     else:
@@ -824,9 +640,8 @@ def trace_view(field, bounds, origins, dirs, *, extinction=None, outside_ior=1.0
     idx = np.flatnonzero(inb)
     start = org[idx] + t_in[idx, None] * d[idx]
     nx, ny, nz = field.shape[:3]
-    res = trace_rays(field, bounds, start, d[idx], rtol=rtol, atol=atol, max_step=max_step,
-                     s_max=4.0 * (nx + ny + nz) * box.hmin, extinction=extinction, n_half=n_half, side=side,
-                     lost_relative=False, analytic=analytic)
+    res = trace_rays(volume, start, d[idx], tolerances=tolerances, s_max=4.0 * (nx + ny + nz) * box.hmin,
+                     level=(n_half, side), lost_relative=False)
     status = np.full(R, MISSED, np.int8)
     hit = np.zeros(R, np.bool_)
     inter = np.zeros(R, np.int16)
@@ -859,18 +674,21 @@ def trace_view(field, bounds, origins, dirs, *, extinction=None, outside_ior=1.0
             "drift": drift}
 
 
-def tolerance_sweep(field, bounds, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12), atol_ratio=1e-2, **kw):
+def tolerance_sweep(volume, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12), atol_ratio=1e-2, max_step=MAX_STEP,
+                    **kw):
     """How far the exits move as the tolerance tightens: the convergence table of the reference.
 
     Parameters
     ----------
-    field, bounds, pos, dirs
+    volume, pos, dirs
         As :func:`trace_rays`.
     rtols : sequence of float
         Relative tolerances, loosest first; ``atol = atol_ratio * rtol``.
     atol_ratio : float
+    max_step : float
+        The step cap in voxels (:class:`GrinTolerances`), the same at every tolerance.
     **kw
-        Passed to :func:`trace_rays` (``max_step``, ``analytic``, ...).
+        Passed to :func:`trace_rays` (``s_max``, ``receivers``, ...).
 
     Returns
     -------
@@ -888,7 +706,7 @@ def tolerance_sweep(field, bounds, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12), 
     runs = []
     for rt in rtols:
         t0 = time.perf_counter()
-        r = trace_rays(field, bounds, pos, dirs, rtol=rt, atol=atol_ratio * rt, **kw)
+        r = trace_rays(volume, pos, dirs, tolerances=GrinTolerances(rt, atol_ratio * rt, max_step), **kw)
         runs.append((rt, time.perf_counter() - t0, r))
     rows = []
     for i, (rt, sec, r) in enumerate(runs):
@@ -906,64 +724,3 @@ def tolerance_sweep(field, bounds, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12), 
                        status_changed=int(np.count_nonzero(r["status"] != q["status"])))
         rows.append(row)
     return rows
-
-
-def trace_rays_scipy(field, bounds, pos, dirs, *, rtol=RTOL, atol=ATOL, s_max=None, analytic=None):
-    """The same rays by ``scipy.integrate.solve_ivp(method="DOP853")`` itself, for checking (slow: Python per step).
-
-    A terminal event stops each ray where it leaves the box (the dense output's root, scipy's own). No
-    step cap, no receivers, no extinction.
-
-    Parameters
-    ----------
-    field, bounds, pos, dirs, rtol, atol, s_max, analytic
-        As :func:`trace_rays`.
-
-    Returns
-    -------
-    dict
-        ``status`` (1 exited, 2 at ``s_max``, 4 solver failure), ``end_pos``, ``end_dir`` (R, 3), ``steps``
-        (R,) (scipy's ``nfev``, right-hand-side evaluations), ``length`` (R,).
-
-    References
-    ----------
-    scipy.integrate.solve_ivp; Hairer, Norsett, Wanner (1993), §II.10.
-    """
-    from scipy.integrate import solve_ivp
-
-    fk, box = _field_tuple(field, bounds, None, analytic)
-    if s_max is None:
-        s_max = 8.0 * float(max(np.shape(field)[:3])) * box.hmin
-    pos = np.asarray(pos, np.float64).reshape(-1, 3)
-    dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
-    R = len(pos)
-    out = {"status": np.zeros(R, np.int8), "end_pos": np.full((R, 3), np.nan), "end_dir": np.full((R, 3), np.nan),
-           "steps": np.zeros(R, np.int64), "length": np.zeros(R)}
-    lo, hi = box.lo, box.hi
-
-    def fun(s, y):
-        o = np.empty(6)
-        _rhs(fk, y, o)
-        return o
-
-    def leave(s, y):
-        return float(min(np.min(y[:3] - lo), np.min(hi - y[:3])))
-
-    leave.terminal = True
-    leave.direction = -1
-    for r in range(R):
-        n0 = _sample(fk, *pos[r])[0]
-        y0 = np.concatenate([pos[r], n0 * dirs[r]])
-        sol = solve_ivp(fun, (0.0, s_max), y0, method="DOP853", rtol=rtol, atol=atol, events=leave)
-        if sol.status == 1 and len(sol.t_events[0]):
-            y = sol.y_events[0][0]
-            out["status"][r] = EXITED
-            out["length"][r] = sol.t_events[0][0]
-        else:
-            y = sol.y[:, -1]
-            out["status"][r] = LIMIT if sol.status == 0 else LOST
-            out["length"][r] = sol.t[-1]
-        out["end_pos"][r] = y[:3]
-        out["end_dir"][r] = y[3:] / np.linalg.norm(y[3:])
-        out["steps"][r] = sol.nfev
-    return out

@@ -60,15 +60,22 @@ def _kappa(ctx):
 
 
 def _st_photon_trace(ctx):
+    """Every photon of the method's ``photons`` stage by the ray equation, DOP853 converged.
+
+    References
+    ----------
+    .. [1] Sun et al. (2008), §3 eqs. 1-3 (the ray equation), §4.3 (photon starts), §4.4 eqs. 4-6 (the
+       march this converges).
+    """
     d = ctx.scene.data
     b = ctx.buf
-    vox = b["voxelize"]
+    voxels = b["voxelize"]
     ph = b["photons"]
     rc = b.get("receivers")
     pos, dirs = ph["start_pos"], ph["start_dir"]
-    g = grin.trace_photons(b["gradient"]["field"], vox["bounds"], pos, dirs, extinction=_kappa(ctx),
-                           receivers=rc["recv"] if rc is not None else None, outside_ior=float(d["outside_ior"]),
-                           entry=ph.get("entry"))
+    volume = grin.GrinVolume(b["gradient"]["field"], voxels["bounds"], _kappa(ctx))
+    g = grin.trace_photons(volume, pos, dirs, receivers=rc["recv"] if rc is not None else None,
+                           outside_ior=float(d["outside_ior"]), entry=ph.get("entry"))
     st = g["status"]
     counts = {name: int(np.count_nonzero(st == code)) for name, code in
               (("exited", EXITED), ("stopped", LIMIT), ("lost", LOST), ("received", grin.RECEIVED))}
@@ -94,15 +101,21 @@ def _st_caustics(ctx):
 
 
 def _st_trace(ctx):
+    """Every pixel's viewing ray by the ray equation, DOP853 converged.
+
+    References
+    ----------
+    .. [1] Sun et al. (2008), §4.5 (viewing rays), eqs. 2-3 and 6.
+    """
     d = ctx.scene.data
     b = ctx.buf
-    vox = b["voxelize"]
+    voxels = b["voxelize"]
     field = b["gradient"]["field"]
     cam = Camera.from_dict(d["camera"])
     H, W = cam.shape
     origin, rdir = cam.primary_rays()
-    vw = grin.trace_view(field, vox["bounds"], origin.reshape(-1, 3), rdir.reshape(-1, 3), extinction=_kappa(ctx),
-                         outside_ior=float(d["outside_ior"]))
+    volume = grin.GrinVolume(field, voxels["bounds"], _kappa(ctx))
+    vw = grin.trace_view(volume, origin.reshape(-1, 3), rdir.reshape(-1, 3), outside_ior=float(d["outside_ior"]))
     ctx.note(f"{H * W} viewing rays by the ray equation (DOP853, rtol {grin.RTOL:g}): "
              f"{int(vw['steps'].sum())} steps, {int(np.count_nonzero(vw['status'] == EXITED))} met material, "
              f"{int(np.count_nonzero(vw['status'] == MISSED))} status 0")
@@ -120,6 +133,12 @@ def _st_trace(ctx):
 
 
 def _st_shade(ctx):
+    """The environment along each ray's exit direction times its transmittance (no in-scattering).
+
+    References
+    ----------
+    .. [1] Sun et al. (2008), §4.5 (viewing rays), eq. 6 (transmittance).
+    """
     tr = ctx.buf["trace"]
     H, W = tr["status"].shape
     env = environment_lookup(ctx.scene.data["environment"], tr["last_dir"].reshape(-1, 3), ctx.scene.base_dir)
@@ -215,17 +234,17 @@ def volume_assemble(scene, bufs, stats):
     ----------
     docs/oracle.md, "Exact reference on volume scenes"; Sun et al. (2008), §4.4-§4.5.
     """
-    vox = bufs["voxelize"]
+    voxels = bufs["voxelize"]
     g = bufs["photon_trace"]["grin"]
     tr = bufs["trace"]
-    arrays = {"ior": vox["ior"], "volume_bounds": np.asarray(vox["bounds"], np.float64),
+    arrays = {"ior": voxels["ior"], "volume_bounds": np.asarray(voxels["bounds"], np.float64),
               "photon_exit_pos": g["exit_pos"], "photon_exit_dir": g["exit_dir"], "photon_status": g["status"]}
     arrays.update({k: tr[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
                                       "path_length", "status")})
     arrays["image"] = bufs["shade"]["image"]
     if "caustics" in bufs:
         arrays.update(bufs["caustics"]["arrays"])
-    st = {"volume_shape": list(vox["ior"].shape), **stats.get("photons", {}), "photon_trace": stats["photon_trace"],
+    st = {"volume_shape": list(voxels["ior"].shape), **stats.get("photons", {}), "photon_trace": stats["photon_trace"],
           "trace": stats["trace"]}
     if "caustics" in stats:
         st["caustics"] = stats["caustics"]

@@ -72,8 +72,9 @@ def test_numba_dop853_is_scipys_dop853():
     field = gradient_field(luneburg(N), BOUNDS)
     pos = np.array([[0.3, 0.2, 1.0], [-0.5, 0.1, 1.0], [0.05, -0.6, 1.0], [0.9, 0.9, 1.0]])
     dirs = np.tile([0.0, 0.0, -1.0], (4, 1))
-    ours = grin.trace_rays(field, BOUNDS, pos, dirs, max_step=1e9)
-    ref = grin.trace_rays_scipy(field, BOUNDS, pos, dirs)
+    volume = grin.GrinVolume(field, BOUNDS)
+    ours = grin.trace_rays(volume, pos, dirs, tolerances=grin.GrinTolerances(max_step=1e9))
+    ref = grin.trace_rays_scipy(volume, pos, dirs)
     assert np.all(ours["status"] == EXITED) and np.all(ref["status"] == EXITED)
     assert np.abs(ours["end_pos"] - ref["end_pos"]).max() < 1e-7
     assert _angle(ours["end_dir"], ref["end_dir"]).max() < 1e-7
@@ -85,8 +86,8 @@ def test_closed_form_luneburg_lens_to_solver_precision():
     """The lens given in closed form (no sampling): every photon leaves at the closed form's point and direction."""
     N = 32
     pos, dirs, _, _, _ = generate_photons(OBLIQUE, BOUNDS, (N, N, N), 24)
-    res = grin.trace_rays(np.zeros((N, N, N, 4), np.float32), BOUNDS, pos, dirs, rtol=1e-12, atol=1e-14,
-                          analytic=("luneburg", (0.0, 0.0, 0.0), R))
+    lens = grin.GrinVolume(np.zeros((N, N, N, 4), np.float32), BOUNDS, analytic=("luneburg", (0.0, 0.0, 0.0), R))
+    res = grin.trace_rays(lens, pos, dirs, tolerances=grin.GrinTolerances(rtol=1e-12, atol=1e-14))
     cp, cu = _closed_form_exits(pos, dirs)
     b = _impact(pos, dirs)
     assert np.all(res["status"] == EXITED)
@@ -103,7 +104,7 @@ def test_sampled_luneburg_lens_meets_the_closed_form():
     h = 2.0 / N
     field = gradient_field(luneburg(N), BOUNDS)
     pos, dirs, _, _, _ = generate_photons(OBLIQUE, BOUNDS, (N, N, N), 24)
-    res = grin.trace_rays(field, BOUNDS, pos, dirs)
+    res = grin.trace_rays(grin.GrinVolume(field, BOUNDS), pos, dirs)
     cp, cu = _closed_form_exits(pos, dirs)
     b = _impact(pos, dirs)
     assert np.all(res["status"] == EXITED)
@@ -124,7 +125,7 @@ def test_tightening_the_tolerance_converges():
     N = 32
     field = gradient_field(luneburg(N), BOUNDS)
     pos, dirs, _, _, _ = generate_photons(OBLIQUE, BOUNDS, (N, N, N), 24)
-    rows = grin.tolerance_sweep(field, BOUNDS, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12))
+    rows = grin.tolerance_sweep(grin.GrinVolume(field, BOUNDS), pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12))
     d = [r["dpos_max"] for r in rows[:-1]]
     assert d[0] > d[1] > d[2], d
     assert rows[2]["rtol"] == grin.RTOL and rows[2]["atol"] == pytest.approx(grin.ATOL)
@@ -141,7 +142,7 @@ def test_uniform_index_goes_straight():
     d = rng.normal(size=(50, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
     pos = rng.uniform(-0.9, 0.9, (50, 3))
-    res = grin.trace_photons(field, BOUNDS, pos, d, outside_ior=1.0)
+    res = grin.trace_photons(grin.GrinVolume(field, BOUNDS), pos, d, outside_ior=1.0)
     assert np.all(res["status"] == EXITED)
     np.testing.assert_allclose(res["exit_pos"], _box_exit(pos, d), atol=1e-12)
     np.testing.assert_allclose(res["exit_dir"], d, atol=1e-14)
@@ -149,7 +150,7 @@ def test_uniform_index_goes_straight():
     eye = np.tile([0.2, 0.1, 3.0], (50, 1))
     target = rng.uniform(-0.8, 0.8, (50, 3))
     u = (target - eye) / np.linalg.norm(target - eye, axis=1)[:, None]
-    vw = grin.trace_view(field, BOUNDS, eye, u, outside_ior=1.0)
+    vw = grin.trace_view(grin.GrinVolume(field, BOUNDS), eye, u, outside_ior=1.0)
     assert np.all(vw["status"] == EXITED) and vw["hit"].all()
     np.testing.assert_allclose(vw["exit_pos"], _box_exit(target, u), atol=1e-12)
     chord = np.linalg.norm(vw["exit_pos"] - (eye + ((1.0 - eye[:, 2]) / u[:, 2])[:, None] * u), axis=1)
