@@ -363,7 +363,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     inside = a_prev > 0.0
     met = inside
     crossings = 0
-    plen = 0.0
+    path_length = 0.0
     tau_r, tau_g, tau_b = 0.0, 0.0, 0.0
     drift = 0.0
     s = 0.0
@@ -396,11 +396,11 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
             tau_b += db_
         a1 = side * (n1 - n_half)
         if a_prev > 0.0 and a1 > 0.0:
-            plen += chord
+            path_length += chord
         elif a_prev > 0.0:
-            plen += chord * a_prev / (a_prev - a1)
+            path_length += chord * a_prev / (a_prev - a1)
         elif a1 > 0.0:
-            plen += chord * a1 / (a1 - a_prev)
+            path_length += chord * a1 / (a1 - a_prev)
         now = a1 > 0.0
         if now != inside:
             crossings += 1
@@ -439,7 +439,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
     out.tau[r, 2] = tau_b
     out.met[r] = met
     out.crossings[r] = crossings
-    out.path_length[r] = plen
+    out.path_length[r] = path_length
     out.length[r] = s
     out.steps[r] = steps
     out.rejected[r] = rej
@@ -645,7 +645,7 @@ def trace_view(volume, origins, dirs, *, outside_ior=1.0, n_range=None, toleranc
     status = np.full(R, MISSED, np.int8)
     hit = np.zeros(R, np.bool_)
     inter = np.zeros(R, np.int16)
-    plen = np.zeros(R)
+    path_length = np.zeros(R)
     trans = np.ones((R, 3))
     exit_pos = np.full((R, 3), np.nan)
     exit_dir = d.copy()
@@ -657,7 +657,7 @@ def trace_view(volume, origins, dirs, *, outside_ior=1.0, n_range=None, toleranc
     status[idx] = np.where((st == EXITED) & ~met, MISSED, st)
     hit[idx] = met
     inter[idx] = res["crossings"].astype(np.int16)
-    plen[idx] = res["path_length"]
+    path_length[idx] = res["path_length"]
     trans[idx] = np.exp(-res["tau"])
     steps[idx] = res["steps"]
     drift[idx] = res["drift"]
@@ -670,7 +670,7 @@ def trace_view(volume, origins, dirs, *, outside_ior=1.0, n_range=None, toleranc
     evals = np.zeros(R, np.int64)
     evals[idx] = res["evals"]
     return {"exit_pos": exit_pos, "exit_dir": exit_dir, "last_dir": last_dir, "hit": hit, "interfaces": inter,
-            "path_length": plen, "status": status, "transmittance": trans, "steps": steps, "evals": evals,
+            "path_length": path_length, "status": status, "transmittance": trans, "steps": steps, "evals": evals,
             "drift": drift}
 
 

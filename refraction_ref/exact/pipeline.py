@@ -323,8 +323,8 @@ def _assemble(scene, bufs, stats):
         from .volume import volume_assemble
 
         return volume_assemble(scene, bufs, stats)
-    tr = bufs["trace"]
-    arrays = {k: tr[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
+    trace_bufs = bufs["trace"]
+    arrays = {k: trace_bufs[k] for k in ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces",
                                  "path_length", "status")}
     arrays["image"] = bufs["shade"]["image"]
     info = {"triangles": stats["triangles"]}

@@ -115,21 +115,21 @@ def _st_trace(ctx):
     H, W = cam.shape
     origin, rdir = cam.primary_rays()
     volume = grin.GrinVolume(field, voxels["bounds"], _kappa(ctx))
-    vw = grin.trace_view(volume, origin.reshape(-1, 3), rdir.reshape(-1, 3), outside_ior=float(d["outside_ior"]))
+    viewed = grin.trace_view(volume, origin.reshape(-1, 3), rdir.reshape(-1, 3), outside_ior=float(d["outside_ior"]))
     ctx.note(f"{H * W} viewing rays by the ray equation (DOP853, rtol {grin.RTOL:g}): "
-             f"{int(vw['steps'].sum())} steps, {int(np.count_nonzero(vw['status'] == EXITED))} met material, "
-             f"{int(np.count_nonzero(vw['status'] == MISSED))} status 0")
-    ctx.stats["trace"] = {"rays": H * W, "solver_steps": int(vw["steps"].sum()),
-                          "drift_max": float(vw["drift"].max()) if H * W else 0.0}
+             f"{int(viewed['steps'].sum())} steps, {int(np.count_nonzero(viewed['status'] == EXITED))} met material, "
+             f"{int(np.count_nonzero(viewed['status'] == MISSED))} status 0")
+    ctx.stats["trace"] = {"rays": H * W, "solver_steps": int(viewed["steps"].sum()),
+                          "drift_max": float(viewed["drift"].max()) if H * W else 0.0}
     return {"ray_origin": origin, "ray_dir": rdir,
-            "hit": vw["hit"].reshape(H, W),
-            "exit_pos": vw["exit_pos"].reshape(H, W, 3),
-            "exit_dir": vw["exit_dir"].reshape(H, W, 3),
-            "interfaces": vw["interfaces"].reshape(H, W),
-            "path_length": vw["path_length"].reshape(H, W),
-            "status": vw["status"].reshape(H, W),
-            "last_dir": vw["last_dir"].reshape(H, W, 3),
-            "transmittance": vw["transmittance"].reshape(H, W, 3)}
+            "hit": viewed["hit"].reshape(H, W),
+            "exit_pos": viewed["exit_pos"].reshape(H, W, 3),
+            "exit_dir": viewed["exit_dir"].reshape(H, W, 3),
+            "interfaces": viewed["interfaces"].reshape(H, W),
+            "path_length": viewed["path_length"].reshape(H, W),
+            "status": viewed["status"].reshape(H, W),
+            "last_dir": viewed["last_dir"].reshape(H, W, 3),
+            "transmittance": viewed["transmittance"].reshape(H, W, 3)}
 
 
 def _st_shade(ctx):
