@@ -27,7 +27,8 @@ import refraction_ref as rr
 from refraction_ref.files import atomic_open  # noqa: E402
 from refraction_ref.meshes import scene_geometry
 from refraction_ref.volumetric.gradient import gradient_field
-from refraction_ref.volumetric.march import STATUS, march_photons
+from refraction_ref.volumetric.knobs import march_knobs
+from refraction_ref.volumetric.march import STATUS, march_grid, march_photons
 from refraction_ref.volumetric.octree import build_octree
 from refraction_ref.volumetric.photons import generate_photons
 from refraction_ref.volumetric.voxelize import voxelize_objects
@@ -44,19 +45,20 @@ def sphere_volume(N):
 def bench_steps(N, M, reps, threads=None):
     ior, b = sphere_volume(N)
     field = gradient_field(ior, b)
-    level, smax, _ = build_octree(ior)
+    level, smax, _ = build_octree(ior, dilate=True)
     ext = np.full(ior.shape + (3,), 0.2, np.float32)
+    grid, robust = march_grid(field, ext, level, smax, b), march_knobs({"stepping": "robust"})
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0, -1, 0],
                                               "radiance": [1, 1, 1]}], b, ior.shape, M)
     old = numba.get_num_threads()
     if threads:
         numba.set_num_threads(threads)
     try:
-        march_photons(field, ext, level, smax, b, pos[:1000], dirs[:1000], rad[:1000])  # warm-up
+        march_photons(grid, (pos[:1000], dirs[:1000], rad[:1000]), robust)  # warm-up
         times, steps = [], 0
         for _ in range(reps):
             t0 = time.perf_counter()
-            _, info = march_photons(field, ext, level, smax, b, pos, dirs, rad, ds_min=1.0)
+            _, info = march_photons(grid, (pos, dirs, rad), robust._replace(ds_min=1.0))
             times.append(time.perf_counter() - t0)
             steps = info["total_steps"]
         nthreads = numba.get_num_threads()
@@ -79,12 +81,13 @@ def luneburg_miss(N, M, integrator, ds_min, R=0.8, eps=0.005, ds_max=8.0):
     b = np.array([[-1.0, -1, -1], [1, 1, 1]])
     ior = luneburg(N, R)
     field = gradient_field(ior, b)
-    level, smax, _ = build_octree(ior, eps, max(eps, 0.02), ds_max)
+    level, smax, _ = build_octree(ior, eps, max(eps, 0.02), ds_max, dilate=True)
     ext = np.zeros(ior.shape + (3,), np.float32)
     pos, dirs, rad, _, _ = generate_photons([{"type": "directional", "direction": [0, 0, -1],
                                               "radiance": [1, 1, 1]}], b, ior.shape, M)
     t0 = time.perf_counter()
-    _, info = march_photons(field, ext, level, smax, b, pos, dirs, rad, ds_min=ds_min, integrator=integrator)
+    _, info = march_photons(march_grid(field, ext, level, smax, b), (pos, dirs, rad),
+                            march_knobs({"stepping": "robust", "ds_min": ds_min, "integrator": integrator}))
     t = time.perf_counter() - t0
     sel = (info["status"] == STATUS["exited"]) & (np.hypot(pos[:, 0], pos[:, 1]) < 0.7 * R)
     F = np.array([0.0, 0.0, -R])

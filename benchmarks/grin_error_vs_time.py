@@ -207,7 +207,7 @@ def convergence_rows(name, N, M):
     """The reference's tolerance sweep on the scene's photons (:func:`~refraction_ref.exact.grin.tolerance_sweep`)."""
     field = gradient_field(volume(name, N), B)
     pos, dirs, _, _, _ = generate_photons([LIGHT], B, (N, N, N), M)
-    rows = grin.tolerance_sweep(field, B, pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12))
+    rows = grin.tolerance_sweep(grin.GrinVolume(field, B), pos, dirs, rtols=(1e-6, 1e-8, 1e-10, 1e-12))
     for r in rows:
         for k in ("dpos_max", "dpos_p99"):
             if r[k] is not None:

@@ -41,7 +41,8 @@ import numpy as np
 from refraction_ref.analytic import sphere_refraction
 from refraction_ref.files import atomic_open
 from refraction_ref.volumetric.gradient import gradient_field
-from refraction_ref.volumetric.march import STATUS, march_photons
+from refraction_ref.volumetric.knobs import march_knobs, octree_dilations
+from refraction_ref.volumetric.march import STATUS, march_grid, march_photons
 from refraction_ref.volumetric.octree import build_octree
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -123,9 +124,9 @@ def run(N):
         field = gradient_field(ior, B)
         ext = np.zeros(ior.shape + (3,), np.float32)
         for stepping in ("paper", "robust"):
-            level, smax, _ = build_octree(ior, dilate=stepping == "robust")
-            _, info = march_photons(field, ext, level, smax, B, pos, dirs, np.ones_like(pos), stepping=stepping,
-                                    stop_fraction=None)
+            level, smax, _ = build_octree(ior, dilate=octree_dilations(stepping)[0])
+            _, info = march_photons(march_grid(field, ext, level, smax, B), (pos, dirs, np.ones_like(pos)),
+                                    march_knobs({"stepping": stepping, "stop_fraction": 0.0}))
             st = info["status"]
             ex = st == STATUS["exited"]
             e = err_fn(info)[ex]

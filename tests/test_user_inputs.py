@@ -342,17 +342,17 @@ def test_accepted_extremes_render_finite(tmp_path):
 def test_check_reads_a_corrupt_candidate_npz_as_a_problem_of_the_case(tmp_path, arrays):
     """check judges a candidate's result.npz per case: a corrupt one is that case's one-line problem, no traceback
     (the whole command's exit statuses on such files: tests/test_fuzz.py, prop_check)."""
-    from refraction_ref.golden.check import _read_result
+    from refraction_ref.golden.judging import read_result
 
     p = _npz(tmp_path / "result.npz", **arrays)
-    got, problem = _read_result(str(p))
+    got, problem = read_result(str(p))
     if problem is None:  # meta is not read by check: the arrays it judges are
         assert "meta" not in got and sorted(got) == sorted(k for k in arrays if k != "meta")
     else:
         assert got is None and "result.npz" in _one_line(problem)
     trunc = tmp_path / "t.npz"
     trunc.write_bytes(p.read_bytes()[:40])
-    got, problem = _read_result(str(trunc))
+    got, problem = read_result(str(trunc))
     assert got is None and _one_line(problem)
 
 

@@ -201,7 +201,7 @@ def test_unsnapped_rasterizer_passes_the_depth_buffers(golden, tmp_path):
     (the depth keys by the slope term, 1/512 pixel of the local depth step; the LDI and the bounds against
     its own bitmask and depths), and `trace`: its positions (`UNSNAPPED_MOVED`) fail against the golden and
     pass against the oracle's trace run on its own LDI."""
-    from refraction_ref.golden.check import _ambiguity, _context
+    from refraction_ref.golden.masks import ambiguity, ambiguity_context
     from refraction_ref.golden.tolerances import judge
 
     rep = _verdicts(golden, tmp_path, "no_snap", QUICK_CASES)
@@ -211,13 +211,13 @@ def test_unsnapped_rasterizer_passes_the_depth_buffers(golden, tmp_path):
         assert c.ok and not c.failing_keys, (case, c.failing_keys)
         g = dict(np.load(os.path.join(golden, case, "golden.npz")))
         a = np.load(os.path.join(str(tmp_path), case, "result.npz"))
-        pics = _context(g)
+        pics = ambiguity_context(g)
         for k in UNSNAPPED_MOVED:
             d = c["keys"][k]["detail"]
             assert "candidate's own stage.peel.ldi" in d or d.startswith("same as"), (case, k, d)
         for k in ("exit_pos", "stage.trace.path_pos"):  # against the golden alone they fail
             spec = man["cases"][case]["keys"][k]["tolerance"]
-            assert not judge(a[k], g[k], spec, ambiguous=_ambiguity(k, g[k], spec, pics, a[k]))["ok"], (case, k)
+            assert not judge(a[k], g[k], spec, ambiguous=ambiguity(k, g[k], spec, pics, a[k]))["ok"], (case, k)
         # (a key byte-identical to one judged before, zlo to zmin with local slicing, is judged once there)
         assert all("step(g)" in c["keys"][k]["detail"] or c["keys"][k]["detail"].startswith("same as")
                    for k in DEPTH_KEYS)
@@ -226,7 +226,7 @@ def test_unsnapped_rasterizer_passes_the_depth_buffers(golden, tmp_path):
         # term zmin/zmax fail (located), with it they pass
         for k in ("stage.minmax.zmin", "stage.minmax.zmax"):
             spec = man["cases"][case]["keys"][k]["tolerance"]
-            amb = _ambiguity(k, g[k], spec, pics, a[k])
+            amb = ambiguity(k, g[k], spec, pics, a[k])
             assert not judge(a[k], g[k], dict(spec, slope=0.0), ambiguous=amb)["ok"], (case, k)
             assert judge(a[k], g[k], spec, ambiguous=amb)["ok"], (case, k)
 

@@ -238,7 +238,7 @@ def test_unsnapped_rasterizer_passes_every_levelmap_case(golden_all, backend, tm
     """The maps rasterized without the 1/256 snap (an analytic rasterizer) pass, position maps included,
     and only through the slope term: without it a position map fails `level_map` in every case."""
     import numpy as np
-    from refraction_ref.golden.check import _ambiguity, _context
+    from refraction_ref.golden.masks import ambiguity, ambiguity_context
     from refraction_ref.golden.tolerances import judge
 
     golden = golden_all
@@ -251,12 +251,12 @@ def test_unsnapped_rasterizer_passes_every_levelmap_case(golden_all, backend, tm
     for case in CASES:
         g = dict(np.load(os.path.join(golden, case, "golden.npz")))
         c = np.load(os.path.join(cand, case, "result.npz"))
-        pics = _context(g)
+        pics = ambiguity_context(g)
         strict = []
         for key in (k for k in g if k.startswith("stage.level_map.position_")):
             spec = man["cases"][case]["keys"][key]["tolerance"]
             assert spec["slope"] == 1.0 / 512.0, key
             assert np.array_equal(np.isfinite(c[key]), np.isfinite(g[key])), (case, key)  # same coverage
-            amb = _ambiguity(key, g[key], spec, pics, c[key])
+            amb = ambiguity(key, g[key], spec, pics, c[key])
             strict.append(judge(c[key], g[key], dict(spec, slope=0.0), ambiguous=amb)["ok"])
         assert not all(strict), case  # the sphere's map fails on about 22 % of its texels without the term
