@@ -68,6 +68,12 @@ class Knob:
     summary : str, optional
         One line for the README's table of the main knobs (``None``: the
         knob is in ``docs/oracle.md``'s table only).
+    read_by : str, optional
+        The methods that read it, for a service's block read by several
+        (the table's ``read by`` column).
+    items : tuple of Knob
+        For a list of objects (``water.waves``): the keys of each item,
+        checked by ``check`` and listed as ``waves[k].<key>`` rows.
     """
 
     name: str
@@ -84,6 +90,8 @@ class Knob:
     allowed: str | None = None
     check: Callable | None = None
     summary: str | None = None
+    read_by: str | None = None
+    items: tuple = ()
 
 
 def _fmt_number(x):
@@ -212,6 +220,11 @@ def declare_block(name, knobs, owner, extra=None, aliases=None, merge=None, pres
 def knob_table(block):
     """The Markdown table of a block's knobs (``docs/oracle.md``), from their declarations.
 
+    Columns: key, default (left out for a block whose every key defaults to
+    null), allowed, meaning, read by (only where a knob names its readers)
+    and section; a list-of-objects knob is followed by one row per item key
+    (``waves[k].amplitude``).
+
     Parameters
     ----------
     block : KnobBlock
@@ -222,10 +235,18 @@ def knob_table(block):
     str
         Header, separator and one row per knob, newline-terminated.
     """
-    rows = ["| key | default | allowed | meaning | section |", "|---|---|---|---|---|"]
-    for k in block.knobs:
-        rows.append(f"| `{k.name}` | {json.dumps(k.default)} | {allowed_text(k)} | {k.doc} | {k.section} |")
-    return "\n".join(rows) + "\n"
+    rows = [(k.name, k) for k in block.knobs]
+    rows = [r for name, k in rows for r in [(name, k)] + [(f"{name}[k].{i.name}", i) for i in k.items]]
+    with_default = block.defaults is not None or any(k.default is not None for _, k in rows)
+    with_readers = any(k.read_by for _, k in rows)
+    head = ["key"] + (["default"] if with_default else []) + ["allowed", "meaning"]
+    head += (["read by"] if with_readers else []) + ["section"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, k in rows:
+        cells = [f"`{name}`"] + ([json.dumps(k.default)] if with_default else []) + [allowed_text(k), k.doc]
+        cells += ([k.read_by or ""] if with_readers else []) + [k.section]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def code_of(knob, value):

@@ -88,6 +88,7 @@ def test_a_declaration_checks_and_documents():
 
     class _Block:
         knobs = (k, c)
+        defaults = {"slices": 256, "normals": "central"}
 
     table = knob_table(_Block).splitlines()
     assert table[2] == "| `slices` | 256 | integer 32..4096, multiple of 32 | bitmask slices | §3.3 |"

@@ -93,10 +93,11 @@ def _check_direction(value, where, data):
 
 
 WAVE_KNOBS = (
-    Knob("amplitude", 0.02, "a_k", "", kind="float"),
-    Knob("wavelength", 0.5, "lambda_k, scene units", "", kind="float", lo=0.0, lo_open=True),
-    Knob("direction", [1.0, 0.0], "d_k, normalised on use", "", allowed="non-zero [x, z]", check=_check_direction),
-    Knob("phase", 0.0, "phi_k, radians", "", kind="float"),
+    Knob("amplitude", 0.02, "a_k", "§4.3", kind="float"),
+    Knob("wavelength", 0.5, "lambda_k, scene units", "§4.3", kind="float", lo=0.0, lo_open=True),
+    Knob("direction", [1.0, 0.0], "d_k, normalised on use", "§4.3", allowed="non-zero [x, z]",
+         check=_check_direction),
+    Knob("phase", 0.0, "phi_k, radians", "§4.3", kind="float"),
 )
 
 #: one wave's defaults (each wave of ``water.waves`` is merged over them)
@@ -128,7 +129,8 @@ WATER_KNOBS = (
          lo=0.0, lo_open=True),
     Knob("absorption", 0.0, "K, per scene unit: `exp(-K d)` over the distance d in water", "eq. 4-17",
          kind="float", lo=0.0),
-    Knob("waves", [], "summed sine waves; [] is a flat surface", "§4.3", allowed="list", check=_check_waves),
+    Knob("waves", [], "summed sine waves; [] is a flat surface", "§4.3", allowed="list", check=_check_waves,
+         items=WAVE_KNOBS),
 )
 
 #: the ``water`` block's defaults (merged only when a scene has one; "water": null means no water)
