@@ -54,7 +54,7 @@ def slice_bounds(zmin, zmax, slicing="local"):
     return np.full_like(zmin, lo), np.full_like(zmax, hi)
 
 
-def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
+def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="add"):
     """Rasterize the mesh into per-pixel occupancy bitmasks.
 
     Parameters
@@ -69,8 +69,9 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
     slices : int
         S, a multiple of 32 (default 256, the thesis's 8 render targets of
         32 bits).
-    blend : {'or', 'add'}
-        Logical OR, or the GPU's additive blending with carry.
+    blend : {'add', 'or'}, default 'add'
+        The GPU's additive blending with carry (``imagespace.blend``'s
+        default, §3.3), or a logical OR.
 
     Returns
     -------
@@ -80,7 +81,7 @@ def voxelize_bitmask(tri_view, camera, zlo, zhi, slices=256, blend="or"):
     ----------
     Chaudhari (2008), §3.3; Eisemann and Décoret (2006).
     """
-    return rasterize(tri_view, camera, blend, zlo=zlo, zhi=zhi, slices=slices, clip=True)
+    return rasterize(tri_view, camera, blend, bounds=(zlo, zhi), slices=slices, clip=True)
 
 
 def collect_depths(tri_view, camera, capacity=32):
