@@ -41,16 +41,18 @@ import numpy as np
 from ..camera import _pixel_xy, primary_dir
 from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
-                                 put_rows, receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.shade import (ShadowMaps, _take_kernel, _world_to_view_args, shade_rows_applies,
-                               shadow_map_test, take_rows)
+                                 receiver_hit_stage, receiver_stages, splat_stage)
+from ..caustics.receivers import ReceiverHitMode
+from ..caustics.shade import ReceiverLighting, _take_kernel, shade_rays, shade_rows_applies
+from ..caustics.shadow import ShadowMaps, shadow_map_test, view_affine
+from ..kernels import put_rows, take_rows
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
 from ..optics import beer_lambert, refract3
 from ..status import EXITED
 from .grid import at_pixels
-from .normals import NORMAL_METHODS, no_lut, normal_at
+from .normals import NORMAL_METHODS, ViewGrid, no_lut, normal_at
 
 __all__ = ["imagespace_caustic_stages"]
 
@@ -269,7 +271,7 @@ class _FrontView(NamedTuple):
     sy: float
     ortho: bool
     eta: float  # outside / ior at the front surface
-    method: int  # NORMAL_METHODS
+    normals: int  # NORMAL_METHODS code of imagespace.normals
     delta: int
 
 
@@ -305,12 +307,13 @@ def _to_view_rows(O, D, k, m, t, zero3, Ov, Dv):
 
 
 @nb.njit(cache=True, inline="always")
-def _front_ray(p, ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method, delta):
+def _front_ray(p, ldi, lut, zfront, e3, view):
     """The thesis's single-surface ray at object pixel ``p`` in view space: its front point and
     direction, in the operations' order of what it replaced: primary_rays_view's direction (rotated
     by the identity ``e3``), layer_normals' normal (NaN where the layer is absent), refract, then
     _front_points_kernel (the refracted direction, or the primary one where it is not finite, and
-    the pixel centre's point at depth ``zfront``)."""
+    the pixel centre's point at depth ``zfront``). ``view`` is the eye's :class:`_FrontView`."""
+    W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
     ii = p // W
     jj = p - ii * W
     x, y, z = primary_dir(ii, jj, W, H, sx, sy, ortho)
@@ -319,8 +322,8 @@ def _front_ray(p, ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method, delta)
     dvz = x * e3[0, 2] + y * e3[1, 2] + z * e3[2, 2]
     nxx, nyy, nzz = np.nan, np.nan, np.nan
     if math.isfinite(ldi[0, ii, jj]):
-        nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, method, delta, W, H, sx, sy, ortho)
-    tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, eta)
+        nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, view.normals, view.delta, ViewGrid(W, H, sx, sy, ortho))
+    tx, ty, tz, _ = refract3(dvx, dvy, dvz, nxx, nyy, nzz, view.eta)
     if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
         tx, ty, tz = dvx, dvy, dvz
     px, py = _pixel_xy(ii, jj, W, H, sx, sy)
@@ -336,8 +339,6 @@ def _final_rays_kernel(view, lut, rays):
     # rows 0 .. nx-1: the exit rays (take_rows of exit_pos, exit_dir at xi); rows nx ..: the thesis's
     # single-surface rays at the object's pixels (_front_ray), then Camera.view_to_world /
     # dir_view_to_world (vec3.affine's order); each row also in view space (_to_view_rows)
-    W, H, sx, sy, ortho, eta = view.W, view.H, view.sx, view.sy, view.ortho, view.eta
-    method, delta = view.method, view.delta
     xi, exit_pos, exit_dir, oi, ldi, zfront = rays.xi, rays.exit_pos, rays.exit_dir, rays.oi, rays.ldi, rays.zfront
     e3, basis, eye, zero3, O, D = rays.eye3, rays.basis, rays.eye, rays.zero3, rays.O, rays.D
     m, tv, Ov, Dv = rays.m, rays.t, rays.Ov, rays.Dv
@@ -354,8 +355,7 @@ def _final_rays_kernel(view, lut, rays):
                 D[k, c] = exit_dir[q, c]
             _to_view_rows(O, D, k, m, tv, zero3, Ov, Dv)
         if k < no:
-            px, py, pz, tx, ty, tz = _front_ray(oi[k], ldi, lut, zfront, e3, W, H, sx, sy, ortho, eta, method,
-                                                delta)
+            px, py, pz, tx, ty, tz = _front_ray(oi[k], ldi, lut, zfront, e3, view)
             r = nx + k
             for c in range(3):
                 O[r, c] = px * basis[0, c] + py * basis[1, c] + pz * basis[2, c] + eye[c]
@@ -375,25 +375,25 @@ def _st_photon_trace(ctx, layered_trace):
         if lcam is None:
             out["lights"].append(None)
             continue
-        lt = {}
-        tv = layered_trace(geom, lcam, p, ior, outside, lt, [])
-        for k, v in lt.items():
+        timings = {}
+        view = layered_trace(geom, lcam, p, ior, outside, timings, [])
+        for k, v in timings.items():
             ctx.timings[k] = ctx.timings.get(k, 0.0) + v
-        tr = tv["trace"]
-        st = tr["status"].ravel()
+        trace = view["trace"]
+        st = trace["status"].ravel()
         N = lcam.width
         cols = np.tile(np.arange(N) + 0.5, N)
         rows = np.repeat(np.arange(N) + 0.5, N)
         flux0 = texel_flux(lcam, cols, rows)
         ex = np.flatnonzero(st == EXITED)
-        trans = beer_lambert(absorption, tr["path_length"].ravel()[ex], ior)
-        o = tr["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
-        dd = tr["exit_dir"].reshape(-1, 3)[ex]
+        trans = beer_lambert(absorption, trace["path_length"].ravel()[ex], ior)
+        o = trace["exit_pos"].reshape(-1, 3)[ex]  # world space (layered_trace)
+        dd = trace["exit_dir"].reshape(-1, 3)[ex]
         bias = 1e-3 * (lcam.far - lcam.near) + 2.0 * 2.0 * lcam.sy / N
         out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex, "trans": trans, "o": o, "d": dd,
-                              "shadow": (lcam, tv["zmin"], bias)})
+                              "shadow": (lcam, view["zmin"], bias)})
         out[f"camera_{l}"] = camera_array(lcam)
-        out[f"ldi_{l}"] = tv["ldi"] if 0 not in tv["ldi"].strides else None
+        out[f"ldi_{l}"] = view["ldi"] if 0 not in view["ldi"].strides else None
         out[f"exit_pos_{l}"] = o
         out[f"exit_dir_{l}"] = dd
     ctx.note(f"{p['photons']}x{p['photons']} photons per light through all layers (§4.1)")
@@ -412,9 +412,9 @@ def _st_final(ctx):
     vis = ShadowMaps(shadow)  # shade_points tests these shadow maps inside its per-point kernel
 
     # the eye's front depth per image pixel (the grid texel under it when imagespace.grid differs)
-    eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape)}
-    img, img1, shadow_bufs = _final_imagespace(ctx.scene, rs, rd["cam"], eye, rd["eyebuf"], b["gather"]["rgb_maps"],
-                                               vis, p["receiver_hit"], g["ior"], g["outside_ior"], g["absorption"], p)
+    eye = {"trace": b["trace"], "zmin": at_pixels(b["minmax"]["zmin"], rd["cam"].shape), "cam": rd["cam"],
+           "depth": rd["eyebuf"]}
+    img, img1, shadow_bufs = _final_imagespace(ctx.scene, rs, eye, b["gather"]["rgb_maps"], vis, g, p)
     ctx.note("receivers lit directly (shadow map) and by the caustics; the object's multi-layer and "
              "single-surface (the thesis's) final passes")
     return {"image_caustics": img, "image_caustics_single": img1, **shadow_bufs}
@@ -501,8 +501,8 @@ def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
     eyespace = scene.data["imagespace"]["receiver_hit"] == "eyespace"
     knobs = tuple(dict.fromkeys(("photons",) + tuple(trace_knobs)))
     return receiver_stages(nr) + (
-        Stage("photon_trace", lambda ctx: _st_photon_trace(ctx, layered_trace), reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs),
-              after=("geometry",),
+        Stage("photon_trace", lambda ctx: _st_photon_trace(ctx, layered_trace),
+              reads=("lights",) + tuple(f"imagespace.{k}" for k in knobs), after=("geometry",),
               makes=photon_buffer_names(nl, True),
               doc="per light: its camera, the passes of ch. 3 in its view, one photon per texel (§4.1)"),
         Stage("receiver_hit", lambda ctx: receiver_hit_stage(ctx, eyespace),
@@ -526,17 +526,24 @@ def imagespace_caustic_stages(scene, layered_trace, trace_knobs):
     )
 
 
-def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, outside, absorption, p):
+def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
     """The final pass (§4.1): ``image_caustics`` (multi-layer), ``image_caustics_single`` (the thesis's), and
     the shadow buffers ``shadow_l``, ``shadow_margin_l`` of :func:`_shadow_buffers` (``vis``: a
     :class:`~refraction_ref.caustics.shade.ShadowMaps`), filled by the shading kernel from its own
-    shadow test where it shades in place, else by :func:`_shadow_buffers`."""
+    shadow test where it shades in place, else by :func:`_shadow_buffers`.
+
+    ``eye``: the eye's ``trace``, its front depth ``zmin`` per image pixel, its camera ``cam`` and the
+    receivers' depth image ``depth`` (``(rdepth, rtri)``); ``material``: the objects' ``ior``,
+    ``outside_ior`` and ``absorption`` (the ``geometry`` stage's buffers); ``p``: the ``imagespace`` knobs
+    (``normals``, ``delta``, ``receiver_hit``)."""
+    cam, eyebuf, mode = eye["cam"], eye["depth"], p["receiver_hit"]
+    ior, outside, absorption = material["ior"], material["outside_ior"], material["absorption"]
     H, W = cam.shape
-    tr = eye["trace"]
+    trace = eye["trace"]
     zfront = eye["zmin"]
     rdepth, rtri = eyebuf
     env = scene.data["environment"]
-    st = tr["status"]
+    st = trace["status"]
     # the pixel classes (receiver seen directly, environment, object exited or stuck) as flat
     # indices, ascending, and the front depth for the normals, on every thread
     px, ldi = _classify(zfront, rdepth, st)
@@ -572,16 +579,16 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     if not len(oi):
         base = np.zeros((H, W, 3))
         put_rows(base.reshape(-1, 3), bi, env_bg)
-        _, cd = shade_rays(scene, rs, cam, np.zeros((0, 3)), np.zeros((0, 3)), mode, eyebuf, rgb_maps, vis, direct,
-                           bufs)
+        _, cd = shade_rays(scene, ReceiverLighting(rs, scene.data["lights"], rgb_maps, vis),
+                           ReceiverHitMode(mode, cam, eyebuf), np.zeros((0, 3)), np.zeros((0, 3)), direct, bufs)
         put_rows(base.reshape(-1, 3), ri, cd)
         if bufs is None:
             shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
         return base.astype(np.float32), base.astype(np.float32), shadow_out
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
-    plen = np.empty(len(oi))
-    _take_kernel(np.ascontiguousarray(tr["path_length"], dtype=np.float64).reshape(-1), oi, plen)  # path_length[obj]
-    trans = beer_lambert(absorption, plen, ior)  # per pixel: only the object's
+    path_length = np.empty(len(oi))  # trace["path_length"] at the object's pixels
+    _take_kernel(np.ascontiguousarray(trace["path_length"], dtype=np.float64).reshape(-1), oi, path_length)
+    trans = beer_lambert(absorption, path_length, ior)  # per pixel: only the object's
     # both passes' rays in one march and one shading: each ray's colour is its own, and one call
     # instead of two halves the serial work around the kernels. The exit rays (world space,
     # layered_trace), then the thesis's final pass: refraction at the front surface only, its
@@ -590,16 +597,17 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     n_full = len(xi)
     O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
     Ov, Dv = np.empty_like(O), np.empty_like(D)
-    m, t = _world_to_view_args(cam)
+    m, t = view_affine(cam)
     _final_rays_kernel(_FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
                                   NORMAL_METHODS[p["normals"]], int(p["delta"])), no_lut(zfront.shape),
-                       _FinalRays(xi, np.ascontiguousarray(tr["exit_pos"], dtype=np.float64).reshape(-1, 3),
-                                  np.ascontiguousarray(tr["exit_dir"], dtype=np.float64).reshape(-1, 3), oi, ldi,
+                       _FinalRays(xi, np.ascontiguousarray(trace["exit_pos"], dtype=np.float64).reshape(-1, 3),
+                                  np.ascontiguousarray(trace["exit_dir"], dtype=np.float64).reshape(-1, 3), oi, ldi,
                                   np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), np.eye(3),
                                   np.ascontiguousarray(cam.basis, dtype=np.float64),
                                   np.ascontiguousarray(cam.eye, dtype=np.float64), np.zeros(3), m, t, O, D, Ov,
                                   Dv))
-    c, cd = shade_rays(scene, rs, cam, O, D, mode, eyebuf, rgb_maps, vis, direct, bufs, (Ov, Dv))
+    c, cd = shade_rays(scene, ReceiverLighting(rs, scene.data["lights"], rgb_maps, vis),
+                       ReceiverHitMode(mode, cam, eyebuf), O, D, direct, bufs, (Ov, Dv))
     if bufs is None:
         shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
     # the two images in float32, each pixel written once from its own rows on every thread (what
@@ -608,7 +616,7 @@ def _final_imagespace(scene, rs, cam, eye, eyebuf, rgb_maps, vis, mode, ior, out
     # stuck, the environment along the last direction, times the transmittance (full), and the
     # single-surface ray's colour (single)
     si = px.si
-    env_stuck = (environment_lookup(env, take_rows(tr["last_dir"].reshape(-1, 3), si), scene.base_dir) if len(si)
+    env_stuck = (environment_lookup(env, take_rows(trace["last_dir"].reshape(-1, 3), si), scene.base_dir) if len(si)
                  else np.zeros((0, 3)))
     f32 = np.empty((H, W, 3), np.float32)
     s32 = np.empty((H, W, 3), np.float32)

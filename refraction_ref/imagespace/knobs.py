@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ..knobs import Knob, declare_block
+from ..knobs import Knob, check_knob, declare_block
 
 __all__ = ["KNOBS", "IMAGESPACE_DEFAULTS", "CHOICES", "CODES", "TRACE_KNOBS", "validate_imagespace", "check_memory",
            "BLOCK", "TraceKnobs", "trace_knobs"]
@@ -66,7 +66,9 @@ def _check_grid(grid, where, data):
                          f"[w, h] with w * {H} == h * {W}, or null for the image's size")
 
 
-GRID_ALLOWED = "null, or [width, height] of integers 1..16384 with the image's aspect (`width * camera.height == height * camera.width`)"
+#: the ``allowed`` cell of ``grid``
+GRID_ALLOWED = ("null, or [width, height] of integers 1..16384 with the image's aspect "
+                "(`width * camera.height == height * camera.width`)")
 
 #: the block's knobs, in the order of its table (docs/oracle.md)
 KNOBS = (
@@ -170,6 +172,8 @@ BLOCK = declare_block("imagespace", KNOBS, owner="imagespace", aliases=ALIASES)
 #: the block's defaults, from :data:`KNOBS`
 IMAGESPACE_DEFAULTS = BLOCK.defaults
 
+_RECORD = next(k for k in KNOBS if k.name == "record")
+
 #: the block's checks, from :data:`KNOBS`: ``validate_imagespace(data, base_dir=".")`` returns ``data``
 #: or raises :class:`~refraction_ref.validation.SceneError` naming the first key out of range
 validate_imagespace = BLOCK.validate
@@ -241,7 +245,7 @@ def trace_knobs(block, record=0):
         holding :data:`TRACE_KNOBS`); only those keys are read.
     record : int, default 0
         Events kept per path (``imagespace.record`` for the eye's trace; a
-        light's photon trace keeps none).
+        light's photon trace keeps none), checked as ``imagespace.record`` is.
 
     Returns
     -------
@@ -252,6 +256,7 @@ def trace_knobs(block, record=0):
     ----------
     .. [1] docs/oracle.md, "### ``imagespace`` block".
     """
+    check_knob(_RECORD, record, "imagespace.record")
     return TraceKnobs(int(block["iterations"]), CODES["normals"][block["normals"]], int(block["delta"]),
                       bool(block["tir"]), int(block["max_interfaces"]), int(block["layers"]), int(record),
                       CODES["endpoint"][block["endpoint"]], CODES["filter"][block["filter"]],

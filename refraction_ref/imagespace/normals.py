@@ -1,26 +1,28 @@
 """Surface normals from depth images (Chaudhari 2008, §3.5).
 
-All three estimators read one layered depth image ``d`` (view-space depth
-per pixel, ``+inf`` where the layer is absent) and return a unit normal in
-view space (x right, y up, z towards the viewer). Orientation is not
-meaningful: the optics flip a normal to face the incident ray.
+Each rule (``imagespace.normals``) is one function; :func:`normal_at`
+dispatches on the rule's code. Each reads one layered depth image ``d``
+(view-space depth per pixel, ``+inf`` where the layer is absent) and returns
+a unit normal in view space (x right, y up, z towards the viewer).
+Orientation is not meaningful: the optics flip a normal to face the incident
+ray.
 
-``forward`` (eq. 3.1)
+``forward`` (eq. 3.1, :func:`normal_forward`)
     ``g_x = [1, 0, d(i+1, j) - d(i, j)]``, ``g_y = [0, 1, d(i, j+1) - d(i, j)]``,
     ``n = g_x x g_y``: one pixel is taken as one unit of depth, the crude
     estimate the thesis starts from.
-``central`` (eq. 3.2)
+``central`` (eq. 3.2, :func:`normal_central`)
     Perspective-corrected central differences with step ``delta``: each
     neighbour is unprojected to its view-space point ``p`` with its own
     depth, and ``grad_x d = (d(i+delta) - d(i-delta)) / (p(i+delta)_x -
     p(i-delta)_x)`` (likewise in y).
-``cross`` (beyond the thesis)
+``cross`` (beyond the thesis, :func:`normal_cross`)
     The same four reads as ``central``, but the normal is the cross
     product of the full 3D differences ``p(i+delta) - p(i-delta)`` and
     ``p(j+delta) - p(j-delta)``: eq. 3.2 neglects that, in perspective, a
     step along a pixel row also moves the point in y (and vice versa),
     which is what limits its accuracy away from the image centre.
-``mesh3x3`` (Fig. 3.4, right)
+``mesh3x3`` (Fig. 3.4, right, :func:`normal_mesh3x3`)
     The normal of the little mesh formed by the 3x3 neighbourhood's
     view-space points: the sum of the 8 triangle normals around the centre
     (9 texture reads instead of 4).
@@ -44,12 +46,15 @@ import numba as nb
 import numpy as np
 
 from ..camera import unproject_pixel
+from .knobs import CODES
 from .peel import layer_depth_lut
 
-__all__ = ["NORMAL_METHODS", "FILTERS", "ViewGrid", "normal_at", "normal_filtered", "sample_depth",
+__all__ = ["NORMAL_METHODS", "ViewGrid", "normal_at", "normal_forward", "normal_central", "normal_mesh3x3",
+           "normal_cross", "normal_filtered", "sample_depth",
            "layer_normals", "layer_depth", "no_lut"]
 
-NORMAL_METHODS = {"forward": 0, "central": 1, "mesh3x3": 2, "cross": 3}
+#: the kernels' code of each normal rule (``imagespace.normals``)
+NORMAL_METHODS = CODES["normals"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -91,143 +96,296 @@ def layer_depth(ldi, n, i, j, lut):
 
 
 @nb.njit(cache=True, inline="always")
-def _point(ldi, n, i, j, lut, W, H, sx, sy, ortho=False):
+def _point(ldi, n, i, j, lut, grid):
+    """The view-space point of layer ``n`` at texel (i, j)'s centre (unprojected with its own depth)."""
     d = layer_depth(ldi, n, i, j, lut)
-    return unproject_pixel(j + 0.5, i + 0.5, d, W, H, sx, sy, ortho)
+    return unproject_pixel(j + 0.5, i + 0.5, d, grid.W, grid.H, grid.sx, grid.sy, grid.ortho)
 
 
 @nb.njit(cache=True, inline="always")
-def normal_at(ldi, n, i, j, lut, method, delta, W, H, sx, sy, ortho=False):
-    """Unit view-space normal of depth image ``layer`` at pixel (i, j).
+def _unit(nx, ny, nz):
+    """``n / |n|`` as ``n * (1 / sqrt(n . n))``, the order every rule normalises in."""
+    s = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx * s, ny * s, nz * s
+
+
+@nb.njit(cache=True, inline="always")
+def normal_forward(ldi, n, i, j, lut):
+    """Forward differences (eq. 3.1): the unit normal ``g_x x g_y`` of layer ``n`` at texel (i, j).
+
+    ``g_x = [1, 0, d(i, j+1) - d(i, j)]`` and ``g_y = [0, 1, d(i-1, j) - d(i, j)]``
+    (the row above is +y): one pixel is taken as one unit of depth. A
+    difference to an absent neighbour is 0.
 
     Parameters
     ----------
-    ldi : (L, H, W) float64
-        Layered depth images.
+    ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
+    n : int
+        The layer.
+    i, j : int64
+        Row and column.
+    lut : tuple
+        On-the-fly peeling inputs (see :func:`layer_depth`).
+
+    Returns
+    -------
+    nx, ny, nz : float
+        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer.
+
+    References
+    ----------
+    Chaudhari 2008, eq. 3.1 (§3.5).
+    """
+    dc = layer_depth(ldi, n, i, j, lut)
+    if not math.isfinite(dc):
+        return 0.0, 0.0, 1.0
+    dr = layer_depth(ldi, n, i, j + 1, lut)
+    du = layer_depth(ldi, n, i - 1, j, lut)  # the row above is +y
+    gx = dr - dc if math.isfinite(dr) else 0.0
+    gy = du - dc if math.isfinite(du) else 0.0
+    return _unit(gx, gy, 1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def normal_central(ldi, n, i, j, lut, delta, grid):
+    """Perspective-corrected central differences (eq. 3.2): the unit normal of layer ``n`` at texel (i, j).
+
+    Each neighbour ``delta`` texels away is unprojected with its own depth,
+    and ``grad_x d = (d(j+delta) - d(j-delta)) / (p(j+delta)_x - p(j-delta)_x)``
+    (likewise in y); the surface ``z = -d(x, y)`` has the normal
+    ``(grad_x d, grad_y d, 1)``. Where a neighbour is absent the difference
+    is one-sided; where both are, that component is 0.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
+    n : int
+        The layer.
+    i, j : int64
+        Row and column.
+    lut : tuple
+        On-the-fly peeling inputs (see :func:`layer_depth`).
+    delta : int
+        Texel step of the differences.
+    grid : ViewGrid
+        The view the layers were rendered in (an orthographic one unprojects
+        without the perspective scaling, eq. 3.2 otherwise unchanged).
+
+    Returns
+    -------
+    nx, ny, nz : float
+        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer.
+
+    References
+    ----------
+    Chaudhari 2008, eq. 3.2 (§3.5).
+    """
+    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
+    dc = layer_depth(ldi, n, i, j, lut)
+    if not math.isfinite(dc):
+        return 0.0, 0.0, 1.0
+    # horizontal: x of the unprojected neighbours
+    jr, jl = j + delta, j - delta
+    dr = layer_depth(ldi, n, i, jr, lut)
+    dl = layer_depth(ldi, n, i, jl, lut)
+    if not math.isfinite(dr):
+        jr, dr = j, dc
+    if not math.isfinite(dl):
+        jl, dl = j, dc
+    gx = 0.0
+    if jr != jl:
+        xr = unproject_pixel(jr + 0.5, i + 0.5, dr, W, H, sx, sy, ortho)[0]
+        xl = unproject_pixel(jl + 0.5, i + 0.5, dl, W, H, sx, sy, ortho)[0]
+        if xr != xl:
+            gx = (dr - dl) / (xr - xl)
+    iu, idn = i - delta, i + delta
+    du = layer_depth(ldi, n, iu, j, lut)
+    dd = layer_depth(ldi, n, idn, j, lut)
+    if not math.isfinite(du):
+        iu, du = i, dc
+    if not math.isfinite(dd):
+        idn, dd = i, dc
+    gy = 0.0
+    if iu != idn:
+        yu = unproject_pixel(j + 0.5, iu + 0.5, du, W, H, sx, sy, ortho)[1]
+        yd = unproject_pixel(j + 0.5, idn + 0.5, dd, W, H, sx, sy, ortho)[1]
+        if yu != yd:
+            gy = (du - dd) / (yu - yd)
+    # surface z = -d(x, y): normal (dd/dx, dd/dy, 1)
+    return _unit(gx, gy, 1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def normal_cross(ldi, n, i, j, lut, delta, grid):
+    """The cross rule (beyond the thesis): the unit normal of layer ``n`` at texel (i, j).
+
+    The same four reads as eq. 3.2, but the normal is the cross product of
+    the full 3D differences ``p(j+delta) - p(j-delta)`` and
+    ``p(i-delta) - p(i+delta)`` of the unprojected neighbours: eq. 3.2
+    neglects that, in perspective, a step along a pixel row also moves the
+    point in y (and vice versa). An absent neighbour is replaced by the
+    centre texel.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
+    n : int
+        The layer.
+    i, j : int64
+        Row and column.
+    lut : tuple
+        On-the-fly peeling inputs (see :func:`layer_depth`).
+    delta : int
+        Texel step of the differences.
+    grid : ViewGrid
+        The view the layers were rendered in.
+
+    Returns
+    -------
+    nx, ny, nz : float
+        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer
+        or the differences are parallel.
+
+    References
+    ----------
+    Chaudhari 2008, eq. 3.2 (§3.5), its neighbours in 3D.
+    """
+    if not math.isfinite(layer_depth(ldi, n, i, j, lut)):
+        return 0.0, 0.0, 1.0
+    jr, jl, iu, idn = j + delta, j - delta, i - delta, i + delta
+    if not math.isfinite(layer_depth(ldi, n, i, jr, lut)):
+        jr = j
+    if not math.isfinite(layer_depth(ldi, n, i, jl, lut)):
+        jl = j
+    if not math.isfinite(layer_depth(ldi, n, iu, j, lut)):
+        iu = i
+    if not math.isfinite(layer_depth(ldi, n, idn, j, lut)):
+        idn = i
+    ax, ay, az = _point(ldi, n, i, jr, lut, grid)
+    bx, by, bz = _point(ldi, n, i, jl, lut, grid)
+    ux, uy, uz = ax - bx, ay - by, az - bz
+    ax, ay, az = _point(ldi, n, iu, j, lut, grid)
+    bx, by, bz = _point(ldi, n, idn, j, lut, grid)
+    vx, vy, vz = ax - bx, ay - by, az - bz
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    if nx == 0.0 and ny == 0.0 and nz == 0.0:
+        nz = 1.0
+    return _unit(nx, ny, nz)
+
+
+@nb.njit(cache=True, inline="always")
+def normal_mesh3x3(ldi, n, i, j, lut, grid):
+    """The 3x3 mesh (Fig. 3.4, right): the unit normal of layer ``n`` at texel (i, j).
+
+    The sum of the normals of the 8 triangles the centre's view-space point
+    forms with each pair of consecutive ring neighbours (counter-clockwise
+    on screen), skipping a triangle with an absent neighbour: 9 texture
+    reads instead of 4.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
+    n : int
+        The layer.
+    i, j : int64
+        Row and column.
+    lut : tuple
+        On-the-fly peeling inputs (see :func:`layer_depth`).
+    grid : ViewGrid
+        The view the layers were rendered in.
+
+    Returns
+    -------
+    nx, ny, nz : float
+        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer
+        or no triangle has all its corners.
+
+    References
+    ----------
+    Chaudhari 2008, Fig. 3.4 (§3.5).
+    """
+    if not math.isfinite(layer_depth(ldi, n, i, j, lut)):
+        return 0.0, 0.0, 1.0
+    cx, cy, cz = _point(ldi, n, i, j, lut, grid)
+    nx = 0.0
+    ny = 0.0
+    nz = 0.0
+    # ring of the 8 neighbours, counter-clockwise on screen
+    ri = (0, -1, -1, -1, 0, 1, 1, 1)
+    rj = (1, 1, 0, -1, -1, -1, 0, 1)
+    for k in range(8):
+        ai, aj = i + ri[k], j + rj[k]
+        bi, bj = i + ri[(k + 1) % 8], j + rj[(k + 1) % 8]
+        if not (math.isfinite(layer_depth(ldi, n, ai, aj, lut)) and math.isfinite(layer_depth(ldi, n, bi, bj, lut))):
+            continue
+        ax, ay, az = _point(ldi, n, ai, aj, lut, grid)
+        bx, by, bz = _point(ldi, n, bi, bj, lut, grid)
+        ux, uy, uz = ax - cx, ay - cy, az - cz
+        vx, vy, vz = bx - cx, by - cy, bz - cz
+        nx += uy * vz - uz * vy
+        ny += uz * vx - ux * vz
+        nz += ux * vy - uy * vx
+    if nx == 0.0 and ny == 0.0 and nz == 0.0:
+        nz = 1.0
+    return _unit(nx, ny, nz)
+
+
+@nb.njit(cache=True, inline="always")
+def normal_at(ldi, n, i, j, lut, normals, delta, grid):
+    """Unit view-space normal of layer ``n`` at texel (i, j) by the rule ``normals``.
+
+    Parameters
+    ----------
+    ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
     n : int
         The layer.
     i, j : int
         Row and column.
     lut : tuple
         On-the-fly peeling inputs (see :func:`layer_depth`).
-    method : int
-        0 forward (eq. 3.1), 1 central perspective-corrected (eq. 3.2),
-        2 3x3 mesh (Fig. 3.4), 3 cross product of central differences.
+    normals : int
+        The rule, a :data:`NORMAL_METHODS` code: 0 :func:`normal_forward`
+        (eq. 3.1), 1 :func:`normal_central` (eq. 3.2), 2
+        :func:`normal_mesh3x3` (Fig. 3.4), 3 :func:`normal_cross`.
     delta : int
-        Step of the central differences.
-    W, H, sx, sy :
-        Camera scalars (:meth:`Camera.kernel_args`).
-    ortho : bool
-        Orthographic view (a directional light's): neighbours unproject
-        without the perspective scaling, eq. 3.2 otherwise unchanged.
+        Step of the differences (``central``, ``cross``).
+    grid : ViewGrid
+        The view the layers were rendered in.
 
     Returns
     -------
     nx, ny, nz : float
+        ``(0, 0, 1)`` where the texel lacks the layer.
 
     References
     ----------
-    Chaudhari (2008), §3.5, eqs. 3.1 and 3.2, Fig. 3.4.
+    Chaudhari 2008, §3.5, eqs. 3.1 and 3.2, Fig. 3.4.
     """
     i = np.int64(i)  # a prange index may arrive unsigned; neighbour offsets need signed ints
     j = np.int64(j)
-    dc = layer_depth(ldi, n, i, j, lut)
-    if not math.isfinite(dc):
-        return 0.0, 0.0, 1.0
-    if method == 0:
-        dr = layer_depth(ldi, n, i, j + 1, lut)
-        du = layer_depth(ldi, n, i - 1, j, lut)  # the row above is +y
-        gx = dr - dc if math.isfinite(dr) else 0.0
-        gy = du - dc if math.isfinite(du) else 0.0
-        nx, ny, nz = gx, gy, 1.0
-    elif method == 1:
-        # horizontal: x of the unprojected neighbours
-        jr, jl = j + delta, j - delta
-        dr = layer_depth(ldi, n, i, jr, lut)
-        dl = layer_depth(ldi, n, i, jl, lut)
-        if not math.isfinite(dr):
-            jr, dr = j, dc
-        if not math.isfinite(dl):
-            jl, dl = j, dc
-        gx = 0.0
-        if jr != jl:
-            xr = unproject_pixel(jr + 0.5, i + 0.5, dr, W, H, sx, sy, ortho)[0]
-            xl = unproject_pixel(jl + 0.5, i + 0.5, dl, W, H, sx, sy, ortho)[0]
-            if xr != xl:
-                gx = (dr - dl) / (xr - xl)
-        iu, idn = i - delta, i + delta
-        du = layer_depth(ldi, n, iu, j, lut)
-        dd = layer_depth(ldi, n, idn, j, lut)
-        if not math.isfinite(du):
-            iu, du = i, dc
-        if not math.isfinite(dd):
-            idn, dd = i, dc
-        gy = 0.0
-        if iu != idn:
-            yu = unproject_pixel(j + 0.5, iu + 0.5, du, W, H, sx, sy, ortho)[1]
-            yd = unproject_pixel(j + 0.5, idn + 0.5, dd, W, H, sx, sy, ortho)[1]
-            if yu != yd:
-                gy = (du - dd) / (yu - yd)
-        # surface z = -d(x, y): normal (dd/dx, dd/dy, 1)
-        nx, ny, nz = gx, gy, 1.0
-    elif method == 3:
-        jr, jl, iu, idn = j + delta, j - delta, i - delta, i + delta
-        if not math.isfinite(layer_depth(ldi, n, i, jr, lut)):
-            jr = j
-        if not math.isfinite(layer_depth(ldi, n, i, jl, lut)):
-            jl = j
-        if not math.isfinite(layer_depth(ldi, n, iu, j, lut)):
-            iu = i
-        if not math.isfinite(layer_depth(ldi, n, idn, j, lut)):
-            idn = i
-        ax, ay, az = _point(ldi, n, i, jr, lut, W, H, sx, sy, ortho)
-        bx, by, bz = _point(ldi, n, i, jl, lut, W, H, sx, sy, ortho)
-        ux, uy, uz = ax - bx, ay - by, az - bz
-        ax, ay, az = _point(ldi, n, iu, j, lut, W, H, sx, sy, ortho)
-        bx, by, bz = _point(ldi, n, idn, j, lut, W, H, sx, sy, ortho)
-        vx, vy, vz = ax - bx, ay - by, az - bz
-        nx = uy * vz - uz * vy
-        ny = uz * vx - ux * vz
-        nz = ux * vy - uy * vx
-        if nx == 0.0 and ny == 0.0 and nz == 0.0:
-            nz = 1.0
-    else:
-        cx, cy, cz = _point(ldi, n, i, j, lut, W, H, sx, sy, ortho)
-        nx = 0.0
-        ny = 0.0
-        nz = 0.0
-        # ring of the 8 neighbours, counter-clockwise on screen
-        ri = (0, -1, -1, -1, 0, 1, 1, 1)
-        rj = (1, 1, 0, -1, -1, -1, 0, 1)
-        for k in range(8):
-            ai, aj = i + ri[k], j + rj[k]
-            bi, bj = i + ri[(k + 1) % 8], j + rj[(k + 1) % 8]
-            if not (math.isfinite(layer_depth(ldi, n, ai, aj, lut)) and math.isfinite(layer_depth(ldi, n, bi, bj, lut))):
-                continue
-            ax, ay, az = _point(ldi, n, ai, aj, lut, W, H, sx, sy, ortho)
-            bx, by, bz = _point(ldi, n, bi, bj, lut, W, H, sx, sy, ortho)
-            ux, uy, uz = ax - cx, ay - cy, az - cz
-            vx, vy, vz = bx - cx, by - cy, bz - cz
-            nx += uy * vz - uz * vy
-            ny += uz * vx - ux * vz
-            nz += ux * vy - uy * vx
-        if nx == 0.0 and ny == 0.0 and nz == 0.0:
-            nz = 1.0
-    s = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-    return nx * s, ny * s, nz * s
-
-
-#: depth-image sampling (``imagespace.filter``): kernel codes
-FILTERS = {"nearest": 0, "bilinear": 1}
+    if normals == 0:
+        return normal_forward(ldi, n, i, j, lut)
+    if normals == 1:
+        return normal_central(ldi, n, i, j, lut, delta, grid)
+    if normals == 3:
+        return normal_cross(ldi, n, i, j, lut, delta, grid)
+    return normal_mesh3x3(ldi, n, i, j, lut, grid)
 
 
 @nb.njit(cache=True, inline="always")
-def _footprint(ldi, n, r, c, lut, filt):
+def _footprint(ldi, n, r, c, lut, filter):
     """The texels a sample at screen position (r, c) reads, and its weights.
 
     Returns ``(i0, j0, k, fx, fy)``: the texels ``(i0 + a, j0 + b)`` for
     ``a, b < k``; ``k`` 2 (bilinear over the four texels around the position,
-    weights ``fx``, ``fy``) when ``filt`` is 1 and all four hold layer ``n``,
+    weights ``fx``, ``fy``) when ``filter`` is 1 and all four hold layer ``n``,
     else 1 (the texel under the position); ``k`` 0 when that texel is off
     screen or lacks the layer.
     """
@@ -239,7 +397,7 @@ def _footprint(ldi, n, r, c, lut, filt):
     j = np.int64(math.floor(c))
     if not math.isfinite(layer_depth(ldi, n, i, j, lut)):
         return i, j, 0, 0.0, 0.0
-    if filt == 0:
+    if filter == 0:
         return i, j, 1, 0.0, 0.0
     u = c - 0.5
     v = r - 0.5
@@ -255,14 +413,14 @@ def _footprint(ldi, n, r, c, lut, filt):
 
 
 @nb.njit(cache=True, inline="always")
-def sample_depth(ldi, n, r, c, lut, filt):
+def sample_depth(ldi, n, r, c, lut, filter):
     """Depth of layer ``n`` at screen position (row ``r``, column ``c``), pixel units.
 
     Texel (i, j) covers ``[i, i + 1) x [j, j + 1)``, its centre at
     ``(i + 0.5, j + 0.5)``; ``+inf`` off screen or where the texel under the
     position lacks the layer.
 
-    ``filt`` 0 (nearest): the texel under the position. 1 (bilinear, the
+    ``filter`` 0 (nearest): the texel under the position. 1 (bilinear, the
     hardware filtering of §3.4.2): the bilinear interpolation of the four
     texels around the position when all four hold layer ``n``, the nearest
     texel where any of them lacks it (a GPU would blend in the cleared value
@@ -280,8 +438,8 @@ def sample_depth(ldi, n, r, c, lut, filt):
         Screen position, row and column in pixel units.
     lut : tuple
         Depth source of :func:`layer_depth`.
-    filt : int
-        0 nearest, 1 bilinear.
+    filter : int
+        0 nearest, 1 bilinear (``CODES["filter"]``).
 
     Returns
     -------
@@ -292,7 +450,7 @@ def sample_depth(ldi, n, r, c, lut, filt):
     ----------
     Chaudhari (2008), §3.4.2 (hardware filtering) and §3.6.
     """
-    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
+    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filter)
     if k == 0:
         return np.inf
     out = 0.0
@@ -327,10 +485,10 @@ class ViewGrid(NamedTuple):
 
 
 @nb.njit(cache=True, inline="always")
-def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
+def normal_filtered(ldi, n, r, c, lut, normals, delta, grid, filter):
     """Unit view-space normal of layer ``n`` at screen position (row ``r``, column ``c``).
 
-    ``filt`` 0: the normal of the texel under the position (:func:`normal_at`
+    ``filter`` 0: the normal of the texel under the position (:func:`normal_at`
     at its centre). 1 (bilinear): the normals of the four texels around the
     position (each :func:`normal_at`), blended with the bilinear weights of
     :func:`sample_depth` and renormalised; the nearest texel's where any of
@@ -349,14 +507,14 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
         Screen position, pixel units (row, column).
     lut : tuple
         On-the-fly peeling inputs (:func:`no_lut` when unused).
-    method : int
+    normals : int
         :data:`NORMAL_METHODS` code.
     delta : int
         Texel offset of the differences.
     grid : ViewGrid
         The image the layers were rendered in.
-    filt : int
-        :data:`FILTERS` code.
+    filter : int
+        ``CODES["filter"]`` code (:mod:`~refraction_ref.imagespace.knobs`).
 
     Returns
     -------
@@ -367,8 +525,7 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
     ----------
     Chaudhari (2008), §3.4.2 (filtered reads), §3.5 (eq. 3.2), §3.6.
     """
-    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
-    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filt)
+    i0, j0, k, fx, fy = _footprint(ldi, n, r, c, lut, filter)
     if k == 0:
         return 0.0, 0.0, 1.0
     ox = 0.0
@@ -382,7 +539,7 @@ def normal_filtered(ldi, n, r, c, lut, method, delta, grid, filt):
         ry = 0.0
         rz = 0.0
         for b in range(k):
-            ax, ay, az = normal_at(ldi, n, i0 + a, j0 + b, lut, method, delta, W, H, sx, sy, ortho)
+            ax, ay, az = normal_at(ldi, n, i0 + a, j0 + b, lut, normals, delta, grid)
             if a == 0 and b == 0:
                 fx0, fy0, fz0 = ax, ay, az
             elif ax * fx0 + ay * fy0 + az * fz0 < 0.0:  # one orientation for the blend
@@ -428,17 +585,17 @@ def no_lut(shape):
 
 
 @nb.njit(cache=True, parallel=True)
-def _normals_kernel(ldi, lut, method, delta, W, H, sx, sy, out, ortho=False):
+def _normals_kernel(ldi, lut, normals, delta, grid, out):
     for i in nb.prange(ldi.shape[1]):
         for j in range(ldi.shape[2]):
             if math.isfinite(ldi[0, i, j]):
-                a, b, c = normal_at(ldi, 0, i, j, lut, method, delta, W, H, sx, sy, ortho)
+                a, b, c = normal_at(ldi, 0, i, j, lut, normals, delta, grid)
                 out[i, j, 0] = a
                 out[i, j, 1] = b
                 out[i, j, 2] = c
 
 
-def layer_normals(layer, camera, method="central", delta=1):
+def layer_normals(layer, camera, normals="central", delta=2):
     """Normals of one whole depth image, (H, W, 3) view space, NaN where the layer is absent.
 
     The per-pixel kernel :func:`normal_at` is what the tracer calls at
@@ -450,9 +607,9 @@ def layer_normals(layer, camera, method="central", delta=1):
         One layered depth image, view-space depth, ``+inf`` where absent.
     camera : Camera
         The view the depth image was rendered from (unprojection of pixels).
-    method : {'forward', 'central', 'mesh3x3', 'cross'}
-        Estimator (see the module docstring).
-    delta : int
+    normals : {'forward', 'central', 'mesh3x3', 'cross'}, default 'central'
+        The rule (``imagespace.normals``; see the module docstring).
+    delta : int, default 2
         Pixel step of the differences (``central`` and ``cross``).
 
     Returns
@@ -463,17 +620,17 @@ def layer_normals(layer, camera, method="central", delta=1):
     Raises
     ------
     ValueError
-        For an unknown ``method``.
+        For an unknown rule ``normals``.
 
     References
     ----------
     Chaudhari (2008), §3.5, eqs. 3.1, 3.2 and Fig. 3.4.
     """
-    if method not in NORMAL_METHODS:
-        raise ValueError(f"normals: unknown method {method!r}; choose one of {sorted(NORMAL_METHODS)}")
+    if normals not in NORMAL_METHODS:
+        raise ValueError(f"normals: unknown method {normals!r}; choose one of {sorted(NORMAL_METHODS)}")
     layer = np.ascontiguousarray(layer, dtype=np.float64)
     out = np.full(layer.shape + (3,), np.nan)
     W, H, sx, sy = camera.kernel_args()
-    _normals_kernel(layer[None], no_lut(layer.shape), NORMAL_METHODS[method], int(delta), W, H, sx, sy, out,
-                    bool(getattr(camera, "ortho", False)))
+    grid = ViewGrid(W, H, sx, sy, bool(getattr(camera, "ortho", False)))
+    _normals_kernel(layer[None], no_lut(layer.shape), NORMAL_METHODS[normals], int(delta), grid, out)
     return out

@@ -22,14 +22,13 @@ The same passes in a light's view make the photon pass (:func:`layered_trace`).
 
 from __future__ import annotations
 
-import time
 from typing import NamedTuple
 
 import numpy as np
 
 from ..camera import Camera
 from ..environment import environment_lookup
-from ..graph import Method, Stage, register_method, run_graph
+from ..graph import Method, Stage, method_renderer, register_method, run_stages
 from ..meshes import eye_inside, scene_geometry
 from ..optics import beer_lambert
 from ..raster import raster_setup
@@ -37,24 +36,23 @@ from ..validation import SceneError
 from ..warm import warmer
 from .depth_bounds import depth_bounds, global_bounds
 from .grid import at_pixels, grid_camera
-from .knobs import check_memory
+from .knobs import TRACE_KNOBS, TraceKnobs, check_memory, trace_knobs
 from .normals import layer_normals
 from .peel import POPCOUNT8, SELECT8, depth_complexity, peel_layers
 from .search_bounds import search_bounds
-from .trace import exit_thresholds, trace_layers
+from .trace import ImagespaceLayers, ImagespaceOptics, exit_thresholds, trace_layers
 from .voxelize import collect_depths, slice_bounds, voxelize_bitmask
 
-__all__ = ["render_imagespace", "check_materials", "layered_trace", "METHOD", "TRACE_KNOBS",
+__all__ = ["render_imagespace", "check_materials", "layered_trace", "METHOD", "TRACE_KNOBS", "VIEW_STAGES",
            "pass_minmax", "pass_voxelize", "pass_peel", "pass_reduce", "pass_trace",
-           "MinMax", "Voxels", "Layers", "Bounds"]
+           "MinMax", "Voxels", "Layers", "Bounds", "TraceKnobs", "trace_knobs", "ImagespaceOptics"]
 
-#: the knobs each pass reads (the eye's stages and the light's photon pass declare the same)
+#: the knobs each pass reads (the eye's stages and the light's photon pass declare the same; the trace's,
+#: :data:`TRACE_KNOBS`, are :func:`~refraction_ref.imagespace.knobs.trace_knobs`' own)
 MINMAX_KNOBS = ("depth",)
 VOXELIZE_KNOBS = ("depth", "slices", "slicing", "blend", "layers")
 PEEL_KNOBS = ("depth", "layers", "peeling", "slices", "peel_all")
 REDUCE_KNOBS = ("bounds", "mip_size", "bound_margin")
-TRACE_KNOBS = ("iterations", "normals", "delta", "tir", "max_interfaces", "layers", "exit_threshold", "slices",
-               "endpoint", "filter")
 
 
 def check_materials(geom):
@@ -210,18 +208,18 @@ def pass_minmax(geom, cam, p):
     Chaudhari (2008), §3.3.
     """
     tri_view = raster_setup(cam.world_to_view(geom.vertices), cam, faces=geom.faces)
-    mm = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
-    zmin, zmax, frags = mm if len(mm) == 3 else (*mm, None)
+    found = depth_bounds(tri_view, cam, keep_fragments=p["depth"] == "bitmask")
+    zmin, zmax, frags = found if len(found) == 3 else (*found, None)
     gmin, gmax = global_bounds(zmin, zmax)
     return MinMax(tri_view, zmin, zmax, frags, gmin, gmax)
 
 
-def pass_voxelize(mm, cam, p):
+def pass_voxelize(minmax, cam, p):
     """Bitmask voxelization (§3.3), or, for ``depth='float'``, the A-buffer of exact depths.
 
     Parameters
     ----------
-    mm : MinMax
+    minmax : MinMax
         The min/max pass of this view.
     cam : Camera
         The view.
@@ -240,22 +238,22 @@ def pass_voxelize(mm, cam, p):
     Chaudhari (2008), §3.3 (bitmask voxelization, Eisemann and Décoret 2006).
     """
     if p["depth"] == "bitmask":
-        zlo, zhi = slice_bounds(mm.zmin, mm.zmax, p["slicing"])
-        src = mm.tri_view if mm.frags is None else mm.frags
+        zlo, zhi = slice_bounds(minmax.zmin, minmax.zmax, p["slicing"])
+        src = minmax.tri_view if minmax.frags is None else minmax.frags
         bits = voxelize_bitmask(src, cam, zlo, zhi, int(p["slices"]), p["blend"])
         return Voxels(bits, zlo, zhi, None, None)
-    ldi, total = collect_depths(mm.tri_view, cam, int(p["layers"]))
+    ldi, total = collect_depths(minmax.tri_view, cam, int(p["layers"]))
     Lr = int(min(int(p["layers"]), total.max(initial=0)))
     # the grid the early-termination threshold counts in
-    return Voxels(None, mm.zmin, mm.zmax, np.ascontiguousarray(ldi[:Lr]), total)
+    return Voxels(None, minmax.zmin, minmax.zmax, np.ascontiguousarray(ldi[:Lr]), total)
 
 
-def pass_peel(vox, shape, p):
+def pass_peel(voxels, shape, p):
     """Layered depth images from the bitmask (§3.4.2), or the on-the-fly tables of §3.4.1.
 
     Parameters
     ----------
-    vox : Voxels
+    voxels : Voxels
         The voxelization pass of this view (only ``bits``, ``zlo``, ``zhi``
         are read for the bitmask; ``ldi``, ``total`` for ``depth='float'``).
     shape : (H, W)
@@ -274,17 +272,17 @@ def pass_peel(vox, shape, p):
     H, W = shape
     L = int(p["layers"])
     peel_all = bool(p["peel_all"])
-    if vox.bits is None:
-        ldi = vox.ldi
+    if voxels.bits is None:
+        ldi = voxels.ldi
         why = "the A-buffer is already sorted into layers"
         if peel_all and ldi.shape[0] < L:  # the thesis's fixed layer count: pad with absent layers
             ldi = np.concatenate([ldi, np.full((L - ldi.shape[0], H, W), np.inf, ldi.dtype)])
             why += f"; padded to all {L} layers (peel_all)"
-        return Layers(ldi, vox.total, None, False, why)
+        return Layers(ldi, voxels.total, None, False, why)
     S = int(p["slices"])
-    total = depth_complexity(vox.bits)
+    total = depth_complexity(voxels.bits)
     if p["peeling"] == "separate":
-        ldi, total = peel_layers(vox.bits, vox.zlo, vox.zhi, S, L, total, peel_all=peel_all)
+        ldi, total = peel_layers(voxels.bits, voxels.zlo, voxels.zhi, S, L, total, peel_all=peel_all)
         why = (f"all {L} layers peeled (peel_all, §3.4.2): the scene's depth complexity is "
                f"{int(total.max(initial=0))}" if peel_all else
                f"{ldi.shape[0]} layers peeled: the scene's depth complexity is "
@@ -292,18 +290,19 @@ def pass_peel(vox, shape, p):
         return Layers(ldi, total, None, True, why)
     Lr = L if peel_all else int(min(L, total.max(initial=0)))
     ldi = np.broadcast_to(np.float32(np.inf), (Lr, H, W))
-    lut = (True, vox.bits, np.ascontiguousarray(vox.zlo), np.ascontiguousarray(vox.zhi), S, POPCOUNT8, SELECT8)
+    lut = (True, voxels.bits, np.ascontiguousarray(voxels.zlo), np.ascontiguousarray(voxels.zhi), S, POPCOUNT8,
+           SELECT8)
     return Layers(ldi, total, lut, False, "on-the-fly peeling with 8-bit look-up tables during the trace (§3.4.1)")
 
 
-def pass_reduce(mm, peel, p):
+def pass_reduce(minmax, layers, p):
     """Search bounds per layer (§3.7).
 
     Parameters
     ----------
-    mm : MinMax
+    minmax : MinMax
         The min/max pass of this view (only ``gmin``, ``gmax`` are read).
-    peel : Layers
+    layers : Layers
         The peeling pass of this view (only ``ldi``, ``lut`` are read).
     p : dict
         The ``imagespace`` knobs (reads :data:`REDUCE_KNOBS`).
@@ -316,39 +315,38 @@ def pass_reduce(mm, peel, p):
     ----------
     Chaudhari (2008), §3.7 (the MIP max-reduction of each layer).
     """
-    L = peel.ldi.shape[0]
-    if peel.lut is not None:
+    L = layers.ldi.shape[0]
+    if layers.lut is not None:
         # no LDI to reduce: the exact global bound serves every layer
-        return Bounds(np.full(L, mm.gmax), np.full(L, mm.gmin),
+        return Bounds(np.full(L, minmax.gmax), np.full(L, minmax.gmin),
                       "on-the-fly peeling has no LDI: the global Zmax bounds every layer")
-    margin = float(p["bound_margin"]) * (mm.gmax - mm.gmin) if np.isfinite(mm.gmax) else 0.0
-    bhi, blo = search_bounds(peel.ldi, p["bounds"], int(p["mip_size"]), margin)
+    margin = float(p["bound_margin"]) * (minmax.gmax - minmax.gmin) if np.isfinite(minmax.gmax) else 0.0
+    bhi, blo = search_bounds(layers.ldi, p["bounds"], int(p["mip_size"]), margin)
     why = (f"max-reduction of the {p['mip_size']}x{p['mip_size']} MIP level + margin {margin:.3g} (§3.7)"
            if p["bounds"] == "mip" else "exact per-layer maxima")
     return Bounds(bhi, blo, why)
 
 
-def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0, image=None):
+def pass_trace(minmax, voxels, layers, bounds, cam, knobs, optics, image=None):
     """Every pixel's ray through the layers (§3.6-3.7), world space (:func:`trace_layers`).
 
     Parameters
     ----------
-    mm : MinMax
+    minmax : MinMax
         The min/max pass (``zmax``: the backmost depth of early termination).
-    vox : Voxels
+    voxels : Voxels
         The voxelization pass (``zlo``, ``zhi``: the grid the exit threshold counts slices in).
-    peel : Layers
+    layers : Layers
         The layers (``ldi``, ``total``, ``lut``).
-    red : Bounds
+    bounds : Bounds
         The search bounds per layer.
     cam : Camera
         The view.
-    p : dict
-        The ``imagespace`` knobs (reads :data:`TRACE_KNOBS`).
-    ior, outside : float
+    knobs : TraceKnobs
+        The trace's knobs (:func:`~refraction_ref.imagespace.knobs.trace_knobs`; ``record``: events kept
+        per path, ``path_pos``, ``path_dir``).
+    optics : ImagespaceOptics or (ior, outside_ior)
         Object and surrounding indices.
-    record : int, default 0
-        Events kept per path (``path_pos``, ``path_dir``).
     image : Camera, optional
         The image casting one ray per pixel when the grid (``cam``) has another size
         (``imagespace.grid``); default ``cam``.
@@ -363,13 +361,65 @@ def pass_trace(mm, vox, peel, red, cam, p, ior, outside, record=0, image=None):
     Chaudhari (2008), §3.6 (binary search, Snell at every interface), §3.7 (search bounds, early
     termination), §3.8 (path length); Oliveira and Brauwers (2007).
     """
-    thr = exit_thresholds(vox.zlo, vox.zhi, int(p["slices"]), p["exit_threshold"])
-    kw = {"record": int(record)} if record else {}
-    return trace_layers(peel.ldi, peel.total, mm.zmax, thr, red.bounds_hi, red.bounds_lo, None,
-                        cam, ior=ior, outside_ior=outside, world=True, iterations=int(p["iterations"]),
-                        normals=p["normals"], delta=int(p["delta"]), tir=bool(p["tir"]),
-                        max_interfaces=int(p["max_interfaces"]), layer_limit=int(p["layers"]), lut=peel.lut,
-                        endpoint=p["endpoint"], filter=p["filter"], image=image, **kw)
+    thr = exit_thresholds(voxels.zlo, voxels.zhi, knobs.slices, knobs.exit_threshold)
+    stack = ImagespaceLayers(layers.ldi, layers.total, minmax.zmax, thr, bounds.bounds_hi, bounds.bounds_lo)
+    return trace_layers(stack, cam, knobs, ImagespaceOptics(*optics), lut=layers.lut, world=True, image=image)
+
+
+# --------------------------------------------------------------------- the passes in any view
+def _view_minmax(ctx):
+    view = ctx.buf["input"]
+    ctx.note("per-pixel Zmin/Zmax (§3.3)")
+    return pass_minmax(view["geom"], view["cam"], view["p"])._asdict()
+
+
+def _view_voxelize(ctx):
+    view = ctx.buf["input"]
+    p = view["p"]
+    voxels = pass_voxelize(from_buffers(MinMax, ctx.buf["minmax"]), view["cam"], p)
+    ctx.note("float depth: exact fragment depths (A-buffer)" if voxels.bits is None
+             else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending")
+    return voxels._asdict()
+
+
+def _view_peel(ctx):
+    view = ctx.buf["input"]
+    layers = pass_peel(from_buffers(Voxels, ctx.buf["voxelize"]), view["cam"].shape, view["p"])
+    ctx.ran = layers.ran
+    ctx.note(layers.why)
+    return layers._asdict()
+
+
+def _view_reduce(ctx):
+    layers = from_buffers(Layers, ctx.buf["peel"])
+    bounds = pass_reduce(from_buffers(MinMax, ctx.buf["minmax"]), layers, ctx.buf["input"]["p"])
+    ctx.ran = layers.lut is None  # on-the-fly peeling has no LDI to reduce
+    ctx.note(bounds.why)
+    return bounds._asdict()
+
+
+def _view_trace(ctx):
+    view = ctx.buf["input"]
+    b = ctx.buf
+    trace = pass_trace(from_buffers(MinMax, b["minmax"]), from_buffers(Voxels, b["voxelize"]),
+                       from_buffers(Layers, b["peel"]), from_buffers(Bounds, b["reduce"]), view["cam"],
+                       trace_knobs(view["p"]), view["optics"])  # a light's photons keep no paths (record 0)
+    ctx.note(f"{view['p']['iterations']} binary-search iterations")
+    return {"trace": trace}
+
+
+#: the passes of chapter 3 in one view, on the buffers ``geom``, ``cam``, ``p`` (the ``imagespace`` knobs) and
+#: ``optics`` (:func:`layered_trace`; :func:`refraction_ref.graph.run_stages` runs them)
+VIEW_STAGES = (
+    Stage("minmax", _view_minmax, after=("input",), makes=MinMax._fields, doc="per-pixel Zmin/Zmax (§3.3)"),
+    Stage("voxelize", _view_voxelize, after=("input", "minmax"), makes=Voxels._fields,
+          doc="bitmask voxelization (§3.3)"),
+    Stage("peel", _view_peel, after=("input", "voxelize"), makes=Layers._fields, doc="layered depth images (§3.4)"),
+    Stage("reduce", _view_reduce, after=("input", "minmax", "peel"), makes=Bounds._fields,
+          doc="search bounds per layer (§3.7)"),
+    Stage("trace", _view_trace, after=("input", "minmax", "voxelize", "peel", "reduce"), makes=("trace",),
+          doc="binary search + Snell at every interface (§3.6-3.7)"),
+)
 
 
 def layered_trace(geom, cam, p, ior, outside, timings, plan):
@@ -378,7 +428,8 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
     The passes of chapter 3 for any view of the refractive objects: the
     eye's (perspective), or a light's (perspective for a point light,
     orthographic for a directional one: the photon pass of §4.1, which
-    traces one photon per texel with the very same kernels).
+    traces one photon per texel with the very same kernels). They run as
+    :data:`VIEW_STAGES` through :func:`refraction_ref.graph.run_stages`.
 
     Parameters
     ----------
@@ -399,33 +450,18 @@ def layered_trace(geom, cam, p, ior, outside, timings, plan):
         (H, W) layers per pixel, ``ldi``, ``zmin``, ``zmax`` (the min/max
         pass: ``zmin`` doubles as a shadow map in a light's view),
         ``pixels_over_layer_limit``.
+
+    References
+    ----------
+    Chaudhari (2008), §3.3-3.7 (the passes), §4.1 (the photon pass in a light's view).
     """
-    tic = time.perf_counter
-    t0 = tic()
-    mm = pass_minmax(geom, cam, p)
-    timings["minmax"] = (tic() - t0) * 1e3
-    plan.append({"stage": "minmax", "ran": True, "why": "per-pixel Zmin/Zmax (§3.3)"})
-    t0 = tic()
-    vox = pass_voxelize(mm, cam, p)
-    timings["voxelize"] = (tic() - t0) * 1e3
-    plan.append({"stage": "voxelize", "ran": True, "why": "float depth: exact fragment depths (A-buffer)"
-                 if vox.bits is None else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending"})
-    t0 = tic()
-    pl = pass_peel(vox, cam.shape, p)
-    timings["peel"] = (tic() - t0) * 1e3
-    plan.append({"stage": "peel", "ran": pl.ran, "why": pl.why})
-    t0 = tic()
-    red = pass_reduce(mm, pl, p)
-    timings["reduce"] = (tic() - t0) * 1e3
-    plan.append({"stage": "reduce", "ran": pl.lut is None, "why": red.why})
-    t0 = tic()
-    tr = pass_trace(mm, vox, pl, red, cam, p, ior, outside)
-    timings["trace"] = (tic() - t0) * 1e3
-    plan.append({"stage": "trace", "ran": True, "why": f"{p['iterations']} binary-search iterations"})
-    total = pl.total
+    view = {"geom": geom, "cam": cam, "p": p, "optics": ImagespaceOptics(ior, outside)}
+    bufs = run_stages(VIEW_STAGES, view, timings=timings, plan=plan)
+    layers = bufs["peel"]
+    total = layers["total"]
     n_over = int(np.count_nonzero(total > int(p["layers"])))
-    return {"trace": tr, "total": total, "ldi": pl.ldi, "zmin": mm.zmin, "zmax": mm.zmax,
-            "pixels_over_layer_limit": n_over}
+    return {"trace": bufs["trace"]["trace"], "total": total, "ldi": layers["ldi"], "zmin": bufs["minmax"]["zmin"],
+            "zmax": bufs["minmax"]["zmax"], "pixels_over_layer_limit": n_over}
 
 
 # --------------------------------------------------------------------- the eye's stages
@@ -457,48 +493,48 @@ def _st_minmax(ctx):
                          "outside the objects")
     p = ctx.scene.data["imagespace"]
     gcam = grid_camera(cam, p["grid"])  # the grid's passes: the image's view, the grid's pixel count
-    mm = pass_minmax(g["geom"], gcam, p)
+    minmax = pass_minmax(g["geom"], gcam, p)
     ctx.note("per-pixel Zmin/Zmax (§3.3)" if gcam is cam else
              f"per-texel Zmin/Zmax of a {gcam.width}x{gcam.height} grid (§3.3; imagespace.grid)")
-    return dict(mm._asdict(), cam=gcam, image_cam=cam)
+    return dict(minmax._asdict(), cam=gcam, image_cam=cam)
 
 
 def _st_voxelize(ctx):
     p = ctx.scene.data["imagespace"]
-    mm = ctx.buf["minmax"]
-    vox = pass_voxelize(from_buffers(MinMax, mm), mm["cam"], p)
-    ctx.note("float depth: exact fragment depths kept per pixel (A-buffer), no bitmask" if vox.bits is None
+    minmax = ctx.buf["minmax"]
+    voxels = pass_voxelize(from_buffers(MinMax, minmax), minmax["cam"], p)
+    ctx.note("float depth: exact fragment depths kept per pixel (A-buffer), no bitmask" if voxels.bits is None
              else f"{p['slices']} slices, {p['slicing']} bounds, {p['blend']} blending (§3.3)")
-    return vox._asdict()
+    return voxels._asdict()
 
 
 def _st_peel(ctx):
     p = ctx.scene.data["imagespace"]
-    pl = pass_peel(from_buffers(Voxels, ctx.buf["voxelize"]), ctx.buf["minmax"]["cam"].shape, p)
-    ctx.note(pl.why)
-    total = pl.total
-    ctx.stats.update({"layers_used": int(pl.ldi.shape[0]),
+    layers = pass_peel(from_buffers(Voxels, ctx.buf["voxelize"]), ctx.buf["minmax"]["cam"].shape, p)
+    ctx.note(layers.why)
+    total = layers.total
+    ctx.stats.update({"layers_used": int(layers.ldi.shape[0]),
                       "pixels_over_layer_limit": int(np.count_nonzero(total > int(p["layers"]))),
                       "depth_complexity_max": int(total.max(initial=0))})
-    return dict(pl._asdict(), depth_complexity=total.astype(np.int16))
+    return dict(layers._asdict(), depth_complexity=total.astype(np.int16))
 
 
 def _st_reduce(ctx):
-    red = pass_reduce(from_buffers(MinMax, ctx.buf["minmax"]), from_buffers(Layers, ctx.buf["peel"]),
-                      ctx.scene.data["imagespace"])
-    ctx.note(red.why)
-    return red._asdict()
+    bounds = pass_reduce(from_buffers(MinMax, ctx.buf["minmax"]), from_buffers(Layers, ctx.buf["peel"]),
+                         ctx.scene.data["imagespace"])
+    ctx.note(bounds.why)
+    return bounds._asdict()
 
 
 def _st_normals(ctx):
     """Per-layer normal maps, as the trace's normal rule gives them at pixel centres (§3.5)."""
     p = ctx.scene.data["imagespace"]
     cam = ctx.buf["minmax"]["cam"]
-    pl = ctx.buf["peel"]
-    ldi = pl["ldi"]
-    if pl["lut"] is not None:  # on-the-fly peeling: materialise the layers to show their normals
-        vox = ctx.buf["voxelize"]
-        ldi, _ = peel_layers(vox["bits"], vox["zlo"], vox["zhi"], int(p["slices"]), int(p["layers"]),
+    layers = ctx.buf["peel"]
+    ldi = layers["ldi"]
+    if layers["lut"] is not None:  # on-the-fly peeling: materialise the layers to show their normals
+        voxels = ctx.buf["voxelize"]
+        ldi, _ = peel_layers(voxels["bits"], voxels["zlo"], voxels["zhi"], int(p["slices"]), int(p["layers"]),
                              peel_all=bool(p["peel_all"]))
     out = np.full(ldi.shape + (3,), np.nan)
     for k in range(ldi.shape[0]):
@@ -511,14 +547,15 @@ def _st_trace(ctx):
     p = ctx.scene.data["imagespace"]
     g = ctx.buf["geometry"]
     b = ctx.buf
-    tr = pass_trace(from_buffers(MinMax, b["minmax"]), from_buffers(Voxels, b["voxelize"]),
-                    from_buffers(Layers, b["peel"]), from_buffers(Bounds, b["reduce"]), b["minmax"]["cam"], p,
-                    g["ior"], g["outside_ior"], record=int(p["record"]), image=b["minmax"]["image_cam"])
+    trace = pass_trace(from_buffers(MinMax, b["minmax"]), from_buffers(Voxels, b["voxelize"]),
+                       from_buffers(Layers, b["peel"]), from_buffers(Bounds, b["reduce"]), b["minmax"]["cam"],
+                       trace_knobs(p, int(p["record"])), ImagespaceOptics(g["ior"], g["outside_ior"]),
+                       image=b["minmax"]["image_cam"])
     ctx.note(f"{p['iterations']} binary-search iterations per interface ending at the "
              + ("last probe's texel (§3.6)" if p["endpoint"] == "probe" else "final bracket's midpoint")
              + f", {p['filter']} depth sampling, {p['normals']} normals"
              + (", total internal reflection followed" if p["tir"] else ""))
-    out = dict(tr)
+    out = dict(trace)
     out.setdefault("path_pos", None)
     out.setdefault("path_dir", None)
     return out
@@ -531,11 +568,11 @@ def _st_rays(ctx):
 
 def _st_shade(ctx):
     g = ctx.buf["geometry"]
-    tr = ctx.buf["trace"]
+    trace = ctx.buf["trace"]
     sc = ctx.scene
-    image = environment_lookup(sc.data["environment"], tr["last_dir"], sc.base_dir)
+    image = environment_lookup(sc.data["environment"], trace["last_dir"], sc.base_dir)
     if np.any(g["absorption"] > 0):
-        trans = beer_lambert(g["absorption"], tr["path_length"], g["ior"])
+        trans = beer_lambert(g["absorption"], trace["path_length"], g["ior"])
         image = (image * trans).astype(np.float32)
         ctx.note("environment look-up; I = I0 exp(-alpha l eta) (§3.8)")
     else:
@@ -590,16 +627,16 @@ def _skipped(scene):
 
 
 def _assemble(scene, bufs, stats):
-    tr = bufs["trace"]
+    trace = bufs["trace"]
     arrays = {
         "ray_origin": bufs["rays"]["ray_origin"],
         "ray_dir": bufs["rays"]["ray_dir"],
-        "hit": tr["status"] != 0,
-        "exit_pos": tr["exit_pos"],
-        "exit_dir": tr["exit_dir"],
-        "interfaces": tr["interfaces"],
-        "path_length": tr["path_length"],
-        "status": tr["status"],
+        "hit": trace["status"] != 0,
+        "exit_pos": trace["exit_pos"],
+        "exit_dir": trace["exit_dir"],
+        "interfaces": trace["interfaces"],
+        "path_length": trace["path_length"],
+        "status": trace["status"],
         "image": bufs["shade"]["image"],
         # per image pixel: the grid texel under its centre (imagespace.grid)
         "depth_complexity": at_pixels(bufs["peel"]["depth_complexity"], bufs["rays"]["ray_dir"].shape[:2]),
@@ -629,32 +666,6 @@ METHOD = register_method(Method(
     doc="Chaudhari (2008): bitmask voxelization, peeled LDIs, gradient normals, 5-step binary search"))
 
 
-def render_imagespace(scene, *, cache=None, keep=None, warm=True, progress=False):
-    """Render a scene with the image-space method (runs :data:`METHOD`'s stage graph).
-
-    Parameters
-    ----------
-    scene : Scene
-        A validated scene (:func:`~refraction_ref.scene.load_scene`).
-    cache : dict, optional
-        Stage cache (:class:`~refraction_ref.session.Session` keeps one).
-    keep : str or list, optional
-        Stages whose buffers to return as ``stage.<stage>.<buffer>``.
-    warm : bool
-        Compile (or load from the cache) every kernel on a tiny scene first,
-        so that ``timings_ms`` measure run time, not JIT time.
-    progress : bool
-        Show a progress bar on long work.
-
-    Returns
-    -------
-    arrays : dict
-        The per-pixel keys of ``docs/oracle.md`` plus ``depth_complexity``.
-    info : dict
-        ``timings_ms``, ``plan`` and method statistics for ``meta``.
-
-    References
-    ----------
-    Chaudhari (2008), chapter 3.
-    """
-    return run_graph(METHOD, scene, cache=cache, keep=keep, progress=progress, warm=warm)
+render_imagespace = method_renderer(
+    METHOD, "render_imagespace",
+    "Render a scene with the image-space method (Chaudhari 2008, ch. 3): :data:`METHOD`'s stage graph.")

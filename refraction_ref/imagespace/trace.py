@@ -74,12 +74,10 @@ from ..schedule import coprime_stride, strided
 from ..status import EXITED, LIMIT, LOST, MISSED, TIR
 from .normals import ViewGrid, layer_depth, normal_filtered, sample_depth
 
-__all__ = ["trace_layers", "exit_thresholds", "ENDPOINTS"]
+__all__ = ["trace_layers", "exit_thresholds", "ImagespaceLayers", "ImagespaceOptics", "ImagespaceRays",
+           "ImagespaceFrame", "ImagespaceOutputs"]
 
 _PARALLEL_EPS = 1e-9  # |dd/dt| below this: the ray is parallel to the image plane
-
-#: where a search ends (``imagespace.endpoint``): kernel codes
-ENDPOINTS = {"probe": 0, "bracket": 1}
 
 
 @nb.njit(cache=True, inline="always")
@@ -94,12 +92,12 @@ def _screen(x, y, z, W, H, sx, sy, ortho=False):
 
 
 @nb.njit(cache=True, inline="always")
-def _behind(ldi, n, x, y, z, forward, lut, grid, filt):
+def _behind(ldi, n, x, y, z, forward, lut, grid, filter):
     """Has the point crossed layer n (beyond it in the direction of travel)?"""
     r, c = _screen(x, y, z, grid.W, grid.H, grid.sx, grid.sy, grid.ortho)
     if r < 0.0:
         return False
-    ls = sample_depth(ldi, n, r, c, lut, filt)
+    ls = sample_depth(ldi, n, r, c, lut, filter)
     if not math.isfinite(ls):
         return False
     if forward:
@@ -119,39 +117,51 @@ def _store(out, i, j, x, y, z, frame, m, t, point):
         out[i, j, 2] = z
 
 
-class _Layers(NamedTuple):
-    """The layered depth images and what the search reads beside them (§3.3-3.7).
+class ImagespaceLayers(NamedTuple):
+    """The layered depth images and what the search reads beside them (§3.3-3.7): :func:`trace_layers`' input.
 
     The on-the-fly peeling inputs (``lut``) travel beside it, not in it: a
     parallel loop's outlined body takes a tuple argument's fields one level
     deep, and ``lut`` is itself a tuple.
+
+    Attributes
+    ----------
+    ldi : (L, H, W) float32 (or float64)
+        Layer depths (``+inf`` where absent).
+    total : (H, W) int
+        Layers per pixel before the layer limit (the last one is the backmost).
+    zback : (H, W) float64
+        Backmost depth per pixel (Zmax of the min/max pass).
+    thr : (H, W) float64
+        Early-termination threshold in depth units (:func:`exit_thresholds`).
+    bounds_hi, bounds_lo : (L,) float64
+        Forward and backward search bounds per layer
+        (:func:`~refraction_ref.imagespace.search_bounds.search_bounds`).
     """
 
-    ldi: np.ndarray  # (L, H, W) layer depths, +inf where absent
-    total: np.ndarray  # (H, W) int32 layers per pixel
-    zback: np.ndarray  # (H, W) backmost depth
-    thr: np.ndarray  # (H, W) early-termination threshold
-    bounds_hi: np.ndarray  # (L,) forward search bounds
-    bounds_lo: np.ndarray  # (L,) backward search bounds
+    ldi: np.ndarray
+    total: np.ndarray
+    zback: np.ndarray
+    thr: np.ndarray
+    bounds_hi: np.ndarray
+    bounds_lo: np.ndarray
 
 
-class _Knobs(NamedTuple):
-    """Optics and search settings of one trace."""
+class ImagespaceOptics(NamedTuple):
+    """The indices of refraction a trace refracts with: the objects' and their surroundings'."""
 
     ior: float
     outside_ior: float
-    iterations: int
-    nmethod: int  # normals.NORMAL_METHODS code
-    delta: int
-    tir: bool
-    max_events: int
-    layer_limit: int
-    record: int  # events kept per pixel in path_pos / path_dir (0: none)
-    endpoint: int  # ENDPOINTS code: 0 the last probe's surface point (§3.6), 1 the final bracket's midpoint
-    filt: int  # normals.FILTERS code: 0 nearest texel, 1 bilinear (§3.4.2)
 
 
-class _Frame(NamedTuple):
+class ImagespaceRays(NamedTuple):
+    """The rays a trace casts: the image's own primary rays (``own``), or the given directions ``dirs``."""
+
+    dirs: np.ndarray  # (Hi, Wi, 3) view-space unit directions; (1, 1, 3) unused when own
+    own: bool
+
+
+class ImagespaceFrame(NamedTuple):
     """Frame the outputs are written in: ``world`` applies ``x @ rot + t``."""
 
     world: bool
@@ -159,21 +169,21 @@ class _Frame(NamedTuple):
     t: np.ndarray  # (3,)
 
 
-class _Outputs(NamedTuple):
+class ImagespaceOutputs(NamedTuple):
     """Arrays the kernel fills (see :func:`trace_layers`, Returns)."""
 
     exit_pos: np.ndarray
     exit_dir: np.ndarray
     last_dir: np.ndarray
     interfaces: np.ndarray
-    path_len: np.ndarray
+    path_length: np.ndarray
     status: np.ndarray
     path_pos: np.ndarray  # (H, W, K, 3); (1, 1, 1, 3) unused when record is 0
     path_dir: np.ndarray
 
 
 @nb.njit(cache=True, inline="always")
-def _bisect(ldi, t, p, e, forward, lut, grid, filt, iterations):
+def _bisect(ldi, t, p, e, forward, lut, grid, filter, iterations):
     """The binary search between S = p and E = e (Oliveira & Brauwers 2007; Chaudhari 2008, §3.6).
 
     Returns the final bracket ``(a, b)`` (fractions of the way from S to E),
@@ -189,7 +199,7 @@ def _bisect(ldi, t, p, e, forward, lut, grid, filt, iterations):
     for _ in range(iterations):
         m = 0.5 * (a + b)
         if _behind(ldi, t, px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz),
-                   forward, lut, grid, filt):
+                   forward, lut, grid, filter):
             b = m
             found = True
         else:
@@ -198,7 +208,7 @@ def _bisect(ldi, t, p, e, forward, lut, grid, filt, iterations):
 
 
 @nb.njit(cache=True, inline="always")
-def _probe_hit(ldi, t, p, e, m, lut, grid, filt):
+def _probe_hit(ldi, t, p, e, m, lut, grid, filter):
     """``endpoint='probe'`` (§3.6): the surface point R_n of layer ``t`` at the last probe's texel.
 
     The point of the line of sight through the last probe P_n (at ``m``
@@ -212,7 +222,7 @@ def _probe_hit(ldi, t, p, e, m, lut, grid, filt):
     W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     qx, qy, qz = px + m * (ex - px), py + m * (ey - py), pz + m * (ez - pz)
     rq, cq = _screen(qx, qy, qz, W, H, sx, sy, ortho)
-    dq = sample_depth(ldi, t, rq, cq, lut, filt) if rq >= 0.0 else np.inf
+    dq = sample_depth(ldi, t, rq, cq, lut, filter) if rq >= 0.0 else np.inf
     if not math.isfinite(dq):
         return False, qx, qy, qz, rq, cq
     qx, qy, qz = unproject_pixel(cq, rq, dq, W, H, sx, sy, ortho)
@@ -220,7 +230,7 @@ def _probe_hit(ldi, t, p, e, m, lut, grid, filt):
 
 
 @nb.njit(cache=True, inline="always")
-def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filt):
+def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filter):
     """``endpoint='bracket'``: the midpoint of the final bracket ``ab = (a, b)``, with two fallbacks.
 
     ``E`` is tested when no probe crossed the layer; the bracket's far end
@@ -233,7 +243,7 @@ def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filt):
     a, b = ab
     W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     if not found:
-        found = _behind(ldi, t, ex, ey, ez, forward, lut, grid, filt)
+        found = _behind(ldi, t, ex, ey, ez, forward, lut, grid, filter)
     if not found:
         return False, 0.0, 0.0, 0.0, -1.0, -1.0
     m = 0.5 * (a + b)
@@ -247,7 +257,7 @@ def _bracket_hit(ldi, t, p, e, ab, found, forward, lut, grid, filt):
 
 
 @nb.njit(cache=True, inline="always")
-def _first_layer(ldi, i, j, image, grid, lut, filt):
+def _first_layer(ldi, i, j, image, grid, lut, filter):
     """Layer 0 where pixel (i, j)'s primary ray meets it: ``(depth, row, col)`` of the grid position.
 
     On a grid of the image's size the pixel's own texel; on another grid
@@ -260,24 +270,24 @@ def _first_layer(ldi, i, j, image, grid, lut, filt):
         return layer_depth(ldi, np.int64(0), i, j, lut), i + 0.5, j + 0.5  # int64: one signature
     rg = (i + 0.5) * grid.H / image.H
     cg = (j + 0.5) * grid.W / image.W
-    return sample_depth(ldi, np.int64(0), rg, cg, lut, filt), rg, cg
+    return sample_depth(ldi, np.int64(0), rg, cg, lut, filter), rg, cg
 
 
 @nb.njit(cache=True, parallel=True)
-def _trace_kernel(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out):
+def _trace_kernel(layers, lut, rays, image, grid, knobs, optics, frame, out):
     Hi = image.H
     step = coprime_stride(Hi)
     for r in nb.prange(Hi):
         # rows spread over the threads (see ..schedule); a row is an ordinary call, not inlined into the
         # parallel loop: Numba's parfor passes on the inlined search and normals took minutes to compile
-        _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, strided(r, step, Hi))
+        _trace_row(layers, lut, rays, image, grid, knobs, optics, frame, out, strided(r, step, Hi))
 
 
 # _nrt=False: the row allocates nothing, and the kernel's caller holds every array it reads. With reference
 # counting, each array taken out of a tuple or sliced in the search's inner loops is an atomic incref/decref
 # pair (the parallel loop's outlined body gets arrays without them): the row ran 4x slower.
 @nb.njit(cache=True, _nrt=False)
-def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
+def _trace_row(layers, lut, rays, image, grid, knobs, optics, frame, out, i):
     """Trace the primary rays of image row ``i`` (see :func:`trace_layers`); the helpers inline here."""
     # the named tuples unpacked by name (a reordered field cannot swap two arguments)
     ldi, total, zback, thr = layers.ldi, layers.total, layers.zback, layers.thr
@@ -285,12 +295,14 @@ def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
     # the rays are the image's pixels; the layers, projections and normals are the grid's
     Wi, Hi, isx, isy = image.W, image.H, image.sx, image.sy
     ortho = grid.ortho
-    ior, outside_ior, iterations, nmethod = knobs.ior, knobs.outside_ior, knobs.iterations, knobs.nmethod
-    delta, tir, max_events, layer_limit, rec = knobs.delta, knobs.tir, knobs.max_events, knobs.layer_limit, knobs.record
-    endpoint, filt = knobs.endpoint, knobs.filt
+    dirs, own_dirs = rays.dirs, rays.own
+    ior, outside_ior = optics.ior, optics.outside_ior
+    iterations, normals, delta, tir = knobs.iterations, knobs.normals, knobs.delta, knobs.tir
+    max_interfaces, layer_limit, rec = knobs.max_interfaces, knobs.layer_limit, knobs.record
+    endpoint, filter = knobs.endpoint, knobs.filter
     world, rot, t0 = frame.world, frame.rot, frame.t
     exit_pos, exit_dir, last_dir, status = out.exit_pos, out.exit_dir, out.last_dir, out.status
-    interfaces, path_len, path_pos, path_dir = out.interfaces, out.path_len, out.path_pos, out.path_dir
+    interfaces, path_pos, path_dir = out.interfaces, out.path_pos, out.path_dir
     L = ldi.shape[0]
     for j0 in range(Wi):
         j = np.int64(j0)
@@ -300,11 +312,11 @@ def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
             vx = dirs[i, j, 0]
             vy = dirs[i, j, 1]
             vz = dirs[i, j, 2]
-        d0, r0, c0 = _first_layer(ldi, i, j, image, grid, lut, filt)
+        d0, r0, c0 = _first_layer(ldi, i, j, image, grid, lut, filter)
         if not math.isfinite(d0):
             status[i, j] = MISSED
             interfaces[i, j] = 0
-            path_len[i, j] = 0.0
+            out.path_length[i, j] = 0.0
             _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
             _store(exit_dir, i, j, vx, vy, vz, world, rot, t0, False)
             _store(exit_pos, i, j, np.nan, np.nan, np.nan, False, rot, t0, True)
@@ -326,21 +338,21 @@ def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
         forward = True
         events = 0
         nint = 0
-        plen = 0.0
+        path_length = 0.0
         st = LOST
         last_tir = False
         while True:
             # ---- interface at layer t: advance, refract (§3.6) --------------
             if g % 2 == 0:
-                plen += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
+                path_length += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
             px, py, pz = qx, qy, qz
             g2 = t if forward else t - 1
             n1 = ior if g % 2 == 0 else outside_ior
             n2 = ior if g2 % 2 == 0 else outside_ior
             # nearest: the texel's own normal (at its centre); bilinear: filtered reads at the hit's
             # texture coordinate
-            rn, cn = (ti + 0.5, tj + 0.5) if filt == 0 else (rq, cq)
-            nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, nmethod, delta, grid, filt)
+            rn, cn = (ti + 0.5, tj + 0.5) if filter == 0 else (rq, cq)
+            nx, ny, nz = normal_filtered(ldi, t, rn, cn, lut, normals, delta, grid, filter)
             wx, wy, wz, is_tir = refract3(vx, vy, vz, nx, ny, nz, n1 / n2)
             if events < rec:  # event `events`: where, and the direction Snell gave
                 _store(path_pos[i], j, events, px, py, pz, world, rot, t0, True)
@@ -361,7 +373,7 @@ def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
                                 or zback[ti, tj] - layer_depth(ldi, t, ti, tj, lut) <= thr[ti, tj]):
                     st = EXITED  # early termination at the backmost depth (§3.7)
                     break
-            if events >= max_events:
+            if events >= max_interfaces:
                 st = TIR if last_tir else LIMIT
                 break
             # ---- next search: which layer, which bound (§3.7) ---------------
@@ -388,25 +400,25 @@ def _trace_row(layers, lut, dirs, own_dirs, image, grid, knobs, frame, out, i):
             k = (zb - depth_p) / dd
             ex, ey, ez = px + k * vx, py + k * vy, pz + k * vz
             # ---- binary search between S = p and E (Oliveira & Brauwers 2007)
-            a, b, m, found = _bisect(ldi, t, (px, py, pz), (ex, ey, ez), forward, lut, grid, filt,
+            a, b, m, found = _bisect(ldi, t, (px, py, pz), (ex, ey, ez), forward, lut, grid, filter,
                                      iterations)
             if endpoint == 0:
                 # §3.6: the last probe P_n's texel t_Pn and the surface point R_n there
-                ok, qx, qy, qz, rq, cq = _probe_hit(ldi, t, (px, py, pz), (ex, ey, ez), m, lut, grid, filt)
+                ok, qx, qy, qz, rq, cq = _probe_hit(ldi, t, (px, py, pz), (ex, ey, ez), m, lut, grid, filter)
                 if not ok:
                     st = EXITED if outside else LOST  # the last probe's texel lacks the layer
                     break
                 ti, tj = np.int64(math.floor(rq)), np.int64(math.floor(cq))
                 continue
             ok, qx, qy, qz, rq, cq = _bracket_hit(ldi, t, (px, py, pz), (ex, ey, ez), (a, b), found, forward,
-                                                  lut, grid, filt)
+                                                  lut, grid, filter)
             if not ok:
                 st = EXITED if outside else LOST
                 break
             ti, tj = np.int64(rq), np.int64(cq)
         status[i, j] = st
         interfaces[i, j] = nint
-        path_len[i, j] = plen
+        out.path_length[i, j] = path_length
         _store(last_dir, i, j, vx, vy, vz, world, rot, t0, False)
         if st == EXITED:
             _store(exit_pos, i, j, px, py, pz, world, rot, t0, True)
@@ -462,70 +474,53 @@ def exit_thresholds(zlo, zhi, slices, exit_threshold=1.0):
     return out
 
 
-def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera, *, ior, outside_ior=1.0,
-                 iterations=5, normals="central", delta=1, tir=False, max_interfaces=64,
-                 layer_limit=None, lut=None, world=False, record=0, endpoint="probe", filter="bilinear",
-                 image=None):
+def trace_layers(layers, camera, knobs, optics, *, dirs_view=None, lut=None, world=False, image=None):
     """Trace every pixel's ray through the layered depth images.
 
     Parameters
     ----------
-    ldi : (L, H, W) float32 (or float64)
-        Layer depths (``+inf`` where absent).
-    total : (H, W) int
-        Layers per pixel before the layer limit (the last one is the backmost).
-    zback : (H, W) float64
-        Backmost depth per pixel (Zmax of the min/max pass).
-    thr : (H, W) float64
-        Early-termination threshold in depth units.
-    bounds_hi, bounds_lo : (L,) float64
-        Forward and backward search bounds per layer (:func:`search_bounds`).
-    dirs_view : (Hi, Wi, 3) float64 or None
-        Unit primary ray directions in view space, one per image pixel;
-        None for the image's own primary rays (computed per pixel in the
-        kernel).
+    layers : ImagespaceLayers
+        The layers (``ldi``, ``total``), the backmost depth ``zback``, the
+        early-termination thresholds ``thr`` and the search bounds per layer.
     camera : Camera
         The view of the layers: the eye's, or a light's (perspective for a
         point light, orthographic for a directional light: every ray then
         starts on the window plane and travels along ``-z``).
-    ior, outside_ior : float
+    knobs : TraceKnobs
+        The ``imagespace`` knobs of the trace
+        (:func:`~refraction_ref.imagespace.knobs.trace_knobs`): binary-search
+        ``iterations`` per interface; the ``normals`` rule and its ``delta``;
+        ``tir`` (follow total internal reflection with backward searches);
+        ``max_interfaces`` events (refractions plus reflections) per ray; the
+        ``layer_limit`` (a search for a layer at or beyond it stops the ray
+        with status ``LIMIT``); ``record``: keep the first ``record`` events
+        of every path in ``path_pos`` and ``path_dir`` (0 records nothing and
+        adds no keys); the ``endpoint`` of a search, ``probe`` (the thesis,
+        §3.6: at the texel of the last probe ``P_n``, the midpoint tested by
+        the last iteration or ``E`` with 0 iterations, on the layer's surface
+        there: the point of the line of sight through ``P_n`` at the layer's
+        sampled depth, whichever side of the layer ``P_n`` was; the search
+        fails only where that texel lacks the layer) or ``bracket`` (the
+        midpoint of the final bracket, an untested point, after testing ``E``
+        when no probe crossed the layer, and moved to the bracket's far end
+        when the midpoint's texel lacks the layer); the ``filter`` of the
+        depth reads (search tests, hit depth, normal reads), ``bilinear``
+        (the thesis's hardware filtering, §3.4.2) over the four texels around
+        the position when all four hold the layer, the nearest texel where
+        any of them lacks it, or ``nearest``: the texel under the position,
+        normals at its centre.
+    optics : ImagespaceOptics
         Object and surrounding indices.
-    iterations : int
-        Binary-search iterations per interface.
-    normals : {'forward', 'central', 'mesh3x3', 'cross'}
-    delta : int
-    tir : bool
-        Follow total internal reflection with backward searches.
-    max_interfaces : int
-        Event limit (refractions plus reflections) per ray.
-    layer_limit : int, optional
-        The user's layer limit (default ``L``); a search for a layer at or
-        beyond it stops the ray with status ``LIMIT``.
+    dirs_view : (Hi, Wi, 3) float64, optional
+        Unit primary ray directions in view space, one per image pixel;
+        None for the image's own primary rays (computed per pixel in the
+        kernel).
     lut : tuple, optional
         On-the-fly peeling inputs (see :func:`~refraction_ref.imagespace.normals.layer_depth`).
-    world : bool
+    world : bool, default False
         Return ``exit_pos``, ``exit_dir``, ``last_dir`` (and ``path_pos``,
         ``path_dir``) in world space (the camera's frame applied as they
         are written) instead of view space.
-    record : int, default 0
-        Keep the first ``record`` events of every path in ``path_pos`` and
-        ``path_dir``; 0 records nothing (and adds no keys).
-    endpoint : {'probe', 'bracket'}
-        Where a search ends. ``probe`` (the thesis, §3.6): at the texel of
-        the last probe ``P_n`` (the midpoint tested by the last iteration;
-        ``E`` with 0 iterations), on the layer's surface there: the point
-        of the line of sight through ``P_n`` at the layer's (sampled) depth,
-        whichever side of the layer ``P_n`` was; the search fails only where
-        that texel lacks the layer. ``bracket``: the midpoint of the final
-        bracket (an untested point), after testing ``E`` when no probe
-        crossed the layer, and moved to the bracket's far end when the
-        midpoint's texel lacks the layer.
-    filter : {'bilinear', 'nearest'}
-        How the depth images are sampled (search tests, hit depth, normal
-        reads): ``bilinear`` (the thesis's hardware filtering, §3.4.2) over
-        the four texels around the position when all four hold the layer,
-        the nearest texel where any of them lacks it; ``nearest``: the
-        texel under the position, normals at its centre.
     image : Camera, optional
         The image casting one ray per pixel (``imagespace.grid``; default ``camera``): ``camera``'s
         view, its own pixel count. Positions project to ``camera``'s grid; a primary ray's first
@@ -541,7 +536,7 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         ``status`` (H, W) int8 (:mod:`refraction_ref.status`). A missed
         pixel's ``exit_dir`` and ``last_dir`` are its primary ray.
 
-        With ``record=K > 0`` also ``path_pos`` and ``path_dir``
+        With ``knobs.record = K > 0`` also ``path_pos`` and ``path_dir``
         (H, W, K, 3) float64, in the frame of ``exit_pos``. Row ``k`` is
         the ``k``-th event of the pixel's path, one per application of
         Snell's law: row 0 is the point where the primary ray meets layer
@@ -563,25 +558,17 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
     bounds, early termination), §3.8 (path length for absorption);
     Oliveira and Brauwers (2007).
     """
-    from .normals import FILTERS, NORMAL_METHODS, no_lut
+    from .normals import no_lut
 
-    if normals not in NORMAL_METHODS:
-        raise ValueError(f"trace_layers: unknown normals {normals!r}; choose one of {sorted(NORMAL_METHODS)}")
-    if endpoint not in ENDPOINTS:
-        raise ValueError(f"trace_layers: unknown endpoint {endpoint!r}; choose one of {sorted(ENDPOINTS)}")
-    if filter not in FILTERS:
-        raise ValueError(f"trace_layers: unknown filter {filter!r}; choose one of {sorted(FILTERS)}")
-    if int(record) != record or record < 0:
-        raise ValueError(f"trace_layers: record must be an integer >= 0, got {record!r}")
-    record = int(record)
-    Hg, Wg = total.shape
+    record = knobs.record
+    Hg, Wg = layers.total.shape
     image = camera if image is None else image
     H, W = image.shape
-    L = ldi.shape[0]
     shape = (H, W, record, 3) if record else (1, 1, 1, 3)
-    out = _Outputs(exit_pos=np.empty((H, W, 3)), exit_dir=np.empty((H, W, 3)), last_dir=np.empty((H, W, 3)),
-                   interfaces=np.empty((H, W), np.int16), path_len=np.empty((H, W)),
-                   status=np.empty((H, W), np.int8), path_pos=np.empty(shape), path_dir=np.empty(shape))
+    out = ImagespaceOutputs(exit_pos=np.empty((H, W, 3)), exit_dir=np.empty((H, W, 3)),
+                            last_dir=np.empty((H, W, 3)), interfaces=np.empty((H, W), np.int16),
+                            path_length=np.empty((H, W)), status=np.empty((H, W), np.int8),
+                            path_pos=np.empty(shape), path_dir=np.empty(shape))
     Wc, Hc, sx, sy = camera.kernel_args()
     if (Hc, Wc) != (Hg, Wg):
         raise ValueError(f"trace_layers: the layers are {(Hg, Wg)}, the camera is {(Hc, Wc)}")
@@ -594,19 +581,18 @@ def trace_layers(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera
         t = np.ascontiguousarray(camera.eye, dtype=np.float64)
     else:
         m, t = np.eye(3), np.zeros(3)
-    layers = _Layers(np.ascontiguousarray(ldi), np.ascontiguousarray(total, dtype=np.int32),
-                     np.ascontiguousarray(zback, dtype=np.float64), np.ascontiguousarray(thr, dtype=np.float64),
-                     np.ascontiguousarray(bounds_hi, dtype=np.float64),
-                     np.ascontiguousarray(bounds_lo, dtype=np.float64))
+    layers = ImagespaceLayers(np.ascontiguousarray(layers.ldi), np.ascontiguousarray(layers.total, dtype=np.int32),
+                              np.ascontiguousarray(layers.zback, dtype=np.float64),
+                              np.ascontiguousarray(layers.thr, dtype=np.float64),
+                              np.ascontiguousarray(layers.bounds_hi, dtype=np.float64),
+                              np.ascontiguousarray(layers.bounds_lo, dtype=np.float64))
     grid = ViewGrid(Wc, Hc, sx, sy, bool(camera.ortho))
     view = ViewGrid(*image.kernel_args(), bool(camera.ortho))
-    knobs = _Knobs(float(ior), float(outside_ior), int(iterations), NORMAL_METHODS[normals], int(delta), bool(tir),
-                   int(max_interfaces), int(L if layer_limit is None else layer_limit), record,
-                   ENDPOINTS[endpoint], FILTERS[filter])
-    _trace_kernel(layers, no_lut(None) if lut is None else lut, dirs, own, view, grid, knobs,
-                  _Frame(bool(world), m, t), out)
+    _trace_kernel(layers, no_lut(None) if lut is None else lut, ImagespaceRays(dirs, own), view, grid, knobs,
+                  ImagespaceOptics(float(optics.ior), float(optics.outside_ior)),
+                  ImagespaceFrame(bool(world), m, t), out)
     res = {"exit_pos": out.exit_pos, "exit_dir": out.exit_dir, "last_dir": out.last_dir,
-           "interfaces": out.interfaces, "path_length": out.path_len, "status": out.status}
+           "interfaces": out.interfaces, "path_length": out.path_length, "status": out.status}
     if record:
         res["path_pos"] = out.path_pos
         res["path_dir"] = out.path_dir

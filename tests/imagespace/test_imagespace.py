@@ -22,13 +22,27 @@ from refraction_ref.camera import Camera
 from refraction_ref.compare import angular_error_deg
 from refraction_ref.environment import environment_lookup
 from refraction_ref.imagespace.depth_bounds import depth_bounds
+from refraction_ref.imagespace.knobs import IMAGESPACE_DEFAULTS, trace_knobs
 from refraction_ref.imagespace.normals import layer_normals, no_lut
 from refraction_ref.imagespace.peel import (POPCOUNT8, SELECT8, depth_complexity, layer_depth_lut,
                                             lowest_set_bit, peel_layers)
 from refraction_ref.imagespace.search_bounds import mip_level, search_bounds
-from refraction_ref.imagespace.trace import trace_layers
+from refraction_ref.imagespace.trace import ImagespaceLayers, ImagespaceOptics, trace_layers
 from refraction_ref.imagespace.voxelize import collect_depths, slice_bounds, voxelize_bitmask
 from refraction_ref.raster import raster_setup
+
+
+def _trace(*args, ior, outside_ior=1.0, lut=None, **knobs):
+    """:func:`trace_layers` called as ``(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera)``
+    with the trace's knobs by name, over these tests' settings: the knobs' defaults, but ``delta`` 1 and
+    the layers' own count as the layer limit."""
+    *arrays, dirs, cam = args
+    assert set(knobs) <= set(IMAGESPACE_DEFAULTS), set(knobs) - set(IMAGESPACE_DEFAULTS)
+    record = knobs.pop("record", 0)
+    block = {**IMAGESPACE_DEFAULTS, "delta": 1, "layers": arrays[0].shape[0], **knobs}
+    return trace_layers(ImagespaceLayers(*arrays), cam, trace_knobs(block, record), ImagespaceOptics(ior, outside_ior),
+                        dirs_view=dirs, lut=lut)
+
 
 KEYS = ("ray_origin", "ray_dir", "hit", "exit_pos", "exit_dir", "interfaces", "path_length", "status", "image")
 
@@ -113,14 +127,14 @@ def test_sphere_against_analytic_refraction():
     Measured (float depth, global bounds, the seed's bilinear filtering and probe end
     point): exit-direction error median 0.194 deg, p90 0.747 deg, 94.8% of hit pixels
     exit, path-length median relative error 0.15%, exit points 0.00017 from the sphere.
-    With nearest sampling (the former default) the floor was 0.5 deg: a refracted
+    With nearest sampling (``filter='nearest'``) the floor is 0.5 deg: a refracted
     ray's hit is looked up at the nearest texel, whose normal is up to half a pixel
     of arc away (0.5 * 0.0142 / 0.5 rad = 0.8 deg at the back surface, about half of
     which reaches the exit direction); filtering reads it at the hit's own texture
     coordinate. The p90 is dominated by the outer 10% of the disc, where eq. 3.2's
     one-sided differences at the silhouette bend normals by several degrees (and 5%
     of the pixels are trapped by a spurious TIR). The probe end point lies on the
-    layer's surface, so the path error is no longer the 5-iteration bracket (1/64 of
+    layer's surface, so the path error is not the 5-iteration bracket's (1/64 of
     a ~1-unit search range: 1.3% with ``endpoint='bracket'``).
     """
     r = rr.render(_sphere_scene(128, depth="float", bounds="global"))
@@ -419,7 +433,7 @@ def test_trace_flat_slab_bracket():
     dirs = np.zeros((16, 16, 3))
     dirs[..., 2] = -1.0
     for it in (0, 1, 5, 12):
-        tr = trace_layers(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.5, iterations=it, endpoint="bracket")
+        tr = _trace(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.5, iterations=it, endpoint="bracket")
         assert np.all(tr["status"] == 1) and np.all(tr["interfaces"] == 2)
         np.testing.assert_array_equal(tr["exit_dir"], dirs)
         expect = 3.0 - 2.0 ** -(it + 1)
@@ -440,7 +454,7 @@ def test_trace_ray_parallel_to_the_image_plane_is_lost():
     dirs[par] = [math.sqrt(1 - c * c), 0.0, -c]
     for tir in (False, True):
         # outside index eta, inside 1: n1 / n2 = eta exactly at the entry
-        tr = trace_layers(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.0, outside_ior=eta, tir=tir)
+        tr = _trace(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.0, outside_ior=eta, tir=tir)
         assert np.all(tr["status"][par] == 4) and np.all(tr["status"][~par] == 1)
         np.testing.assert_array_equal(tr["last_dir"][par], np.broadcast_to([1.0, 0.0, 0.0], (128, 3)))
         assert np.all(tr["interfaces"][par] == 1)
@@ -473,9 +487,9 @@ def test_trace_lut_agrees_with_the_float32_ldi():
     binary-search decisions at layer edges); the default no-LUT tuple is inert. The bit-for-bit
     statement, with a float64 LDI (a kernel signature of its own, minutes to compile): -m slow."""
     bits, zmin, zmax, S, ldi, ghost, lut, args, kw = _lut_setup()
-    b = trace_layers(ghost, *args, lut=lut, **kw)
-    f = trace_layers(ldi, *args, **kw)
-    c = trace_layers(ldi, *args, lut=no_lut(None), **kw)
+    b = _trace(ghost, *args, lut=lut, **kw)
+    f = _trace(ldi, *args, **kw)
+    c = _trace(ldi, *args, lut=no_lut(None), **kw)
     for k in f:
         np.testing.assert_array_equal(f[k], c[k], err_msg=k)
     hit = b["status"] != 0
@@ -498,8 +512,8 @@ def test_trace_lut_equals_ldi():
     """
     bits, zmin, zmax, S, ldi, ghost, lut, args, kw = _lut_setup()
     ldi64 = _lut_all(bits, zmin, zmax, S, ldi.shape[0], POPCOUNT8, SELECT8)
-    a = trace_layers(ldi64, *args, **kw)
-    b = trace_layers(ghost, *args, lut=lut, **kw)
+    a = _trace(ldi64, *args, **kw)
+    b = _trace(ghost, *args, lut=lut, **kw)
     assert np.count_nonzero(a["status"] == 1) > 1000
     for k in a:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)

@@ -32,12 +32,25 @@ from refraction_ref.analytic import icosphere_mesh, sphere_refraction
 from refraction_ref.camera import Camera
 from refraction_ref.compare import angular_error_deg
 from refraction_ref.imagespace.depth_bounds import depth_bounds
-from refraction_ref.imagespace.knobs import IMAGESPACE_DEFAULTS
+from refraction_ref.imagespace.knobs import IMAGESPACE_DEFAULTS, trace_knobs
 from refraction_ref.imagespace.peel import peel_layers
 from refraction_ref.imagespace.search_bounds import search_bounds
-from refraction_ref.imagespace.trace import exit_thresholds, trace_layers
+from refraction_ref.imagespace.trace import ImagespaceLayers, ImagespaceOptics, exit_thresholds, trace_layers
 from refraction_ref.imagespace.voxelize import collect_depths, slice_bounds, voxelize_bitmask
 from refraction_ref.raster import raster_setup, rasterize
+
+
+def _trace(*args, ior, outside_ior=1.0, lut=None, **knobs):
+    """:func:`trace_layers` called as ``(ldi, total, zback, thr, bounds_hi, bounds_lo, dirs_view, camera)``
+    with the trace's knobs by name, over these tests' settings: the knobs' defaults, but ``delta`` 1 and
+    the layers' own count as the layer limit."""
+    *arrays, dirs, cam = args
+    assert set(knobs) <= set(IMAGESPACE_DEFAULTS), set(knobs) - set(IMAGESPACE_DEFAULTS)
+    record = knobs.pop("record", 0)
+    block = {**IMAGESPACE_DEFAULTS, "delta": 1, "layers": arrays[0].shape[0], **knobs}
+    return trace_layers(ImagespaceLayers(*arrays), cam, trace_knobs(block, record), ImagespaceOptics(ior, outside_ior),
+                        dirs_view=dirs, lut=lut)
+
 
 KEYS = ("hit", "exit_pos", "exit_dir", "interfaces", "path_length", "status", "image", "depth_complexity")
 
@@ -189,7 +202,7 @@ def test_probe_endpoint_is_the_unprojection_of_the_last_probe(filt, iterations):
     and it lies on the last probe's texel."""
     cam, layers = _sphere_layers()
     ldi, total, zmax, thr, bhi, blo = layers
-    tr = trace_layers(*layers, None, cam, ior=1.5, iterations=iterations, normals="central", delta=2,
+    tr = _trace(*layers, None, cam, ior=1.5, iterations=iterations, normals="central", delta=2,
                       record=2, endpoint="probe", filter=filt)
     m = (tr["status"] == 1) & (tr["interfaces"] == 2)
     assert m.sum() > 500  # of about 700 hit pixels
@@ -233,7 +246,7 @@ def test_probe_endpoint_of_a_flat_slab_is_on_its_back_face(iterations):
     dirs = np.zeros((16, 16, 3))
     dirs[..., 2] = -1.0
     for filt in ("nearest", "bilinear"):
-        tr = trace_layers(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.5, iterations=iterations,
+        tr = _trace(ldi, total, zback, thr, bhi, blo, dirs, cam, ior=1.5, iterations=iterations,
                           endpoint="probe", filter=filt)
         assert np.all(tr["status"] == 1) and np.all(tr["interfaces"] == 2)
         np.testing.assert_array_equal(tr["exit_dir"], dirs)
@@ -249,7 +262,7 @@ def test_probe_endpoint_fails_only_where_the_probes_texel_lacks_the_layer():
     ldi = ldi.copy()
     ldi[1, :, :8] = np.inf
     for endpoint in ("probe", "bracket"):
-        tr = trace_layers(ldi, total, zback, thr, bhi, blo, None, cam, ior=1.0, endpoint=endpoint)
+        tr = _trace(ldi, total, zback, thr, bhi, blo, None, cam, ior=1.0, endpoint=endpoint)
         assert np.all(tr["status"][:, :8] == 4) and np.all(tr["status"][:, 8:] == 1)
         assert np.all(tr["interfaces"][:, :8] == 1) and np.all(tr["interfaces"][:, 8:] == 2)
 
@@ -278,8 +291,8 @@ def test_bilinear_equals_nearest_on_a_flat_slab(endpoint, normals):
     the nearest one at that level (measured <= 5e-16), and no status changes."""
     cam, ldi, total, zback, thr, bhi, blo = _flat_slab(40, fov=70.0)
     kw = dict(ior=1.5, iterations=5, normals=normals, delta=2, endpoint=endpoint, record=3)
-    near = trace_layers(ldi, total, zback, thr, bhi, blo, None, cam, filter="nearest", **kw)
-    bil = trace_layers(ldi, total, zback, thr, bhi, blo, None, cam, filter="bilinear", **kw)
+    near = _trace(ldi, total, zback, thr, bhi, blo, None, cam, filter="nearest", **kw)
+    bil = _trace(ldi, total, zback, thr, bhi, blo, None, cam, filter="bilinear", **kw)
     assert np.count_nonzero(near["status"] == 1) > 1000
     for k in near:
         if normals in ("central", "forward") or near[k].dtype.kind != "f":
