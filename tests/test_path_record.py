@@ -23,8 +23,9 @@ from refraction_ref.analytic import sphere_refraction
 from refraction_ref.camera import Camera
 from refraction_ref.exact import ExactMesh, trace_exact
 from refraction_ref.imagespace.depth_bounds import depth_bounds
+from refraction_ref.imagespace.knobs import IMAGESPACE_DEFAULTS, trace_knobs
 from refraction_ref.imagespace.search_bounds import search_bounds
-from refraction_ref.imagespace.trace import exit_thresholds, trace_layers
+from refraction_ref.imagespace.trace import ImagespaceLayers, ImagespaceOptics, exit_thresholds, trace_layers
 from refraction_ref.imagespace.voxelize import collect_depths
 from refraction_ref.meshes import load_mesh
 from refraction_ref.raster import raster_setup
@@ -51,9 +52,15 @@ def _setup():
     return v, f, cam, (ldi, total, zmax, thr, bhi, blo)
 
 
-def _imagespace(ior=1.5, **kw):
+def _imagespace(ior=1.5, outside_ior=1.0, world=False, **knobs):
+    """The image-space trace of :func:`_setup`'s layers with the trace's knobs by name, over the knobs'
+    defaults but ``delta`` 1 and the layers' own count as the layer limit."""
     v, f, cam, layers = _setup()
-    return trace_layers(*layers, None, cam, ior=ior, **kw)
+    assert set(knobs) <= set(IMAGESPACE_DEFAULTS), set(knobs) - set(IMAGESPACE_DEFAULTS)
+    record = knobs.pop("record", 0)
+    block = {**IMAGESPACE_DEFAULTS, "delta": 1, "layers": layers[0].shape[0], **knobs}
+    return trace_layers(ImagespaceLayers(*layers), cam, trace_knobs(block, record),
+                        ImagespaceOptics(ior, outside_ior), world=world)
 
 
 def _exact(ior=1.5, outside_ior=1.0, **kw):
