@@ -42,9 +42,11 @@ import numpy as np
 
 from ..caustics.light import window_samples
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
-                                 receiver_hit_stage, receiver_stages, shade_rays, splat_stage)
-from ..caustics.receivers import IndexedTriangles, hit_exact
-from ..caustics.shade import exact_visibility
+                                 receiver_hit_stage, receiver_stages, splat_stage)
+from ..caustics.exact_hits import IndexedTriangles, hit_exact
+from ..caustics.receivers import ReceiverHitMode
+from ..caustics.shade import ReceiverLighting, shade_rays
+from ..caustics.shadow import exact_visibility
 from ..embree import mesh_scene
 from ..environment import environment_lookup
 from ..graph import Stage
@@ -105,6 +107,13 @@ def _distance_kernel(hp, o, out):
 
 
 def _st_photon_trace_exact(ctx):
+    """Every light's jittered photons through the real triangles (:func:`~refraction_ref.exact.trace.trace_exact`).
+
+    References
+    ----------
+    .. [1] Chaudhari (2008), §4.1 (the caustics this is the reference for); docs/oracle.md, "Caustics on
+       receivers".
+    """
     d = ctx.scene.data
     knobs = exact_knobs(d, "photons", "photon_seed", "max_bounces")
     g = ctx.buf["geometry"]
@@ -118,13 +127,13 @@ def _st_photon_trace_exact(ctx):
             continue
         lcam = light_camera(light, geom.vertices, n)
         o, dd, flux0, half = window_samples(lcam, n, knobs.photon_seed + l)
-        tr = trace_exact(mesh, o, dd, max_bounces=knobs.max_bounces)
-        st = tr["status"].astype(np.int8)
+        traced = trace_exact(mesh, o, dd, max_bounces=knobs.max_bounces)
+        st = traced["status"].astype(np.int8)
         ex = np.flatnonzero(st == EXITED)
         # the exited photons' rows, gathered on every thread; the buffers are those arrays
-        eo, ed = take_rows(tr["exit_pos"], ex), take_rows(tr["exit_dir"], ex)
+        eo, ed = take_rows(traced["exit_pos"], ex), take_rows(traced["exit_dir"], ex)
         out["lights"].append({"cam": lcam, "status": st, "flux0": flux0, "ex": ex,
-                              "trans": take_rows(tr["transmittance"], ex), "o": eo, "d": ed, "half": half[ex]})
+                              "trans": take_rows(traced["transmittance"], ex), "o": eo, "d": ed, "half": half[ex]})
         out[f"camera_{l}"] = camera_array(lcam)
         out[f"exit_pos_{l}"] = eo
         out[f"exit_dir_{l}"] = ed
@@ -133,13 +142,19 @@ def _st_photon_trace_exact(ctx):
 
 
 def _st_final_exact(ctx):
+    """The image with caustics: receivers lit directly (exact shadow rays) and by the caustic maps.
+
+    References
+    ----------
+    .. [1] Chaudhari (2008), §4.1 (receivers lit by the caustics); docs/oracle.md, "Caustics on receivers".
+    """
     d = ctx.scene.data
     b = ctx.buf
     geom = b["geometry"]["geom"]
     lights = d["lights"]
     rs = b["receivers"]["rs"]
     rgb_maps = b["gather"]["rgb_maps"]
-    eye_tr = b["trace"]["flat"]
+    eye_traced = b["trace"]["flat"]
     origin, rdir = b["trace"]["ray_origin"], b["trace"]["ray_dir"]
     # the objects' triangles read in place, and the exact tracer's scene of them (cached by
     # content: primitive k is face k); building vertices[faces] was serial work every render
@@ -154,7 +169,7 @@ def _st_final_exact(ctx):
     o = np.ascontiguousarray(origin.reshape(-1, 3), dtype=np.float64)
     dd = np.ascontiguousarray(rdir.reshape(-1, 3), dtype=np.float64)
     t_rec, f_rec = hit_exact(rs.tris, o, dd)
-    hp = eye_tr.get("hit_pos")
+    hp = eye_traced.get("hit_pos")
     t_obj = np.full(len(o), np.inf)
     if hp is not None:  # np.where(isfinite(hp[:, 0]), np.linalg.norm(hp - o, axis=1), inf), on every thread
         _distance_kernel(np.ascontiguousarray(hp, dtype=np.float64), o, t_obj)
@@ -165,21 +180,21 @@ def _st_final_exact(ctx):
     env = d["environment"]
     if bg.any():
         img[bg] = environment_lookup(env, dd[bg], ctx.scene.base_dir)
-    st = eye_tr["status"]
+    st = eye_traced["status"]
     ex = obj & (st == EXITED)
     # the receivers seen directly (o + t d) and the exit rays' receivers in one shading call
     # (every point's colour is its own): one pass of shadow rays, one of map look-ups
     ri, xi = np.flatnonzero(rec), np.flatnonzero(ex)
     if len(ri) or len(xi):
         direct = (_ray_points(o, t_rec, dd, ri), f_rec[ri], take_rows(dd, ri))
-        c, cd = shade_rays(ctx.scene, rs, None, take_rows(eye_tr["exit_pos"], xi),
-                           take_rows(eye_tr["exit_dir"], xi), "exact", None, rgb_maps, vis, direct)
+        c, cd = shade_rays(ctx.scene, ReceiverLighting(rs, d["lights"], rgb_maps, vis), ReceiverHitMode("exact"),
+                           take_rows(eye_traced["exit_pos"], xi), take_rows(eye_traced["exit_dir"], xi), direct)
         put_rows(img, ri, cd)
         put_rows(img, xi, c)
     stuck = obj & (st != EXITED)
     if stuck.any():
-        img[stuck] = environment_lookup(env, eye_tr["last_dir"][stuck], ctx.scene.base_dir)
-    _scale_rows(img, np.flatnonzero(obj), np.ascontiguousarray(eye_tr["transmittance"], dtype=np.float64))
+        img[stuck] = environment_lookup(env, eye_traced["last_dir"][stuck], ctx.scene.base_dir)
+    _scale_rows(img, np.flatnonzero(obj), np.ascontiguousarray(eye_traced["transmittance"], dtype=np.float64))
     ctx.note("receivers lit directly (exact shadow rays) and by the caustics; the object traced exactly")
     return {"image_caustics": img.reshape(H, W, 3).astype(np.float32)}
 

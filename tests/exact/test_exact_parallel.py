@@ -453,7 +453,7 @@ def test_nearest_hits_matches_one_embree_call():
 
 def test_exact_visibility_chunks_and_threads(on_one_and_two_threads):
     """Shadow rays past an icosphere in chunks on two threads: the same as in one go."""
-    from refraction_ref.caustics.shade import exact_visibility
+    from refraction_ref.caustics.shadow import exact_visibility
 
     v, f = icosphere_mesh(3, 0.5)
     tris = v[f]
