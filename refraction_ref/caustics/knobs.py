@@ -50,27 +50,29 @@ KNOBS = (
          "texels per side of each receiver's caustic map (and of the level map's position, diffuse and caustics "
          "maps), so every method's maps of a receiver have one size; was `imagespace.caustic_map` and "
          "`levelmap.map_size`",
-         "Chaudhari §4.1; Tipprasert §4.2.2", kind="int", lo=1, hi=8192),
+         "Chaudhari §4.1; Tipprasert §4.2.2", kind="int", lo=1, hi=8192, read_by="every method"),
     Knob("gather", 7,
          "Gaussian gathering window in texels (Wyman and Davis 2006); 1 = none; was `imagespace.gather`",
-         "Chaudhari §2.3.2", kind="int", lo=1, hi=63, allowed="odd integer 1..63", check=_odd_window),
+         "Chaudhari §2.3.2", kind="int", lo=1, hi=63, allowed="odd integer 1..63", check=_odd_window,
+         read_by="image-space"),
     Knob("placement", "component",
-         "the level map's reference box and planes: \"component\" (the default from contract_version 5) the box "
+         "the level map's reference box and planes: \"component\" the box "
          "of eqs. 4-2/4-3 centred on the receiver's origin `P_0` (its `transform.translate`), each extent twice "
          "the **component along that axis** of the vertex farthest along it (`w = 2 max |(P - P_0) . U|`, ...: "
          "the smallest box about `P_0` that encloses the receiver along U, V, W, the box's stated purpose; the "
-         "tight box when `P_0` is the receiver's middle), planes by eqs. 4-7 to 4-9; \"thesis\" (the default of "
-         "contract_version 4) the same box with eq. 4-3's `|P_a|` read as the whole vector's length "
+         "tight box when `P_0` is the receiver's middle), planes by eqs. 4-7 to 4-9; \"thesis\" "
+         "the same box with eq. 4-3's `|P_a|` read as the whole vector's length "
          "(`w = 2 |P_x - P_0|`, ...; a flat floor is as deep as it is wide); \"tight\" the tight box of the "
-         "vertices with planes at slab centres (before contract_version 4); was `levelmap.placement`",
-         "Tipprasert §4.2.1, eqs. 4-2, 4-3, 4-7 to 4-9", kind="choice", choices=PLACEMENTS),
+         "vertices with planes at slab centres; was `levelmap.placement`",
+         "Tipprasert §4.2.1, eqs. 4-2, 4-3, 4-7 to 4-9", kind="choice", choices=PLACEMENTS,
+         read_by="level map, exact water"),
     Knob("shadows", True,
          "receivers occlude each other in the level map's maps (the first surface along the light wins); was "
          "`levelmap.shadows`",
-         "Tipprasert §4.2.2", kind="bool"),
+         "Tipprasert §4.2.2", kind="bool", read_by="level map, exact water"),
     Knob("ambient", 0.1,
          "`I_a` of eq. 4-19 as a fraction of the albedo; was `levelmap.ambient`",
-         "Tipprasert §4.6, eq. 4-19", kind="float", lo=0.0),
+         "Tipprasert §4.6, eq. 4-19", kind="float", lo=0.0, read_by="level map, exact water"),
 )
 
 BLOCK = declare_block("caustics", KNOBS, owner="caustics")

@@ -52,7 +52,7 @@ KNOBS = (
          "the shading normals refracted with (Conventions, vertex and shading normals): `crease` per-corner "
          "normals from the triangles alone, smooth across edges below `crease_deg` and sharp across the others; "
          "`file` the mesh file's own vertex normals, `crease` for objects without them; `smooth` area-weighted "
-         "vertex normals across every edge (the former default; it rounds a cube into a lens); `face` face "
+         "vertex normals across every edge (it rounds a cube into a lens); `face` face "
          "normals. The `trace` stage's plan note states the rule applied to each object and how many edges are "
          "sharp",
          kind="choice", choices=NORMALS),

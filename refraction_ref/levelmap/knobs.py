@@ -50,10 +50,10 @@ LEVELMAP_KNOBS = (
          "of `planes` equal slabs. Plane i accepts `[zeta_i - s/2, zeta_i + s/2)` (eq. 4-15)",
          "§4.2.1, eqs. 4-6 to 4-9", kind="int", lo=1, hi=4096),
     Knob("smart_spacing", "respace",
-         "smart slicing's planes: \"respace\" (the thesis's, the default from contract_version 5) slices each "
+         "smart slicing's planes: \"respace\" (the thesis's) slices each "
          "sub-box anew with `n_i = max(round(hr_i / (2 eps)), 1)` **planes** by eq. 4-22 and §4.2.1's slicing "
-         "(texels change; `n_i` counts planes as Table 5-4 does: sphere 3 -> 1, 101 -> 50); \"lattice\" (the "
-         "default of contract_version 4) keeps the normal slicing's planes that meet a sub-box and drops the rest "
+         "(texels change; `n_i` counts planes as Table 5-4 does: sphere 3 -> 1, 101 -> 50); \"lattice\" "
+         "keeps the normal slicing's planes that meet a sub-box and drops the rest "
          "(no texel changes: Table 5-5's zero by construction)",
          "§4.7.2, eqs. 4-21, 4-22; Table 5-4", kind="choice", choices=SPACINGS, allowed='"respace", "lattice"'),
     Knob("culling", "none",
