@@ -150,7 +150,8 @@ def trace_explanations(golden, name, gold, cand, passed):
     ldi = cand.get("stage.peel.ldi")
     if ldi is None or not passed.get("stage.peel.ldi") or ldi.shape != gold["stage.peel.ldi"].shape:
         return {}
-    from ..imagespace.pipeline import Bounds, Layers, MinMax, Voxels, check_materials, grid_camera, pass_trace
+    from ..imagespace.pipeline import (Bounds, Layers, MinMax, Voxels, check_materials, grid_camera, pass_trace,
+                                       trace_knobs)
     from ..meshes import scene_geometry
 
     sc = load_scene(os.path.join(golden, name, "scene.json"))
@@ -174,7 +175,7 @@ def trace_explanations(golden, name, gold, cand, passed):
         total = np.asarray(src("stage.peel.depth_complexity", "depth_complexity")).astype(np.int32)
         bounds = Bounds(src("stage.reduce.bounds_hi"), src("stage.reduce.bounds_lo"), "")
         return pass_trace(minmax, voxels, Layers(layers, total, None, True, ""), bounds, grid_camera(cam, p["grid"]),
-                          p, ior, outside, record=int(p["record"]), image=cam)
+                          trace_knobs(p, int(p["record"])), (ior, outside), image=cam)
 
     keys = {"exit_pos": "exit_pos", "path_length": "path_length", "stage.trace.exit_pos": "exit_pos",
             "stage.trace.path_pos": "path_pos", "stage.trace.path_length": "path_length"}
@@ -198,7 +199,7 @@ def _light_trace(sc, gold, light):
     every layer is present).
     """
     from ..imagespace.pipeline import (Layers, check_materials, pass_minmax, pass_peel, pass_reduce, pass_trace,
-                                       pass_voxelize)
+                                       pass_voxelize, trace_knobs)
     from ..lights import light_camera
     from ..meshes import scene_geometry
     from ..status import EXITED
@@ -220,8 +221,8 @@ def _light_trace(sc, gold, light):
         nfin = np.isfinite(ldi).sum(axis=0)
         total = np.where(nfin >= ldi.shape[0], np.maximum(peeled.total, nfin), nfin).astype(peeled.total.dtype)
         layers = Layers(ldi, total, None, True, "")
-        trace = pass_trace(minmax, voxels, layers, pass_reduce(minmax, layers, p), lcam, p, ior,
-                           float(d["outside_ior"]))
+        trace = pass_trace(minmax, voxels, layers, pass_reduce(minmax, layers, p), lcam, trace_knobs(p),
+                           (ior, float(d["outside_ior"])))
         ex = np.flatnonzero(trace["status"].ravel() == EXITED)
         return trace["exit_pos"].reshape(-1, 3)[ex], trace["exit_dir"].reshape(-1, 3)[ex]
 

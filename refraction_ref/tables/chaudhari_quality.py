@@ -273,7 +273,7 @@ def layered(prep, bound="tight", iterations=5, timings=None):
         bounds = P.pass_reduce(minmax, peeled, dict(p, bounds="global" if bound == "global" else "mip"))
     t["reduce"] = (tic() - t0) * 1e3
     t0 = tic()
-    traced = P.pass_trace(minmax, voxels, peeled, bounds, prep.cam, p, prep.ior, prep.outside)
+    traced = P.pass_trace(minmax, voxels, peeled, bounds, prep.cam, P.trace_knobs(p), (prep.ior, prep.outside))
     t["trace"] = (tic() - t0) * 1e3
     if timings is not None:
         timings.update(t, frame=sum(t.values()))
