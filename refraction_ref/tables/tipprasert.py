@@ -83,7 +83,7 @@ def slice_images_ms(prep, n):
     """T(I) of eq. 5-3: the baseline's slice images for ``n`` sample planes, timed alone (ms).
 
     One orthographic rasterization of the receiver per slab (the slab between the water and the box, then
-    one per plane: ``n + 1``), as :func:`~refraction_ref.levelmap.volumetric.volumetric_caustics` draws them
+    one per plane: ``n + 1``), as :func:`~refraction_ref.levelmap.slice_image_baseline.slice_image_caustics` draws them
     before each plane's splat.
 
     Parameters

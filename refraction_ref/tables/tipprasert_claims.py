@@ -370,7 +370,7 @@ CLAIMS = (
                   "volumetric baseline's, in every (model, planes) cell of Table 5-1 (normal slicing, the "
                   "same planes), beside half an 8-bit step (0.5/255).",
              construction=("our baseline shares the level map's plane lattice, acceptance slabs and splat "
-                           "kernel (levelmap/volumetric.py calls splat_plane with the same planes): the images "
+                           "kernel (levelmap/slice_image_baseline.py calls splat_plane with the same planes): the images "
                            "are identical by design, so the row tests our code, not the thesis's two "
                            "algorithms")),
     ClaimRow("§5.2.4, Experiment 2 (depth profiling cost)", QUOTE_PROFILE, _profiling, timing=True,
