@@ -309,10 +309,10 @@ def _to_view_rows(O, D, k, m, t, zero3, Ov, Dv):
 @nb.njit(cache=True, inline="always")
 def _front_ray(p, ldi, lut, zfront, e3, view):
     """The thesis's single-surface ray at object pixel ``p`` in view space: its front point and
-    direction, in the operations' order of what it replaced: primary_rays_view's direction (rotated
-    by the identity ``e3``), layer_normals' normal (NaN where the layer is absent), refract, then
-    _front_points_kernel (the refracted direction, or the primary one where it is not finite, and
-    the pixel centre's point at depth ``zfront``). ``view`` is the eye's :class:`_FrontView`."""
+    direction, with the bits of the public functions' operations in their order: primary_rays_view's
+    direction (rotated by the identity ``e3``), layer_normals' normal (NaN where the layer is absent),
+    refract, then the refracted direction (the primary one where it is not finite) and the pixel
+    centre's point at depth ``zfront``. ``view`` is the eye's :class:`_FrontView`."""
     W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
     ii = p // W
     jj = p - ii * W
@@ -610,8 +610,8 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
                        ReceiverHitMode(mode, cam, eyebuf), O, D, direct, bufs, (Ov, Dv))
     if bufs is None:
         shadow_out = _shadow_buffers(cam.shape, ri, direct[0], vis.shadow)
-    # the two images in float32, each pixel written once from its own rows on every thread (what
-    # base / full / single in float64 and their astype(np.float32) gave): receivers seen directly
+    # the two images in float32, each pixel written once from its own rows on every thread (the bits of
+    # composing them in float64 and casting to float32): receivers seen directly
     # (cd) and the environment (env_bg) in both; the object's pixels: the exit ray's colour or,
     # stuck, the environment along the last direction, times the transmittance (full), and the
     # single-surface ray's colour (single)
