@@ -73,7 +73,13 @@ def _clip01(x):
 def face_rows(lo, hi, v, faces, v0, e1, e2, ng):
     """Faces ``[lo, hi)``: first vertex, edges ``v1 - v0``, ``v2 - v0`` and the unit geometric
     normal ``e1 x e2 / |e1 x e2|`` (NaN for a face of zero area), as ``np.cross`` and
-    ``np.linalg.norm`` compute them."""
+    ``np.linalg.norm`` compute them.
+
+    References
+    ----------
+    .. [1] Möller and Trumbore 1997, "Fast, minimum storage ray-triangle intersection" (the edges and normal
+        its test reads); docs/oracle.md, "`exact` block".
+    """
     for k in range(lo, hi):
         a, b, c = faces[k, 0], faces[k, 1], faces[k, 2]
         for j in range(3):
@@ -163,7 +169,12 @@ class ExactHits(NamedTuple):
 @nb.njit(cache=True, nogil=True)
 def init_rows(lo, hi, origins, st, out):
     """Rays ``[lo, hi)``: the tracer's per-ray arrays before the first bounce (filled by the
-    first bounce's chunks, in parallel, rather than by NumPy up front)."""
+    first bounce's chunks, in parallel, rather than by NumPy up front).
+
+    References
+    ----------
+    .. [1] docs/oracle.md, Outputs (the exact reference's per-pixel keys before the first event).
+    """
     o = origins
     d = st.dir0
     pos, dirn, side, medium, status = st.pos, st.dirn, st.side, st.medium, st.status
@@ -202,7 +213,12 @@ def init_rows(lo, hi, origins, st, out):
 def query_rows(lo, hi, active, pos, dirn, side, eps, first, org32, dir32):
     """Rows ``[lo, hi)``: the float32 Embree queries of the rays ``active[m]``, their origins
     pushed off the surface along the new direction and the face normal (``pos + eps (dir + side)``)
-    after the first bounce."""
+    after the first bounce.
+
+    References
+    ----------
+    .. [1] docs/oracle.md, "`exact` block" (Embree's float32 queries, offset by `epsilon` from the last hit).
+    """
     for m in range(lo, hi):
         i = active[m]
         for c in range(3):

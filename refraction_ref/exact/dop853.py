@@ -152,7 +152,13 @@ class GrinField(NamedTuple):
 
 @nb.njit(cache=True)
 def sample_index(fk, x, y, z):
-    """``(n, dn/dx, dn/dy, dn/dz)`` at a world point: the method's trilinear field, or the closed-form lens."""
+    """``(n, dn/dx, dn/dy, dn/dz)`` at a world point: the method's trilinear field, or the closed-form lens.
+
+    References
+    ----------
+    .. [1] Sun et al. 2008, §3 (the trilinear index field, eq. 3's gradient); docs/oracle.md, "Exact reference on
+        volume scenes".
+    """
     if fk.kind == 0:
         return sample_field(fk.field, fk.lo, fk.ih, x, y, z)
     p = fk.prm
@@ -168,7 +174,12 @@ def sample_index(fk, x, y, z):
 
 @nb.njit(cache=True)
 def ray_rhs(fk, y, out):
-    """``out = (v / n, grad n)`` at state ``y = (x, v)``; returns n (Sun et al. 2008, eqs. 2-3)."""
+    """``out = (v / n, grad n)`` at state ``y = (x, v)``; returns n (Sun et al. 2008, eqs. 2-3).
+
+    References
+    ----------
+    .. [1] Sun et al. 2008, eqs. 2-3 (the ray equation d/ds (n dx/ds) = grad n as a first-order system).
+    """
     n, gx, gy, gz = sample_index(fk, y[0], y[1], y[2])
     out[0] = y[3] / n
     out[1] = y[4] / n
@@ -184,6 +195,11 @@ def dop853_step(fk, tab, y, f, h, K, tmp, ynew):
     """One DOP853 step of size h from (y, f = rhs(y)) into ``ynew``; K[12] = rhs(ynew). Returns n(ynew).
 
     scipy's ``rk_step``: stage s at ``y + h sum_j A[s, j] K[j]``, the solution ``y + h sum_j B[j] K[j]``.
+
+    References
+    ----------
+    .. [1] E. Hairer, S. P. Norsett, G. Wanner, *Solving Ordinary Differential Equations I*, II.5 (Dormand-Prince
+        8(5,3)); scipy.integrate.DOP853.
     """
     A, B = tab.A, tab.B
     for c in range(6):
@@ -205,7 +221,13 @@ def dop853_step(fk, tab, y, f, h, K, tmp, ynew):
 
 @nb.njit(cache=True)
 def dop853_error_norm(tab, K, h, y, ynew, rtol, atol):
-    """scipy's ``DOP853._estimate_error_norm``: ``|h| e5^2 / sqrt((e5^2 + 0.01 e3^2) 6)`` in scaled RMS."""
+    """scipy's ``DOP853._estimate_error_norm``: ``|h| e5^2 / sqrt((e5^2 + 0.01 e3^2) 6)`` in scaled RMS.
+
+    References
+    ----------
+    .. [1] E. Hairer, S. P. Norsett, G. Wanner, *Solving Ordinary Differential Equations I*, II.10;
+        scipy.integrate.DOP853's error estimate.
+    """
     e5 = 0.0
     e3 = 0.0
     for c in range(6):
@@ -224,7 +246,13 @@ def dop853_error_norm(tab, K, h, y, ynew, rtol, atol):
 
 @nb.njit(cache=True)
 def dop853_initial_step(fk, y0, f0, bound, max_step, rtol, atol, tmp, f1):
-    """scipy's ``select_initial_step`` for an error estimator of order 7 (Hairer et al. II.4)."""
+    """scipy's ``select_initial_step`` for an error estimator of order 7 (Hairer et al. II.4).
+
+    References
+    ----------
+    .. [1] E. Hairer, S. P. Norsett, G. Wanner, *Solving Ordinary Differential Equations I*, II.4
+        (the initial step); scipy.integrate's select_initial_step.
+    """
     d0 = 0.0
     d1 = 0.0
     for c in range(6):
@@ -261,6 +289,10 @@ def grin_field(volume):
     -------
     GrinField, box
         The box: :class:`~refraction_ref.volumetric.grid.VolumeBox`.
+
+    References
+    ----------
+    .. [1] Sun et al. 2008, §3 (the index volume); docs/oracle.md, "Exact reference on volume scenes".
     """
     field, bounds, extinction, analytic = volume
     shape = np.shape(field)

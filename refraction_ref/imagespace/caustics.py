@@ -27,7 +27,7 @@ class's flat indices from per-image-row counts and offsets; the rays, the
 shading and the two images row by row), so the bits do not depend on the
 number of threads. With the OpenMP layer each thread gets one contiguous
 block of a kernel's iterations, so a kernel whose rows differ in cost
-interleaves them (:func:`_final_rays_kernel`).
+interleaves them (:func:`final_rays_kernel`).
 """
 
 from __future__ import annotations
@@ -58,8 +58,20 @@ __all__ = ["imagespace_caustic_stages"]
 
 
 @nb.njit(cache=True, parallel=True)
-def _put32_kernel(idx, vals, a32, b32):
-    # a32[idx] = b32[idx] = vals.astype(np.float32), row by row
+def put32_kernel(idx, vals, a32, b32):
+    """``a32[idx] = b32[idx] = vals.astype(np.float32)``, row by row on every thread.
+
+    Parameters
+    ----------
+    idx : (M,) int64
+    vals : (M, 3) float64
+    a32, b32 : (N, 3) float32
+        Written in place.
+
+    References
+    ----------
+    .. [1] Chaudhari 2008, §4.1 (the caustic pass's final image: the receivers seen through the object)
+    """
     for k0 in nb.prange(idx.shape[0]):
         k = np.int64(k0)
         q = idx[k]
@@ -68,8 +80,8 @@ def _put32_kernel(idx, vals, a32, b32):
             b32[q, c] = np.float32(vals[k, c])
 
 
-class _ObjectRows(NamedTuple):
-    """The object's pixels and the rows :func:`_object_pixels_kernel` reads their colours from."""
+class ObjectRows(NamedTuple):
+    """The object's pixels and the rows :func:`object_pixels_kernel` reads their colours from."""
 
     oi: np.ndarray  # (no,) the object's pixels (flat, ascending)
     orow: np.ndarray  # (no,) each one's row in c (exited) or env_stuck (stuck): _Pixels.orow
@@ -83,9 +95,19 @@ class _ObjectRows(NamedTuple):
 
 
 @nb.njit(cache=True, parallel=True)
-def _object_pixels_kernel(rows):
-    # full[p] = (exit: c[its exit row], else env_stuck[its stuck row]) * trans[k] and single[p] =
-    # c[n_full + k], cast to float32, for the k-th object pixel p = oi[k]
+def object_pixels_kernel(rows):
+    """The object pixels' colours: ``full[p]`` = (exit: ``c[its exit row]``, else ``env_stuck[its stuck row]``)
+    ``* trans[k]`` and ``single[p] = c[n_full + k]``, cast to float32, for the k-th object pixel ``p = oi[k]``.
+
+    Parameters
+    ----------
+    rows : ObjectRows
+        The pixels, their rows and the outputs ``f32``, ``s32`` (written).
+
+    References
+    ----------
+    .. [1] Chaudhari 2008, §4.1 (the caustic pass's final image: the receivers seen through the object)
+    """
     oi, orow, st, c, n_full, env_stuck, trans, f32, s32 = rows.oi, rows.orow, rows.st, rows.c, rows.n_full, \
         rows.env_stuck, rows.trans, rows.f32, rows.s32
     for k0 in nb.prange(oi.shape[0]):
@@ -172,10 +194,24 @@ def _class_fill_kernel(zfront, rdepth, st, first, rows):
                 ao += 1
 
 
-def _classify(zfront, rdepth, st):
+def classify_pixels(zfront, rdepth, st):
     """``(_Pixels, ldi)``: the flat indices of each class of :func:`_pixel_class`, ascending (as
     ``np.flatnonzero`` of the NumPy masks), and the front depth with +inf where none (1, H, W), by
-    two passes over the image rows on every thread."""
+    two passes over the image rows on every thread.
+
+    Parameters
+    ----------
+    zfront : (H, W) float
+        The object's front depth (+inf where none).
+    rdepth : (H, W) float
+        The receivers' depth.
+    st : (H, W) int
+        The trace's status codes.
+
+    References
+    ----------
+    .. [1] Chaudhari 2008, §4.1 (the caustic pass's final image: the receivers seen through the object)
+    """
     zf = np.ascontiguousarray(zfront, dtype=np.float64)
     rd = np.ascontiguousarray(rdepth, dtype=np.float64)
     st = np.ascontiguousarray(st)
@@ -191,8 +227,8 @@ def _classify(zfront, rdepth, st):
     return rows, ldi
 
 
-class _EyeView(NamedTuple):
-    """The eye camera's scalars, for :func:`_direct_rays_kernel`."""
+class EyeView(NamedTuple):
+    """The eye camera's scalars, for :func:`direct_rays_kernel`."""
 
     W: int
     H: int
@@ -201,8 +237,8 @@ class _EyeView(NamedTuple):
     ortho: bool
 
 
-class _DirectGeometry(NamedTuple):
-    """What :func:`_direct_rays_kernel` reads."""
+class DirectGeometry(NamedTuple):
+    """What :func:`direct_rays_kernel` reads."""
 
     basis: np.ndarray  # (3, 3) Camera.basis
     eye: np.ndarray  # (3,)
@@ -211,8 +247,8 @@ class _DirectGeometry(NamedTuple):
     rtri: np.ndarray  # (H W,) the receiver triangle seen at each pixel
 
 
-class _DirectOut(NamedTuple):
-    """What :func:`_direct_rays_kernel` writes."""
+class DirectOut(NamedTuple):
+    """What :func:`direct_rays_kernel` writes."""
 
     Pd: np.ndarray  # (nr, 3) points seen directly
     fd: np.ndarray  # (nr,) int64 their triangles
@@ -221,10 +257,24 @@ class _DirectOut(NamedTuple):
 
 
 @nb.njit(cache=True, parallel=True)
-def _direct_rays_kernel(view, geo, rows, out):
-    # per receiver pixel seen directly (rows.ri): Camera.primary_rays' origin and direction
-    # (_primary_rays' operations), _depth_points' point and the receiver triangle under it; per
-    # environment pixel (rows.bi): the direction
+def direct_rays_kernel(view, geo, rows, out):
+    """Per receiver pixel seen directly (``rows.ri``): the primary ray's origin and direction
+    (:meth:`Camera.primary_rays`' operations), the receiver point at its depth and the triangle under
+    it; per environment pixel (``rows.bi``): the direction.
+
+    Parameters
+    ----------
+    view : EyeView
+    geo : DirectGeometry
+    rows : tuple
+        ``ri``, ``bi``: the receiver and environment pixels (flat).
+    out : DirectOut
+        Written.
+
+    References
+    ----------
+    .. [1] Chaudhari 2008, §4.1 (the caustic pass's final image: the receivers seen through the object)
+    """
     W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
     basis, eye, fwd, rdepth, rtri = geo.basis, geo.eye, geo.fwd, geo.rdepth, geo.rtri
     ri, bi = rows.ri, rows.bi
@@ -262,8 +312,8 @@ def _direct_rays_kernel(view, geo, rows, out):
         dd[k, 2] = d2
 
 
-class _FrontView(NamedTuple):
-    """The eye camera's scalars and the front surface's normal rule, for :func:`_final_rays_kernel`."""
+class FrontView(NamedTuple):
+    """The eye camera's scalars and the front surface's normal rule, for :func:`final_rays_kernel`."""
 
     W: int
     H: int
@@ -275,8 +325,8 @@ class _FrontView(NamedTuple):
     delta: int
 
 
-class _FinalRays(NamedTuple):
-    """Inputs and outputs of :func:`_final_rays_kernel`."""
+class FinalRays(NamedTuple):
+    """Inputs and outputs of :func:`final_rays_kernel`."""
 
     xi: np.ndarray  # (nx,) exit pixels (flat)
     exit_pos: np.ndarray  # (H W, 3) world
@@ -312,7 +362,7 @@ def _front_ray(p, ldi, lut, zfront, e3, view):
     direction, with the bits of the public functions' operations in their order: primary_rays_view's
     direction (rotated by the identity ``e3``), layer_normals' normal (NaN where the layer is absent),
     refract, then the refracted direction (the primary one where it is not finite) and the pixel
-    centre's point at depth ``zfront``. ``view`` is the eye's :class:`_FrontView`."""
+    centre's point at depth ``zfront``. ``view`` is the eye's :class:`FrontView`."""
     W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
     ii = p // W
     jj = p - ii * W
@@ -335,10 +385,23 @@ def _front_ray(p, ldi, lut, zfront, e3, view):
 
 
 @nb.njit(cache=True, parallel=True)
-def _final_rays_kernel(view, lut, rays):
-    # rows 0 .. nx-1: the exit rays (take_rows of exit_pos, exit_dir at xi); rows nx ..: the thesis's
-    # single-surface rays at the object's pixels (_front_ray), then Camera.view_to_world /
-    # dir_view_to_world (vec3.affine's order); each row also in view space (_to_view_rows)
+def final_rays_kernel(view, lut, rays):
+    """The final pass's rays: rows ``0 .. nx-1`` the exit rays (``exit_pos``, ``exit_dir`` at ``xi``),
+    rows ``nx ..`` the thesis's single-surface rays at the object's pixels, in world space
+    (:meth:`Camera.view_to_world`'s order) and in view space.
+
+    Parameters
+    ----------
+    view : FrontView
+    lut : array
+        The peeling look-up table (empty without one).
+    rays : FinalRays
+        Inputs and outputs (``O``, ``D``, ``Ov``, ``Dv`` written).
+
+    References
+    ----------
+    .. [1] Chaudhari 2008, §4.1 (the caustic pass's final image: the receivers seen through the object)
+    """
     xi, exit_pos, exit_dir, oi, ldi, zfront = rays.xi, rays.exit_pos, rays.exit_dir, rays.oi, rays.ldi, rays.zfront
     e3, basis, eye, zero3, O, D = rays.eye3, rays.basis, rays.eye, rays.zero3, rays.O, rays.D
     m, tv, Ov, Dv = rays.m, rays.t, rays.Ov, rays.Dv
@@ -546,7 +609,7 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
     st = trace["status"]
     # the pixel classes (receiver seen directly, environment, object exited or stuck) as flat
     # indices, ascending, and the front depth for the normals, on every thread
-    px, ldi = _classify(zfront, rdepth, st)
+    px, ldi = classify_pixels(zfront, rdepth, st)
     ri, bi, oi, xi = px.ri, px.bi, px.oi, px.xi
     # receivers seen directly: shaded with the object's rays below (one call): each one's primary
     # ray, its point origin + dir (rdepth / dir . fwd) and triangle; the environment pixels'
@@ -555,13 +618,13 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
     direct = (np.empty((len(ri), 3)), np.empty(len(ri), np.int64), np.empty((len(ri), 3)))
     dirs_bg = np.empty((len(bi), 3))
     if len(ri) + len(bi):
-        _direct_rays_kernel(_EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
-                            _DirectGeometry(np.ascontiguousarray(cam.basis, dtype=np.float64),
+        direct_rays_kernel(EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
+                            DirectGeometry(np.ascontiguousarray(cam.basis, dtype=np.float64),
                                             np.ascontiguousarray(cam.eye, dtype=np.float64),
                                             np.ascontiguousarray(-cam.basis[2], dtype=np.float64),
                                             np.ascontiguousarray(rdepth, dtype=np.float64).reshape(-1),
                                             np.ascontiguousarray(rtri).reshape(-1)),
-                            px, _DirectOut(*direct, dirs_bg))
+                            px, DirectOut(*direct, dirs_bg))
     env_bg = environment_lookup(env, dirs_bg, scene.base_dir) if len(bi) else np.zeros((0, 3))
     # the shadow buffers at the receiver pixels seen directly: written by the shading kernel from the
     # shadow test it makes there anyway, where it shades in place; else tested on their own after
@@ -598,9 +661,9 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
     O, D = np.empty((n_full + len(oi), 3)), np.empty((n_full + len(oi), 3))
     Ov, Dv = np.empty_like(O), np.empty_like(D)
     m, t = view_affine(cam)
-    _final_rays_kernel(_FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
+    final_rays_kernel(FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), float(outside / ior),
                                   NORMAL_METHODS[p["normals"]], int(p["delta"])), no_lut(zfront.shape),
-                       _FinalRays(xi, np.ascontiguousarray(trace["exit_pos"], dtype=np.float64).reshape(-1, 3),
+                       FinalRays(xi, np.ascontiguousarray(trace["exit_pos"], dtype=np.float64).reshape(-1, 3),
                                   np.ascontiguousarray(trace["exit_dir"], dtype=np.float64).reshape(-1, 3), oi, ldi,
                                   np.ascontiguousarray(zfront, dtype=np.float64).reshape(-1), np.eye(3),
                                   np.ascontiguousarray(cam.basis, dtype=np.float64),
@@ -621,10 +684,10 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
     f32 = np.empty((H, W, 3), np.float32)
     s32 = np.empty((H, W, 3), np.float32)
     f32f, s32f = f32.reshape(-1, 3), s32.reshape(-1, 3)
-    _put32_kernel(np.ascontiguousarray(ri, dtype=np.int64), np.ascontiguousarray(cd, dtype=np.float64), f32f, s32f)
-    _put32_kernel(np.ascontiguousarray(bi, dtype=np.int64), np.ascontiguousarray(env_bg, dtype=np.float64), f32f,
+    put32_kernel(np.ascontiguousarray(ri, dtype=np.int64), np.ascontiguousarray(cd, dtype=np.float64), f32f, s32f)
+    put32_kernel(np.ascontiguousarray(bi, dtype=np.int64), np.ascontiguousarray(env_bg, dtype=np.float64), f32f,
                   s32f)
-    _object_pixels_kernel(_ObjectRows(oi, px.orow, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c),
+    object_pixels_kernel(ObjectRows(oi, px.orow, np.ascontiguousarray(st).reshape(-1), np.ascontiguousarray(c),
                                       n_full, np.ascontiguousarray(env_stuck, dtype=np.float64),
                                       np.ascontiguousarray(trans, dtype=np.float64), f32f, s32f))
     return f32, s32, shadow_out

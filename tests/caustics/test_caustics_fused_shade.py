@@ -158,10 +158,10 @@ def test_final_rays_kernel_equals_numpy(on_one_and_two_threads, ortho, method, d
         O, D, Ov, Dv = (np.empty((n, 3)) for _ in range(4))
         Wk, Hk, sx, sy = cam.kernel_args()
         m, t = view_affine(cam)
-        ic._final_rays_kernel(
-            ic._FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), eta, NORMAL_METHODS[method], delta),
+        ic.final_rays_kernel(
+            ic.FrontView(Wk, Hk, float(sx), float(sy), bool(cam.ortho), eta, NORMAL_METHODS[method], delta),
             no_lut(zfront.shape),
-            ic._FinalRays(xi, exit_pos.reshape(-1, 3), exit_dir.reshape(-1, 3), oi,
+            ic.FinalRays(xi, exit_pos.reshape(-1, 3), exit_dir.reshape(-1, 3), oi,
                           np.where(np.isfinite(zfront), zfront, np.inf)[None], zfront.reshape(-1), np.eye(3),
                           np.ascontiguousarray(cam.basis), np.ascontiguousarray(cam.eye, dtype=np.float64),
                           np.zeros(3), m, t, O, D, Ov, Dv))
@@ -250,9 +250,9 @@ def test_final_composite_kernels_equal_numpy(on_one_and_two_threads):
 
     def run():
         f32, s32 = np.empty((H * W, 3), np.float32), np.empty((H * W, 3), np.float32)
-        ic._put32_kernel(ri, cd, f32, s32)
-        ic._put32_kernel(bi, env_bg, f32, s32)
-        ic._object_pixels_kernel(ic._ObjectRows(oi, orow, st, c, len(xi), env_stuck, trans, f32, s32))
+        ic.put32_kernel(ri, cd, f32, s32)
+        ic.put32_kernel(bi, env_bg, f32, s32)
+        ic.object_pixels_kernel(ic.ObjectRows(oi, orow, st, c, len(xi), env_stuck, trans, f32, s32))
         return f32, s32
 
     for f32, s32 in on_one_and_two_threads(run):
@@ -288,12 +288,12 @@ def test_pixel_classes_and_direct_rays_equal_numpy(on_one_and_two_threads, ortho
                                                                         + dirs[:, 2] * fwd[2]))[:, None]
 
     def run():
-        px, ldi = ic._classify(zfront, rdepth, st)
+        px, ldi = ic.classify_pixels(zfront, rdepth, st)
         Wk, Hk, sx, sy = cam.kernel_args()
-        out = ic._DirectOut(np.empty((len(px.ri), 3)), np.empty(len(px.ri), np.int64), np.empty((len(px.ri), 3)),
+        out = ic.DirectOut(np.empty((len(px.ri), 3)), np.empty(len(px.ri), np.int64), np.empty((len(px.ri), 3)),
                             np.empty((len(px.bi), 3)))
-        ic._direct_rays_kernel(ic._EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
-                               ic._DirectGeometry(np.ascontiguousarray(cam.basis), np.asarray(cam.eye, dtype=float),
+        ic.direct_rays_kernel(ic.EyeView(Wk, Hk, float(sx), float(sy), bool(cam.ortho)),
+                               ic.DirectGeometry(np.ascontiguousarray(cam.basis), np.asarray(cam.eye, dtype=float),
                                                   np.ascontiguousarray(fwd), rdepth.reshape(-1), rtri.reshape(-1)),
                                px, out)
         return px, ldi, out
