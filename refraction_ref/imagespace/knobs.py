@@ -74,16 +74,20 @@ GRID_ALLOWED = ("null, or [width, height] of integers 1..16384 with the image's 
 KNOBS = (
     Knob("iterations", 5,
          "binary-search iterations per interface", "§3.6",
-         kind="int", lo=0, hi=64),
+         kind="int", lo=0, hi=64,
+         summary="binary-search iterations per interface (§3.6)"),
     Knob("layers", 32,
          "layer limit; never more are peeled than the depth complexity (unless `peel_all`)", "§3.4.2",
-         kind="int", lo=1, hi=32),
+         kind="int", lo=1, hi=32,
+         summary="layer limit (§3.4.2); never more are peeled than the scene's depth complexity (unless `peel_all`)"),
     Knob("slices", 256,
          "bitmask slices S per pixel", "§3.3",
-         kind="int", lo=32, hi=4096, allowed="integer 32..4096, multiple of 32", check=_check_slices),
+         kind="int", lo=32, hi=4096, allowed="integer 32..4096, multiple of 32", check=_check_slices,
+         summary="bitmask slices S (§3.3), a multiple of 32"),
     Knob("bounds", "mip",
          "search bound: max over a MIP level + margin, or exact global maxima", "§3.7",
-         kind="choice", choices=("mip", "global")),
+         kind="choice", choices=("mip", "global"),
+         summary="search bound: max of the 256x256 MIP level + margin (§3.7), or `global` exact maxima"),
     Knob("mip_size", 256,
          "MIP level (texels per side) of the reduction", "§3.7",
          kind="int", lo=1),
@@ -94,7 +98,9 @@ KNOBS = (
          "bitmask blending: \"add\" the thesis's additive blending, a 32-bit add per word, so two fragments in "
          "one slice carry into the next bit and a carry out of bit 31 is lost (\"Since current Direct3D version"
          " does not support logical OR blending, we employ additive blending\", §3.3); \"or\" a logical OR", "§3.3",
-         kind="choice", choices=("add", "or")),
+         kind="choice", choices=("add", "or"),
+         summary="`add`: the thesis's additive blending with carry (§3.3: Direct3D 10 has no logical-OR blend), or "
+                 "`or`"),
     Knob("endpoint", "probe",
          "where each interface's binary search ends: \"probe\" the thesis's R_n, the surface point at the last "
          "probe's texel (the line of sight through the last probe P_n at the layer's sampled depth there; "
@@ -102,42 +108,56 @@ KNOBS = (
          "P3\", §3.6), the search failing only where that texel lacks the layer; \"bracket\" the midpoint of the "
          "final bracket (an untested point), testing E when no probe crossed the layer and moving to the "
          "bracket's far end where the midpoint's texel lacks it", "§3.6",
-         kind="choice", choices=("probe", "bracket")),
+         kind="choice", choices=("probe", "bracket"),
+         summary="where a search ends: `probe`, the surface point at the last probe's texel (§3.6), or `bracket`, the "
+                 "midpoint of the final bracket with two fallbacks"),
     Knob("filter", "bilinear",
          "depth-image sampling in the search, at the hit and for its normal: \"bilinear\" the hardware filtering"
          " of §3.4.2 (\"hardware filtering can be easily applied while sampling these textures\"), over the four"
          " texels around the position when all four hold the layer, the nearest texel where any of them lacks "
          "it; the normal is the bilinear blend of those four texels' normals (each by the `normals` rule), "
          "renormalised; \"nearest\" the texel under the position and its normal", "§3.2, §3.4.2",
-         kind="choice", choices=("bilinear", "nearest")),
+         kind="choice", choices=("bilinear", "nearest"),
+         summary="depth-image sampling: `bilinear`, the thesis's hardware filtering (§3.4.2), nearest where one of the"
+                 " four texels lacks the layer; or `nearest`"),
     Knob("peel_all", False,
          "peel all `layers` layers whatever the scene's depth complexity (the layers beyond it are `+inf` "
          "everywhere), as the thesis's single pass writes all 32 channels of its render targets: the thesis's "
          "cost (Table 4.1's 16- and 32-layer columns); no output changes, only `stage.peel.ldi` (and "
          "`stage.reduce`'s bounds, `-inf`/`+inf` for the absent layers)", "§3.4.2",
-         kind="bool"),
+         kind="bool",
+         summary="peel all `layers` whatever the depth complexity (the thesis's fixed passes; Table 4.1's cost); no "
+                 "output changes"),
     Knob("depth", "bitmask",
          "layer depths from the bitmask, or exact fragment depths (A-buffer; beyond the thesis)", "§3.3",
-         kind="choice", choices=("bitmask", "float")),
+         kind="choice", choices=("bitmask", "float"),
+         summary="`bitmask`, or `float`: exact fragment depths (A-buffer)"),
     Knob("slicing", "local",
          "slices span each pixel's Zmin..Zmax, or the object's global bounds", "§3.3",
-         kind="choice", choices=("local", "global")),
+         kind="choice", choices=("local", "global"),
+         summary="per-pixel Zmin/Zmax, or `global` object bounds (§3.3)"),
     Knob("peeling", "separate",
          "separate peeling pass, or on the fly with 8-bit look-up tables", "§3.4.2, §3.4.1",
-         kind="choice", choices=("separate", "lut")),
+         kind="choice", choices=("separate", "lut"),
+         summary="separate pass (§3.4.2), or `lut`: on the fly with 8-bit tables (§3.4.1)"),
     Knob("normals", "central",
          "normal estimate from the depth image: eq. 3.1, eq. 3.2, Fig. 3.4, or the cross product of the same "
          "four unprojected neighbours (beyond the thesis)", "§3.5",
-         kind="choice", choices=("forward", "central", "mesh3x3", "cross")),
+         kind="choice", choices=("forward", "central", "mesh3x3", "cross"),
+         summary="`forward` (eq. 3.1), `central` (eq. 3.2), `mesh3x3` (Fig. 3.4), `cross` (beyond the thesis: the "
+                 "cross product of the same four unprojected neighbours)"),
     Knob("delta", 2,
          "pixel step of the central differences", "eq. 3.2",
-         kind="int", lo=1, hi=8),
+         kind="int", lo=1, hi=8,
+         summary="step of the central differences (eq. 3.2)"),
     Knob("exit_threshold", 1.0,
          "early termination within this many slices of the backmost depth", "§3.7",
-         kind="float", lo=0.0),
+         kind="float", lo=0.0,
+         summary="early termination within this many slices of the backmost depth (§3.7)"),
     Knob("tir", False,
          "follow total internal reflection with backward searches (beyond the thesis; sketched in §4.3)", "§4.3",
-         kind="bool"),
+         kind="bool",
+         summary="follow total internal reflection with backward searches (beyond the thesis)"),
     Knob("max_interfaces", 64,
          "event limit per ray (refractions + reflections)",
          kind="int", lo=1, hi=4096),
@@ -150,7 +170,9 @@ KNOBS = (
     Knob("record", 0,
          "interfaces per path recorded as the `trace` stage buffers `path_pos`, `path_dir` (H, W, K, 3) with K"
          " = `record` (Stage buffers; kept with `--keep trace`); 0 records none. No other output changes",
-         kind="int", lo=0, hi=64),
+         kind="int", lo=0, hi=64,
+         summary="interfaces per path kept as stage buffers `stage.trace.path_pos` / `path_dir` (for backend authors; "
+                 "`--keep trace`)"),
     Knob("grid", None,
          "the voxel grid's x-y size: the size of the bitmask and layered-depth textures, apart from the "
          "image's (the thesis renders a 512x512 viewport with 256x256 or 512x512 textures); null is the "
@@ -161,7 +183,10 @@ KNOBS = (
          "(`filter`) at its pixel centre's grid position `((i + 0.5) Hg / H, (j + 0.5) Wg / W)`. "
          "`depth_complexity` (and the caustic final pass's front depth) reads the grid texel under each pixel "
          "centre. Another aspect is refused", "§3.3, §4.1, §4.2",
-         nullable=True, allowed=GRID_ALLOWED, check=_check_grid),
+         nullable=True, allowed=GRID_ALLOWED, check=_check_grid,
+         summary="the voxel grid's x-y size `[width, height]` (the bitmask and layer textures; the thesis renders a "
+                 "512x512 viewport with a 256 or 512 grid, §3.3, §4.1-4.2); null: the image's size. Same aspect "
+                 "as the image; one ray per image pixel, sampled on the grid"),
 )
 
 #: keys that moved to the ``caustics`` block (the caustic maps are a service every method reads)
