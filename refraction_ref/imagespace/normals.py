@@ -56,6 +56,31 @@ __all__ = ["NORMAL_METHODS", "ViewGrid", "normal_at", "normal_forward", "normal_
 #: the kernels' code of each normal rule (``imagespace.normals``)
 NORMAL_METHODS = CODES["normals"]
 
+#: docstring entries the normal rules share (their ``{name}`` placeholders), filled by :func:`_rule_doc`
+_RULE_DOC = {
+    "texel": """ldi : (L, H, W) ndarray
+        Layered depth images, ``+inf`` where absent.
+    n : int
+        The layer.
+    i, j : int64
+        Row and column.
+    lut : tuple
+        On-the-fly peeling inputs (see :func:`layer_depth`).""",
+    "step": """delta : int
+        Texel step of the differences.""",
+    "grid": """grid : ViewGrid
+        The view the layers were rendered in.""",
+    "normal": """nx, ny, nz : float
+        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer.""",
+}
+
+
+def _rule_doc(fn):
+    """Fill the shared entries (:data:`_RULE_DOC`) into a normal rule's docstring."""
+    for name, text in _RULE_DOC.items():
+        fn.__doc__ = fn.__doc__.replace("{" + name + "}", text)
+    return fn
+
 
 @nb.njit(cache=True, inline="always")
 def layer_depth(ldi, n, i, j, lut):
@@ -103,6 +128,29 @@ def _point(ldi, n, i, j, lut, grid):
 
 
 @nb.njit(cache=True, inline="always")
+def _slope(ldi, n, i, j, lut, grid, dc, di, dj, axis):
+    """``(d(a) - d(b)) / (p(a) - p(b))[axis]`` of eq. 3.2 between the texels ``a = (i + di, j + dj)`` and
+    ``b = (i - di, j - dj)``, each unprojected with its own depth; an absent one is replaced by the centre
+    (depth ``dc``), and the slope is 0 where both are or their points coincide."""
+    ia, ja, ib, jb = i + di, j + dj, i - di, j - dj
+    da = layer_depth(ldi, n, ia, ja, lut)
+    db = layer_depth(ldi, n, ib, jb, lut)
+    if not math.isfinite(da):
+        ia, ja, da = i, j, dc
+    if not math.isfinite(db):
+        ib, jb, db = i, j, dc
+    if ia == ib and ja == jb:
+        return 0.0
+    qa = unproject_pixel(ja + 0.5, ia + 0.5, da, grid.W, grid.H, grid.sx, grid.sy, grid.ortho)
+    qb = unproject_pixel(jb + 0.5, ib + 0.5, db, grid.W, grid.H, grid.sx, grid.sy, grid.ortho)
+    pa = qa[0] if axis == 0 else qa[1]
+    pb = qb[0] if axis == 0 else qb[1]
+    if pa != pb:
+        return (da - db) / (pa - pb)
+    return 0.0
+
+
+@nb.njit(cache=True, inline="always")
 def _unit(nx, ny, nz):
     """``n / |n|`` as ``n * (1 / sqrt(n . n))``, the order every rule normalises in."""
     s = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
@@ -110,6 +158,7 @@ def _unit(nx, ny, nz):
 
 
 @nb.njit(cache=True, inline="always")
+@_rule_doc
 def normal_forward(ldi, n, i, j, lut):
     """Forward differences (eq. 3.1): the unit normal ``g_x x g_y`` of layer ``n`` at texel (i, j).
 
@@ -119,19 +168,11 @@ def normal_forward(ldi, n, i, j, lut):
 
     Parameters
     ----------
-    ldi : (L, H, W) ndarray
-        Layered depth images, ``+inf`` where absent.
-    n : int
-        The layer.
-    i, j : int64
-        Row and column.
-    lut : tuple
-        On-the-fly peeling inputs (see :func:`layer_depth`).
+    {texel}
 
     Returns
     -------
-    nx, ny, nz : float
-        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer.
+    {normal}
 
     References
     ----------
@@ -148,6 +189,7 @@ def normal_forward(ldi, n, i, j, lut):
 
 
 @nb.njit(cache=True, inline="always")
+@_rule_doc
 def normal_central(ldi, n, i, j, lut, delta, grid):
     """Perspective-corrected central differences (eq. 3.2): the unit normal of layer ``n`` at texel (i, j).
 
@@ -159,65 +201,32 @@ def normal_central(ldi, n, i, j, lut, delta, grid):
 
     Parameters
     ----------
-    ldi : (L, H, W) ndarray
-        Layered depth images, ``+inf`` where absent.
-    n : int
-        The layer.
-    i, j : int64
-        Row and column.
-    lut : tuple
-        On-the-fly peeling inputs (see :func:`layer_depth`).
-    delta : int
-        Texel step of the differences.
+    {texel}
+    {step}
     grid : ViewGrid
         The view the layers were rendered in (an orthographic one unprojects
         without the perspective scaling, eq. 3.2 otherwise unchanged).
 
     Returns
     -------
-    nx, ny, nz : float
-        Unit view-space normal; ``(0, 0, 1)`` where the texel lacks the layer.
+    {normal}
 
     References
     ----------
     Chaudhari 2008, eq. 3.2 (§3.5).
     """
-    W, H, sx, sy, ortho = grid.W, grid.H, grid.sx, grid.sy, grid.ortho
     dc = layer_depth(ldi, n, i, j, lut)
     if not math.isfinite(dc):
         return 0.0, 0.0, 1.0
-    # horizontal: x of the unprojected neighbours
-    jr, jl = j + delta, j - delta
-    dr = layer_depth(ldi, n, i, jr, lut)
-    dl = layer_depth(ldi, n, i, jl, lut)
-    if not math.isfinite(dr):
-        jr, dr = j, dc
-    if not math.isfinite(dl):
-        jl, dl = j, dc
-    gx = 0.0
-    if jr != jl:
-        xr = unproject_pixel(jr + 0.5, i + 0.5, dr, W, H, sx, sy, ortho)[0]
-        xl = unproject_pixel(jl + 0.5, i + 0.5, dl, W, H, sx, sy, ortho)[0]
-        if xr != xl:
-            gx = (dr - dl) / (xr - xl)
-    iu, idn = i - delta, i + delta
-    du = layer_depth(ldi, n, iu, j, lut)
-    dd = layer_depth(ldi, n, idn, j, lut)
-    if not math.isfinite(du):
-        iu, du = i, dc
-    if not math.isfinite(dd):
-        idn, dd = i, dc
-    gy = 0.0
-    if iu != idn:
-        yu = unproject_pixel(j + 0.5, iu + 0.5, du, W, H, sx, sy, ortho)[1]
-        yd = unproject_pixel(j + 0.5, idn + 0.5, dd, W, H, sx, sy, ortho)[1]
-        if yu != yd:
-            gy = (du - dd) / (yu - yd)
+    # x between the right and left neighbours, y between the ones above (+y) and below
+    gx = _slope(ldi, n, i, j, lut, grid, dc, 0, delta, 0)
+    gy = _slope(ldi, n, i, j, lut, grid, dc, -delta, 0, 1)
     # surface z = -d(x, y): normal (dd/dx, dd/dy, 1)
     return _unit(gx, gy, 1.0)
 
 
 @nb.njit(cache=True, inline="always")
+@_rule_doc
 def normal_cross(ldi, n, i, j, lut, delta, grid):
     """The cross rule (beyond the thesis): the unit normal of layer ``n`` at texel (i, j).
 
@@ -230,18 +239,9 @@ def normal_cross(ldi, n, i, j, lut, delta, grid):
 
     Parameters
     ----------
-    ldi : (L, H, W) ndarray
-        Layered depth images, ``+inf`` where absent.
-    n : int
-        The layer.
-    i, j : int64
-        Row and column.
-    lut : tuple
-        On-the-fly peeling inputs (see :func:`layer_depth`).
-    delta : int
-        Texel step of the differences.
-    grid : ViewGrid
-        The view the layers were rendered in.
+    {texel}
+    {step}
+    {grid}
 
     Returns
     -------
@@ -279,6 +279,7 @@ def normal_cross(ldi, n, i, j, lut, delta, grid):
 
 
 @nb.njit(cache=True, inline="always")
+@_rule_doc
 def normal_mesh3x3(ldi, n, i, j, lut, grid):
     """The 3x3 mesh (Fig. 3.4, right): the unit normal of layer ``n`` at texel (i, j).
 
@@ -289,16 +290,8 @@ def normal_mesh3x3(ldi, n, i, j, lut, grid):
 
     Parameters
     ----------
-    ldi : (L, H, W) ndarray
-        Layered depth images, ``+inf`` where absent.
-    n : int
-        The layer.
-    i, j : int64
-        Row and column.
-    lut : tuple
-        On-the-fly peeling inputs (see :func:`layer_depth`).
-    grid : ViewGrid
-        The view the layers were rendered in.
+    {texel}
+    {grid}
 
     Returns
     -------
