@@ -256,6 +256,19 @@ class DirectOut(NamedTuple):
     db: np.ndarray  # (nb, 3) the primary rays' directions at the environment pixels
 
 
+@nb.njit(cache=True, inline="always")
+def _pixel_dir(p, W, H, sx, sy, ortho, rot):
+    """Row and column of flat pixel ``p`` and its primary direction turned by ``rot`` (``x rot[0] + y rot[1] +
+    z rot[2]``, :meth:`Camera.primary_rays`' order)."""
+    i = p // W
+    j = p - i * W
+    x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
+    d0 = x * rot[0, 0] + y * rot[1, 0] + z * rot[2, 0]
+    d1 = x * rot[0, 1] + y * rot[1, 1] + z * rot[2, 1]
+    d2 = x * rot[0, 2] + y * rot[1, 2] + z * rot[2, 2]
+    return i, j, d0, d1, d2
+
+
 @nb.njit(cache=True, parallel=True)
 def direct_rays_kernel(view, geo, rows, out):
     """Per receiver pixel seen directly (``rows.ri``): the primary ray's origin and direction
@@ -283,12 +296,7 @@ def direct_rays_kernel(view, geo, rows, out):
     for k0 in nb.prange(nr + bi.shape[0]):
         k = np.int64(k0)
         p = ri[k] if k < nr else bi[k - nr]
-        i = p // W
-        j = p - i * W
-        x, y, z = primary_dir(i, j, W, H, sx, sy, ortho)
-        d0 = x * basis[0, 0] + y * basis[1, 0] + z * basis[2, 0]
-        d1 = x * basis[0, 1] + y * basis[1, 1] + z * basis[2, 1]
-        d2 = x * basis[0, 2] + y * basis[1, 2] + z * basis[2, 2]
+        i, j, d0, d1, d2 = _pixel_dir(p, W, H, sx, sy, ortho, basis)
         if k >= nr:
             q = k - nr
             db[q, 0] = d0
@@ -364,12 +372,7 @@ def _front_ray(p, ldi, lut, zfront, e3, view):
     refract, then the refracted direction (the primary one where it is not finite) and the pixel
     centre's point at depth ``zfront``. ``view`` is the eye's :class:`FrontView`."""
     W, H, sx, sy, ortho = view.W, view.H, view.sx, view.sy, view.ortho
-    ii = p // W
-    jj = p - ii * W
-    x, y, z = primary_dir(ii, jj, W, H, sx, sy, ortho)
-    dvx = x * e3[0, 0] + y * e3[1, 0] + z * e3[2, 0]
-    dvy = x * e3[0, 1] + y * e3[1, 1] + z * e3[2, 1]
-    dvz = x * e3[0, 2] + y * e3[1, 2] + z * e3[2, 2]
+    ii, jj, dvx, dvy, dvz = _pixel_dir(p, W, H, sx, sy, ortho, e3)
     nxx, nyy, nzz = np.nan, np.nan, np.nan
     if math.isfinite(ldi[0, ii, jj]):
         nxx, nyy, nzz = normal_at(ldi, 0, ii, jj, lut, view.normals, view.delta, ViewGrid(W, H, sx, sy, ortho))

@@ -22,9 +22,11 @@ def depth_bounds(tri_view, camera, keep_fragments=False):
     Parameters
     ----------
     tri_view : (T, 3, 3) ndarray or RasterSetup
-        Triangles in view space (clipped to the near plane by
-        :func:`~refraction_ref.raster.raster_setup` when given raw).
+        Triangles in view space, as :func:`~refraction_ref.raster.rasterize` takes them.
     camera : Camera
+        The view they are rasterized in.
+    keep_fragments : bool
+        Also return the fragments.
 
     Returns
     -------
