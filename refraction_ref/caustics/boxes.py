@@ -187,7 +187,7 @@ def dir_to_map(box, t):
     Parameters
     ----------
     box : Box
-        The reference box defining the map frame.
+        As for :func:`to_map`.
     t : (..., 3) array_like
         World directions.
 

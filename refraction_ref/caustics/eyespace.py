@@ -414,10 +414,7 @@ def march_eyespace(origins_view, dirs_view, depth, cam, rel_thick=0.01, max_samp
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
-       Accurate Photon Tracing on GPUs", EGSR 2006.
+    Chaudhari 2008, §4.1 (photons to their receivers); Krüger et al. 2006 (the screen-space march).
     """
     O = np.ascontiguousarray(origins_view, dtype=np.float64).reshape(-1, 3)
     D = np.ascontiguousarray(dirs_view, dtype=np.float64).reshape(-1, 3)

@@ -268,10 +268,7 @@ def eye_buffers(rs, cam):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
-       Accurate Photon Tracing on GPUs", EGSR 2006.
+    Chaudhari 2008, §4.1 (the receivers the eye sees); Krüger et al. 2006 (the depth the march reads).
     """
     tv = cam.world_to_view(rs.tris)
     d = -tv[..., 2]
@@ -341,10 +338,7 @@ def receiver_hits(rs, origins, dirs, mode, cam=None, eyebuf=None, view=None):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] J. Krüger, K. Bürger, R. Westermann, "Interactive Screen-Space
-       Accurate Photon Tracing on GPUs", EGSR 2006.
+    Chaudhari 2008, §4.1 (photons to their receivers); Krüger et al. 2006 (``march``).
     """
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)

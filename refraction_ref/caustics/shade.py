@@ -453,10 +453,8 @@ def shade_rows_applies(rs, lights, maps_rgb, visibility):
 
     Parameters
     ----------
-    rs : ReceiverSet
-    lights : list of dict
-    maps_rgb : list of (Hc, Wc, 3) arrays
-    visibility : callable
+    rs, lights, maps_rgb, visibility
+        As for :func:`shade_points_fuses`.
 
     Returns
     -------
@@ -464,8 +462,7 @@ def shade_rows_applies(rs, lights, maps_rgb, visibility):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    Chaudhari 2008, §4.1.
     """
     return (bool(lights) and all(lt["type"] == "directional" for lt in lights)
             and shade_points_fuses(rs, lights, maps_rgb, visibility))

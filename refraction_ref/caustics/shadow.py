@@ -142,7 +142,7 @@ def light_view(lcam, bias):
 
     References
     ----------
-    .. [1] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
+    Williams 1978 (the light's depth image and the shadow test's bias).
     """
     return LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width), float(lcam.height),
                      float(bias))
@@ -225,9 +225,7 @@ def shadow_map_visibility(lcam, zmin, points, bias):
         return np.ones(0)
     pv = lcam.world_to_view(p)
     out = np.empty(len(p))
-    _shadow_map_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64),
-                       LightView(float(lcam.sx), float(lcam.sy), bool(lcam.ortho), float(lcam.width),
-                                  float(lcam.height), float(bias)), out)
+    _shadow_map_kernel(pv, np.ascontiguousarray(zmin, dtype=np.float64), light_view(lcam, bias), out)
     return out
 
 
@@ -288,7 +286,7 @@ def tie_probes(col, row, d, zmin, bias, tie, m):
 
     References
     ----------
-    .. [1] L. Williams, "Casting Curved Shadows on Curved Surfaces", SIGGRAPH 1978.
+    Williams 1978 (the shadow test, probed around the point).
     """
     if tie > 0:
         for q in range(4):
@@ -335,12 +333,8 @@ def shadow_map_test(lcam, zmin, points, bias, tie, idx, code, margin):
 
     Parameters
     ----------
-    lcam : Camera
-    zmin : (N, N) float64
-    points : (M, 3) array_like
-    bias : float
-    tie : float
-        Texels (:func:`shadow_map_margin`).
+    lcam, zmin, points, bias, tie
+        As for :func:`shadow_map_margin`.
     idx : (M,) array_like of int
         Distinct rows of ``code`` and ``margin``.
     code : (K,) uint8

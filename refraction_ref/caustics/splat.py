@@ -130,6 +130,14 @@ def _footprint_bands(col, row, Hc, Wc):
     return i0s, j0s, fx, fy, counts, items
 
 
+def _map_values(shape, values):
+    """The map's ``Hc, Wc`` and the points' values as a float64 ``(N, C)`` array (one column for 1-D values)."""
+    val = np.ascontiguousarray(values, dtype=np.float64)
+    if val.ndim == 1:
+        val = val[:, None]
+    return int(shape[0]), int(shape[1]), val
+
+
 def splat_bilinear(col, row, values, shape, out=None):
     """Add point values into a map with bilinear weights, deterministically.
 
@@ -158,10 +166,7 @@ def splat_bilinear(col, row, values, shape, out=None):
     .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
        Approximating Caustics", I3D 2006 (splatting and gathering).
     """
-    Hc, Wc = int(shape[0]), int(shape[1])
-    val = np.ascontiguousarray(values, dtype=np.float64)
-    if val.ndim == 1:
-        val = val[:, None]
+    Hc, Wc, val = _map_values(shape, values)
     if out is None:
         out = np.zeros((Hc, Wc, val.shape[1]))
     n = val.shape[0]
@@ -246,11 +251,8 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
 
     Parameters
     ----------
-    col, row : (N,) array_like
-        Continuous map positions.
-    values : (N, C) array_like
-        What each point deposits.
-    shape : (Hc, Wc)
+    col, row, values, shape
+        As for :func:`splat_bilinear`.
     groups : (N,) array_like of int
         Each point's group (negative: in none but the whole map).
     ng : int
@@ -264,16 +266,10 @@ def splat_bilinear_groups(col, row, values, shape, groups, ng):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
-       Approximating Caustics", I3D 2006 (splatting and gathering).
+    Chaudhari 2008, §4.1; Wyman and Davis 2006 (splatting and gathering), as :func:`splat_bilinear`.
     """
-    Hc, Wc = int(shape[0]), int(shape[1])
+    Hc, Wc, val = _map_values(shape, values)
     ng = int(ng)
-    val = np.ascontiguousarray(values, dtype=np.float64)
-    if val.ndim == 1:
-        val = val[:, None]
     out = np.zeros((1 + ng, Hc, Wc, val.shape[1]))
     n = val.shape[0]
     if n == 0:
@@ -377,10 +373,7 @@ def receiver_photons(P, face, idx, normals, box, flux):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
-       Approximating Caustics", I3D 2006 (splatting and gathering).
+    Chaudhari 2008, §4.1 (the photons' irradiance on a receiver's map); Wyman and Davis 2006 (splatting).
     """
     Hc, Wc = box.size
     frame = np.array([box.center, box.U, box.V, box.W, [box.w, box.d, 0.0]], dtype=np.float64)
@@ -392,30 +385,35 @@ def receiver_photons(P, face, idx, normals, box, flux):
     return col, row, val
 
 
+@nb.njit(cache=True, inline="always")
+def _texel_mean(m, i, j):
+    # m[i, j].mean() as NumPy takes it: the channels summed in order, then divided by their count
+    C = m.shape[2]
+    s = 0.0
+    for c in range(C):
+        s += m[i, j, c]
+    return s / C
+
+
 @nb.njit(cache=True, parallel=True)
 def _accumulate_kernel(m, radiance, unit, rgb):
-    # unit += m.mean(axis=2) (NumPy sums the three channels in order, then divides), rgb += m * L
+    # unit += m.mean(axis=2), rgb += m * L
     H, W, C = m.shape
     for i0 in nb.prange(H):
         i = np.int64(i0)
         for j in range(W):
-            s = 0.0
             for c in range(C):
-                s += m[i, j, c]
                 rgb[i, j, c] += m[i, j, c] * radiance[c]
-            unit[i, j] += s / C
+            unit[i, j] += _texel_mean(m, i, j)
 
 
 @nb.njit(cache=True, parallel=True)
 def _channel_mean_kernel(m, out):
-    H, W, C = m.shape
+    H, W = m.shape[0], m.shape[1]
     for i0 in nb.prange(H):
         i = np.int64(i0)
         for j in range(W):
-            s = 0.0
-            for c in range(C):
-                s += m[i, j, c]
-            out[i, j] = s / C
+            out[i, j] = _texel_mean(m, i, j)
 
 
 def channel_mean(m):
@@ -432,8 +430,7 @@ def channel_mean(m):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
+    Chaudhari 2008, §4.1 (the caustic maps' mean over the channels).
     """
     m = np.ascontiguousarray(m, dtype=np.float64)
     out = np.empty(m.shape[:2])
@@ -491,10 +488,7 @@ def accumulate_light(m, radiance, unit, rgb):
 
     References
     ----------
-    .. [1] P. Chaudhari, "Real-Time Multiple Refractions Through Deformable
-       Objects", M.S. thesis, UMBC, 2008, §4.1.
-    .. [2] C. Wyman, S. Davis, "Interactive Image-Space Techniques for
-       Approximating Caustics", I3D 2006 (splatting and gathering).
+    Chaudhari 2008, §4.1 (one light's caustic map, lit); Wyman and Davis 2006 (splatting and gathering).
     """
     _accumulate_kernel(np.ascontiguousarray(m, dtype=np.float64), np.asarray(radiance, dtype=np.float64),
                        unit, rgb)
