@@ -49,6 +49,8 @@ import numba as nb
 import numpy as np
 
 from ..raster import BAND, MAX_COORD, bin_bands, edge_setup, oriented_triangle, pixel_span, row_span
+from ..raster.blend import step_edges
+from .maps import map_point
 
 __all__ = ["BeamSet", "PlaneSet", "ReceiverTexels", "beams_in_map", "cull_beams", "splat_plane", "splat_planes",
            "section_texels", "section_irradiance", "receiver_cosine", "GROUP_SECTIONS"]
@@ -176,19 +178,16 @@ class BeamSet:
 def _to_map(org, dirs, tbar, frame, O, D, tdz, inv_tv):
     """:func:`~.planes.to_map` of the edge-ray origins, :func:`~.planes.dir_to_map` of their directions, and
     each beam axis's ``T . T0`` and ``1 / |T . V|`` (0 where the beam does not go down the box), beams in parallel."""
-    cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
     w = frame[4, 0]
     d = frame[4, 1]
     Wc = frame[5, 0]
     Hc = frame[5, 1]
     for f in nb.prange(org.shape[0]):
         for k in range(3):
-            qx = org[f, k, 0] - cx
-            qy = org[f, k, 1] - cy
-            qz = org[f, k, 2] - cz
-            O[f, k, 0] = ((qx * frame[1, 0] + qy * frame[1, 1] + qz * frame[1, 2]) / w + 0.5) * Wc
-            O[f, k, 1] = ((qx * frame[3, 0] + qy * frame[3, 1] + qz * frame[3, 2]) / d + 0.5) * Hc
-            O[f, k, 2] = -(qx * frame[2, 0] + qy * frame[2, 1] + qz * frame[2, 2])
+            x, y, z = map_point(frame, org[f, k, 0], org[f, k, 1], org[f, k, 2])
+            O[f, k, 0] = x
+            O[f, k, 1] = y
+            O[f, k, 2] = z
             tx = dirs[f, k, 0]
             ty = dirs[f, k, 1]
             tz = dirs[f, k, 2]
@@ -474,7 +473,6 @@ def _splat(beams, sec, bins, grid, texels, planes, out):
             if j0 > j1 or i0 > i1:
                 continue
             e = edge_setup(x0, y0, x1, y1, x2, y2)
-            a0, a1, a2 = e[0], e[1], e[2]
             v = (x0, y0, x1, y1, x2, y2)
             inv_area = 1.0 / area
             tx = tbar[t, 0]
@@ -486,10 +484,7 @@ def _splat(beams, sec, bins, grid, texels, planes, out):
                 # the rasterizer's scanline step: the row's covered run, edge functions stepped along it
                 ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
                 for j in range(ja, jb + 1):
-                    if j > ja:
-                        w0 -= 256 * a0
-                        w1 -= 256 * a1
-                        w2 -= 256 * a2
+                    w0, w1, w2 = step_edges(j, ja, e, w0, w1, w2)
                     if accept[i, j] != key:  # depth test against the position map (eq. 4-15)
                         continue
                     g_ = receiver_cosine(tx, ty, tz, normal, i, j)
@@ -568,24 +563,17 @@ def splat_plane(beams, cand, box, plane, texels, K, out):
 
     Parameters
     ----------
-    beams : BeamSet
-    cand : (M,) int64
-        Candidate beams.
-    box : Box
+    beams, cand, box : BeamSet, (M,) int64, Box
+        As for :func:`splat_planes`.
     plane : PlaneSet
         One plane: ``zeta`` a float, ``key`` an int, ``rect`` (4,) int64.
-    texels : ReceiverTexels
-        Depth-test map (a fragment is kept where ``accept == plane.key``),
-        depth and unit normal of the receiver at each texel.
-    K : float
-        Absorption coefficient of the water.
-    out : (Hc, Wc) float64
-        Accumulated irradiance (additive blending).
+    texels, K, out : ReceiverTexels, float, (Hc, Wc) float64
+        As for :func:`splat_planes` (a fragment is kept where ``texels.accept == plane.key``).
 
     Returns
     -------
     int
-        Number of intersection triangles drawn.
+        Number of this plane's intersection triangles drawn.
 
     References
     ----------

@@ -82,14 +82,16 @@ class _VolumeArrays(NamedTuple):
 
 
 @nb.njit(cache=True, inline="always")
-def _incident(light_point, ldir, lpos, w, px, py, pz):
+def _incident(light, px, py, pz):
     """Unit incident direction at a point and the irradiance perpendicular to it
-    (:func:`~.water.incident_directions`)."""
-    if not light_point:
-        return ldir[0], ldir[1], ldir[2], w
-    dx = px - lpos[0]
-    dy = py - lpos[1]
-    dz = pz - lpos[2]
+    (:func:`~.water.incident_directions`); ``light`` is read only, so its fields
+    may be read inside a ``prange`` loop (numba#7135 drops stores, not loads)."""
+    w = light.weight
+    if not light.point:
+        return light.dir[0], light.dir[1], light.dir[2], w
+    dx = px - light.pos[0]
+    dy = py - light.pos[1]
+    dz = pz - light.pos[2]
     r2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
     s = 1.0 / math.sqrt(r2)
     return dx * s, dy * s, dz * s, w / r2
@@ -100,12 +102,8 @@ def _refract_vertices(mesh, light, eta, T, ok):
     """T_i at every water vertex (eq. 2-8) and whether light enters there."""
     V = mesh.vertices
     N = mesh.normals
-    lp = light.point
-    ld = light.dir
-    lq = light.pos
-    w = light.weight
     for i in nb.prange(V.shape[0]):
-        ix, iy, iz, _ = _incident(lp, ld, lq, w, V[i, 0], V[i, 1], V[i, 2])
+        ix, iy, iz, _ = _incident(light, V[i, 0], V[i, 1], V[i, 2])
         tx, ty, tz, tir = refract3(ix, iy, iz, N[i, 0], N[i, 1], N[i, 2], eta)
         T[i, 0] = tx
         T[i, 1] = ty
@@ -119,10 +117,6 @@ def _volumes(mesh, light, T, ok, out):
     """Per water triangle: its vertices, their T_i, the flux E_perp A_w cos(theta_i) and the beam axis (eq. 4-14)."""
     V = mesh.vertices
     F = mesh.faces
-    lp = light.point
-    ld = light.dir
-    lq = light.pos
-    w = light.weight
     O = out.origins
     D = out.dirs
     flux = out.flux
@@ -156,7 +150,7 @@ def _volumes(mesh, light, T, ok, out):
         nx = e1y * e2z - e1z * e2y  # 2 A_w n
         ny = e1z * e2x - e1x * e2z
         nz = e1x * e2y - e1y * e2x
-        ix, iy, iz, e = _incident(lp, ld, lq, w, cx / 3.0, cy / 3.0, cz / 3.0)
+        ix, iy, iz, e = _incident(light, cx / 3.0, cy / 3.0, cz / 3.0)
         proj = -(nx * ix + ny * iy + nz * iz) * 0.5  # A_w cos(theta_i), signed
         flux[f] = e * proj if (good and proj > 0.0) else 0.0
         ln = math.sqrt(mx * mx + my * my + mz * mz)

@@ -31,7 +31,7 @@ import numpy as np
 from ..raster import ortho_setup, rasterize_ortho
 from ..caustics.receivers import Receivers  # the receivers' triangle soup, shared with the caustics
 
-__all__ = ["Receivers", "LevelMap", "LevelMapPair", "level_map", "receiver_selection", "map_setup"]
+__all__ = ["Receivers", "LevelMap", "LevelMapPair", "level_map", "receiver_selection", "map_setup", "map_point"]
 
 
 class LevelMap(NamedTuple):
@@ -184,25 +184,44 @@ def receiver_selection(receivers, r, shadows=True):
     return np.arange(len(receivers.tris)) if shadows else np.flatnonzero(receivers.owner == r)
 
 
+@nb.njit(cache=True, inline="always")
+def map_point(frame, px, py, pz):
+    """:func:`~.planes.to_map` of one world point, inside a kernel.
+
+    Parameters
+    ----------
+    frame : (6, 3) float64
+        The box's rows ``center, U, V, W, (w, d, 0), (Wc, Hc, 0)``.
+    px, py, pz : float
+        The world point.
+
+    Returns
+    -------
+    x, y, z : float
+        Its map coordinates: texel column and row, depth along ``-V``.
+
+    References
+    ----------
+    Tipprasert (2006), §4.2.1 (box axes, eq. 4-1) and §4.2.2 (eqs. 4-10 to 4-13).
+    """
+    qx = px - frame[0, 0]
+    qy = py - frame[0, 1]
+    qz = pz - frame[0, 2]
+    x = ((qx * frame[1, 0] + qy * frame[1, 1] + qz * frame[1, 2]) / frame[4, 0] + 0.5) * frame[5, 0]
+    y = ((qx * frame[3, 0] + qy * frame[3, 1] + qz * frame[3, 2]) / frame[4, 1] + 0.5) * frame[5, 1]
+    return x, y, -(qx * frame[2, 0] + qy * frame[2, 1] + qz * frame[2, 2])
+
+
 @nb.njit(cache=True, parallel=True)
 def _tris_to_map(tris, sel, frame, out):
     """:func:`~.planes.to_map` of the vertices of triangles ``tris[sel]``, triangles in parallel."""
-    cx = frame[0, 0]
-    cy = frame[0, 1]
-    cz = frame[0, 2]
-    w = frame[4, 0]
-    d = frame[4, 1]
-    Wc = frame[5, 0]
-    Hc = frame[5, 1]
     for m in nb.prange(sel.shape[0]):
         t = sel[m]
         for k in range(3):
-            qx = tris[t, k, 0] - cx
-            qy = tris[t, k, 1] - cy
-            qz = tris[t, k, 2] - cz
-            out[m, k, 0] = ((qx * frame[1, 0] + qy * frame[1, 1] + qz * frame[1, 2]) / w + 0.5) * Wc
-            out[m, k, 1] = ((qx * frame[3, 0] + qy * frame[3, 1] + qz * frame[3, 2]) / d + 0.5) * Hc
-            out[m, k, 2] = -(qx * frame[2, 0] + qy * frame[2, 1] + qz * frame[2, 2])
+            x, y, z = map_point(frame, tris[t, k, 0], tris[t, k, 1], tris[t, k, 2])
+            out[m, k, 0] = x
+            out[m, k, 1] = y
+            out[m, k, 2] = z
 
 
 def map_setup(receivers, sel, box):

@@ -27,7 +27,7 @@ from ..schedule import coprime_stride, strided
 from .coverage import edge_setup, oriented_triangle, pixel_span, row_span
 from .snap import BAND
 
-__all__ = ["OPS", "FRAGMENT_LIMIT", "Fragments"]
+__all__ = ["OPS", "FRAGMENT_LIMIT", "Fragments", "step_edges"]
 
 #: blend operation -> the code the kernels branch on
 OPS = {"min": 0, "max": 1, "count": 2, "or": 3, "add": 4, "collect": 5, "minmax": 6, "nearest": 7}
@@ -105,6 +105,40 @@ class _RasterRecord(NamedTuple):
     facing: np.ndarray  # int8 -1 / +1
 
 
+@nb.njit(cache=True, inline="always")
+def step_edges(j, ja, e, w0, w1, w2):
+    """The edge functions of pixel ``j`` of a row's covered run, from those of pixel ``j - 1``.
+
+    The scanline step of :func:`~.coverage.row_span`'s walk, shared by every
+    kernel that walks such runs (:func:`_raster_band`, the intersection
+    triangles of :mod:`~refraction_ref.levelmap.caustics_map`). Integer
+    arithmetic only, inlined: the callers' bits are those of the step
+    written out in place.
+
+    Parameters
+    ----------
+    j, ja : int
+        The pixel, and the first of the run (whose values ``row_span`` returned).
+    e : tuple of 6 int
+        ``(a0, a1, a2, b0, b1, b2)`` from :func:`~.coverage.edge_setup`.
+    w0, w1, w2 : int
+        Edge functions at pixel ``j - 1`` (at ``ja`` when ``j == ja``).
+
+    Returns
+    -------
+    w0, w1, w2 : int
+        Edge functions at pixel ``j``.
+
+    References
+    ----------
+    J. Pineda, "A Parallel Algorithm for Polygon Rasterization", SIGGRAPH
+    1988 (incremental edge functions).
+    """
+    if j > ja:
+        return w0 - 256 * e[0], w1 - 256 * e[1], w2 - 256 * e[2]
+    return w0, w1, w2
+
+
 @nb.njit(cache=True)
 def _raster_band(b, op, tri, grid, blend, out, rec):
     """Rasterize the binned triangles of band ``b`` with blend ``op`` (see ``OPS``).
@@ -147,17 +181,13 @@ def _raster_band(b, op, tri, grid, blend, out, rec):
         if j0 > j1 or i0 > i1:
             continue
         e = edge_setup(x0, y0, x1, y1, x2, y2)
-        a0, a1, a2 = e[0], e[1], e[2]
         v = (x0, y0, x1, y1, x2, y2)
         inv_area = 1.0 / area
         for i in range(i0, i1 + 1):
             # the row's covered run (row_span), its edge functions stepped incrementally
             ja, jb, w0, w1, w2 = row_span(v, e, i, j0, j1)
             for j in range(ja, jb + 1):
-                if j > ja:
-                    w0 -= 256 * a0
-                    w1 -= 256 * a1
-                    w2 -= 256 * a2
+                w0, w1, w2 = step_edges(j, ja, e, w0, w1, w2)
                 # D holds 1/depth for perspective set-ups, depth for orthographic ones:
                 # either way the attribute interpolates linearly on screen
                 if perspective:
