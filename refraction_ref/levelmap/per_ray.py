@@ -269,13 +269,10 @@ def per_ray_caustics(beams, cand, lm, box, K, out):
 
     Parameters
     ----------
-    beams : BeamSet
-        Beams in the map coordinates of ``box``.
-    cand : (M,) int64
-        Candidate beams.
+    beams, cand, box : BeamSet, (M,) int64, Box
+        As for :func:`search_hits`.
     lm : LevelMap
         The receiver's maps (``depth``, ``own``, ``normal``).
-    box : Box
     K : float
         Absorption coefficient of the water.
     out : (Hc, Wc) float64

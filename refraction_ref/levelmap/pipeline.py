@@ -151,6 +151,7 @@ def water_pass(scene):
     Parameters
     ----------
     scene : Scene
+        Its ``water`` block, ``outside_ior`` and ``lights``.
 
     Returns
     -------
@@ -180,6 +181,8 @@ def planes_pass(scene):
     Parameters
     ----------
     scene : Scene
+        Its ``receivers``, ``lights``, ``water`` block, ``outside_ior`` and
+        ``caustics`` knobs (``placement``, ``map_size``).
 
     Returns
     -------

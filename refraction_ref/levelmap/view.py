@@ -670,13 +670,6 @@ def water_surface_hits_analytic(water, origins, dirs, eta):
     eta : float
         ``outside_ior / water.ior``.
 
-    Returns
-    -------
-    P, T : (N, 3) float64
-        Surface point and refracted unit direction (NaN where the ray misses the water).
-    status : (N,) int8
-        ``VIEW_THROUGH`` (1), ``VIEW_DIRECT`` (3, missed the water) or ``VIEW_TIR`` (4).
-
     References
     ----------
     Tipprasert (2006), §2.6 (Snell's law, eq. 2-8).

@@ -114,10 +114,8 @@ def surface_normals(water, x, z):
 
     Parameters
     ----------
-    water : dict
-        The resolved ``water`` block.
-    x, z : array_like
-        World coordinates, broadcast together.
+    water, x, z : dict, array_like, array_like
+        As for :func:`wave_gradient`, whose derivatives give the normals.
 
     Returns
     -------
