@@ -105,7 +105,7 @@ import numba as nb
 import numpy as np
 
 from ..status import EXITED, LIMIT, LOST, MISSED
-from ..volumetric.extinction import skipped_attenuation
+from ..volumetric.extinction import optical_depth, skipped_attenuation
 from ..volumetric.grid import half_contrast, volume_box
 from ..volumetric.receivers import exit_receivers, receiver_tuple, segment_receiver
 from ..volumetric.view import box_entry_one
@@ -205,56 +205,6 @@ def _root(mode, fk, tab, y, f, bracket, w):
                 gb *= 0.5
             side = -1
     return hb
-
-
-@nb.njit(cache=True)
-def _optical_depth(ext, lo, ih, a, b):
-    """``integral of kappa`` per channel along the segment a -> b, voxel by voxel (the march's walk)."""
-    nx, ny, nz = ext.shape[0], ext.shape[1], ext.shape[2]
-    u0 = (a[0] - lo[0]) * ih[0]
-    w0 = (a[1] - lo[1]) * ih[1]
-    t0 = (a[2] - lo[2]) * ih[2]
-    du = (b[0] - lo[0]) * ih[0] - u0
-    dw = (b[1] - lo[1]) * ih[1] - w0
-    dt = (b[2] - lo[2]) * ih[2] - t0
-    wx, wy, wz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    length = math.sqrt(wx * wx + wy * wy + wz * wz)
-    tr, tg, tb = 0.0, 0.0, 0.0
-    if not length > 0.0:
-        return tr, tg, tb
-    i = min(max(int(math.floor(u0)), 0), nx - 1)
-    j = min(max(int(math.floor(w0)), 0), ny - 1)
-    k = min(max(int(math.floor(t0)), 0), nz - 1)
-    si = 1 if du > 0 else -1
-    sj = 1 if dw > 0 else -1
-    sk = 1 if dt > 0 else -1
-    ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else np.inf
-    tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else np.inf
-    tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else np.inf
-    di = abs(1.0 / du) if du != 0.0 else np.inf
-    dj = abs(1.0 / dw) if dw != 0.0 else np.inf
-    dk = abs(1.0 / dt) if dt != 0.0 else np.inf
-    t = 0.0
-    for _ in range(nx + ny + nz + 3):
-        tn = min(ti, min(tj, min(tk, 1.0)))
-        w = (tn - t) * length
-        if w > 0.0:
-            tr += ext[i, j, k, 0] * w
-            tg += ext[i, j, k, 1] * w
-            tb += ext[i, j, k, 2] * w
-        if tn >= 1.0:
-            break
-        if ti <= tj and ti <= tk:
-            i = min(max(i + si, 0), nx - 1)
-            ti += di
-        elif tj <= tk:
-            j = min(max(j + sj, 0), ny - 1)
-            tj += dj
-        else:
-            k = min(max(k + sk, 0), nz - 1)
-            tk += dk
-        t = tn
-    return tr, tg, tb
 
 
 # --------------------------------------------------------------------- one ray
@@ -390,7 +340,7 @@ def _trace_one(r, fk, tab, cfg, recv, x0, d0, out):
         cx, cy, cz = ynew[0] - y[0], ynew[1] - y[1], ynew[2] - y[2]
         chord = math.sqrt(cx * cx + cy * cy + cz * cz)
         if fk.has_ext:
-            dr, dg, db_ = _optical_depth(fk.ext, fk.lo, fk.ih, y, ynew)
+            dr, dg, db_ = optical_depth(fk.ext, fk.lo, fk.ih, (y[0], y[1], y[2]), (ynew[0], ynew[1], ynew[2]))
             tau_r += dr
             tau_g += dg
             tau_b += db_

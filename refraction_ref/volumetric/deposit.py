@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from .grid import cell
+from .grid import dda_start, voxel_segment
 
 __all__ = ["Deposits", "deposit_segment", "merge_buffers", "take_workspace", "give_workspace", "release_workspace"]
 
@@ -93,33 +93,14 @@ def deposit_segment(dep, g, lo, ih, a, b, l0, l1, d):
     """
     accr, nx, ny, nz, py, pz = dep.rows, dep.nx, dep.ny, dep.nz, dep.py, dep.pz
     sr, sd, sgn = dep.sr, dep.sd, dep.sign
-    ax, ay, az = a
-    bx, by, bz = b
     l0r, l0g, l0b = l0
     l1r, l1g, l1b = l1
     dx, dy, dz = d
-    u0 = (ax - lo[0]) * ih[0]
-    w0 = (ay - lo[1]) * ih[1]
-    t0 = (az - lo[2]) * ih[2]
-    du = (bx - lo[0]) * ih[0] - u0
-    dw = (by - lo[1]) * ih[1] - w0
-    dt = (bz - lo[2]) * ih[2] - t0
+    u0, w0, t0, du, dw, dt = voxel_segment(lo, ih, a, b)
     lv = math.sqrt(du * du + dw * dw + dt * dt)
     if not lv > 0.0:
         return
-    i = cell(u0, nx)
-    j = cell(w0, ny)
-    k = cell(t0, nz)
-    si = 1 if du > 0 else -1
-    sj = 1 if dw > 0 else -1
-    sk = 1 if dt > 0 else -1
-    inf = np.inf
-    ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else inf
-    tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else inf
-    tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else inf
-    di = abs(1.0 / du) if du != 0.0 else inf
-    dj = abs(1.0 / dw) if dw != 0.0 else inf
-    dk = abs(1.0 / dt) if dt != 0.0 else inf
+    i, j, k, si, sj, sk, ti, tj, tk, di, dj, dk = dda_start(u0, w0, t0, du, dw, dt, nx, ny, nz)
     # value(t) = (a + b t) * (length in voxel), pre-scaled to fixed point
     c = lv * sr * sgn
     ar, br = l0r * c, (l1r - l0r) * c

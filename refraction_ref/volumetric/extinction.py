@@ -4,8 +4,9 @@ Three forms, one per pass that reads it:
 
 * :func:`attenuate`: a photon's radiance and transmittance over one march
   step, with the extinction of the voxel the step starts in (§4.4);
-* :func:`skipped_attenuation`: exactly integrated, voxel by voxel, along the
-  straight segment a photon that starts on a proxy skipped (§4.3);
+* :func:`skipped_attenuation`: exactly integrated, voxel by voxel
+  (:func:`optical_depth`), along the straight segment a photon that starts
+  on a proxy skipped (§4.3);
 * :func:`transmit`: a viewing ray's transmittance over one step (§4.5).
 
 References
@@ -21,11 +22,10 @@ from __future__ import annotations
 import math
 
 import numba as nb
-import numpy as np
 
-from .grid import cell
+from .grid import dda_start, voxel_segment
 
-__all__ = ["attenuate", "skipped_attenuation", "transmit"]
+__all__ = ["attenuate", "optical_depth", "skipped_attenuation", "transmit"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -71,6 +71,58 @@ def attenuate(ext, i, j, k, seg, lrad, trans):
     return nr, ng, nb_, tr_r, tr_g, tr_b
 
 
+@nb.njit(cache=True, inline="always")
+def optical_depth(ext, lo, ih, a, b):
+    """``integral of kappa`` per channel along the straight segment a -> b, voxel by voxel (3D DDA).
+
+    Parameters
+    ----------
+    ext, lo, ih
+        The extinction volume and where it lies, as :func:`skipped_attenuation`
+        reads them.
+    a, b : 3-tuples of float
+        Segment ends (world).
+
+    Returns
+    -------
+    tuple of 3 floats
+        The optical depth (RGB); zero for a segment of no length.
+
+    References
+    ----------
+    Sun et al. (2008), §4.3, eq. 6; Amanatides and Woo (1987).
+    """
+    nx, ny, nz = ext.shape[0], ext.shape[1], ext.shape[2]
+    u0, w0, t0, du, dw, dt = voxel_segment(lo, ih, a, b)
+    wx, wy, wz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    length = math.sqrt(wx * wx + wy * wy + wz * wz)  # world length of the segment
+    tr, tg, tb = 0.0, 0.0, 0.0
+    if not length > 0.0:
+        return tr, tg, tb
+    i, j, k, si, sj, sk, ti, tj, tk, di, dj, dk = dda_start(u0, w0, t0, du, dw, dt, nx, ny, nz)
+    t = 0.0
+    for _ in range(nx + ny + nz + 3):
+        tn = min(ti, min(tj, min(tk, 1.0)))
+        w = (tn - t) * length
+        if w > 0.0:
+            tr += ext[i, j, k, 0] * w
+            tg += ext[i, j, k, 1] * w
+            tb += ext[i, j, k, 2] * w
+        if tn >= 1.0:
+            break
+        if ti <= tj and ti <= tk:
+            i = min(max(i + si, 0), nx - 1)
+            ti += di
+        elif tj <= tk:
+            j = min(max(j + sj, 0), ny - 1)
+            tj += dj
+        else:
+            k = min(max(k + sk, 0), nz - 1)
+            tk += dk
+        t = tn
+    return tr, tg, tb
+
+
 @nb.njit(cache=True, parallel=True)
 def skipped_attenuation(ext, lo, ih, a, b, out):
     """Eq. 6 along straight segments: ``out = exp(-integral of kappa)`` per channel from a to b (3D DDA).
@@ -100,50 +152,8 @@ def skipped_attenuation(ext, lo, ih, a, b, out):
     Sun et al. (2008), §4.3 (proxy geometry) and eq. 6; Amanatides and Woo
     (1987).
     """
-    nx, ny, nz = ext.shape[0], ext.shape[1], ext.shape[2]
     for p in nb.prange(a.shape[0]):
-        u0 = (a[p, 0] - lo[0]) * ih[0]
-        w0 = (a[p, 1] - lo[1]) * ih[1]
-        t0 = (a[p, 2] - lo[2]) * ih[2]
-        du = (b[p, 0] - lo[0]) * ih[0] - u0
-        dw = (b[p, 1] - lo[1]) * ih[1] - w0
-        dt = (b[p, 2] - lo[2]) * ih[2] - t0
-        wx, wy, wz = b[p, 0] - a[p, 0], b[p, 1] - a[p, 1], b[p, 2] - a[p, 2]
-        length = math.sqrt(wx * wx + wy * wy + wz * wz)  # world length of the segment
-        tr, tg, tb = 0.0, 0.0, 0.0
-        if length > 0.0:
-            i = cell(u0, nx)
-            j = cell(w0, ny)
-            k = cell(t0, nz)
-            si = 1 if du > 0 else -1
-            sj = 1 if dw > 0 else -1
-            sk = 1 if dt > 0 else -1
-            ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else np.inf
-            tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else np.inf
-            tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else np.inf
-            di = abs(1.0 / du) if du != 0.0 else np.inf
-            dj = abs(1.0 / dw) if dw != 0.0 else np.inf
-            dk = abs(1.0 / dt) if dt != 0.0 else np.inf
-            t = 0.0
-            for _ in range(nx + ny + nz + 3):
-                tn = min(ti, min(tj, min(tk, 1.0)))
-                w = (tn - t) * length
-                if w > 0.0:
-                    tr += ext[i, j, k, 0] * w
-                    tg += ext[i, j, k, 1] * w
-                    tb += ext[i, j, k, 2] * w
-                if tn >= 1.0:
-                    break
-                if ti <= tj and ti <= tk:
-                    i = min(max(i + si, 0), nx - 1)
-                    ti += di
-                elif tj <= tk:
-                    j = min(max(j + sj, 0), ny - 1)
-                    tj += dj
-                else:
-                    k = min(max(k + sk, 0), nz - 1)
-                    tk += dk
-                t = tn
+        tr, tg, tb = optical_depth(ext, lo, ih, (a[p, 0], a[p, 1], a[p, 2]), (b[p, 0], b[p, 1], b[p, 2]))
         out[p, 0] = math.exp(-tr)
         out[p, 1] = math.exp(-tg)
         out[p, 2] = math.exp(-tb)

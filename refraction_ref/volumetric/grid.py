@@ -26,8 +26,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-__all__ = ["VolumeBox", "volume_box", "cell", "voxel_of", "node_distance", "segment_exit", "sample_field",
-           "half_contrast"]
+__all__ = ["VolumeBox", "volume_box", "cell", "voxel_segment", "dda_start", "voxel_of", "node_distance", "segment_exit",
+           "sample_field", "half_contrast"]
 
 
 class VolumeBox(NamedTuple):
@@ -89,6 +89,75 @@ def cell(u, na):
         return 0
     c = int(u)
     return c if c < na - 1 else na - 1
+
+
+@nb.njit(cache=True, inline="always")
+def voxel_segment(lo, ih, a, b):
+    """The segment a -> b in voxel units: its start and its end minus its start.
+
+    Parameters
+    ----------
+    lo, ih : (3,) float64
+        Lower corner and inverse voxel size of the volume.
+    a, b : 3-tuples of float
+        The segment's ends, world units.
+
+    Returns
+    -------
+    tuple of 6 floats
+        ``(u0, w0, t0, du, dw, dt)``, the input of :func:`dda_start`.
+
+    References
+    ----------
+    Sun et al. (2008), §4.1 (the voxel grid).
+    """
+    ax, ay, az = a
+    bx, by, bz = b
+    u0 = (ax - lo[0]) * ih[0]
+    w0 = (ay - lo[1]) * ih[1]
+    t0 = (az - lo[2]) * ih[2]
+    return u0, w0, t0, (bx - lo[0]) * ih[0] - u0, (by - lo[1]) * ih[1] - w0, (bz - lo[2]) * ih[2] - t0
+
+
+@nb.njit(cache=True, inline="always")
+def dda_start(u0, w0, t0, du, dw, dt, nx, ny, nz):
+    """The first voxel and the steps of a 3D DDA walk along ``u0 + t du`` (voxel units), ``t`` in [0, 1].
+
+    Parameters
+    ----------
+    u0, w0, t0 : float
+        The segment's start, voxel units.
+    du, dw, dt : float
+        The segment's end minus its start, voxel units.
+    nx, ny, nz : int
+        Voxels along each axis.
+
+    Returns
+    -------
+    tuple
+        ``(i, j, k, si, sj, sk, ti, tj, tk, di, dj, dk)``: the start voxel
+        (:func:`cell`), the step sign per axis, ``t`` at the first boundary
+        crossed on each axis and ``t`` between two boundaries on it (``inf``
+        along an axis the segment does not move on).
+
+    References
+    ----------
+    Sun et al. (2008), §4.3 and §4.4 (the voxels a segment crosses); Amanatides
+    and Woo (1987).
+    """
+    i = cell(u0, nx)
+    j = cell(w0, ny)
+    k = cell(t0, nz)
+    si = 1 if du > 0 else -1
+    sj = 1 if dw > 0 else -1
+    sk = 1 if dt > 0 else -1
+    ti = ((i + (1 if du > 0 else 0)) - u0) / du if du != 0.0 else np.inf
+    tj = ((j + (1 if dw > 0 else 0)) - w0) / dw if dw != 0.0 else np.inf
+    tk = ((k + (1 if dt > 0 else 0)) - t0) / dt if dt != 0.0 else np.inf
+    di = abs(1.0 / du) if du != 0.0 else np.inf
+    dj = abs(1.0 / dw) if dw != 0.0 else np.inf
+    dk = abs(1.0 / dt) if dt != 0.0 else np.inf
+    return i, j, k, si, sj, sk, ti, tj, tk, di, dj, dk
 
 
 @nb.njit(cache=True, inline="always")
