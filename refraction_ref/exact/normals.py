@@ -128,6 +128,22 @@ def _adjacency_kernel(f, nv, start, incident):
         fill[v] += 1
 
 
+@nb.njit(cache=True, inline="always")
+def _put_unit(out, r, x, y, z):
+    # row r of out = (x, y, z) / its length (np.linalg.norm's operations), zeros for a zero vector;
+    # returns the length
+    n = math.sqrt(x * x + y * y + z * z)
+    if n > 0.0:
+        out[r, 0] = x / n
+        out[r, 1] = y / n
+        out[r, 2] = z / n
+    else:
+        out[r, 0] = 0.0
+        out[r, 1] = 0.0
+        out[r, 2] = 0.0
+    return n
+
+
 @nb.njit(cache=True, parallel=True)
 def _face_normals_kernel(v, f, fn, ln, un):
     # np.cross and np.linalg.norm's operations, in their order: the same bits
@@ -142,16 +158,7 @@ def _face_normals_kernel(v, f, fn, ln, un):
         fn[k, 0] = nx
         fn[k, 1] = ny
         fn[k, 2] = nz
-        n = math.sqrt(nx * nx + ny * ny + nz * nz)
-        ln[k] = n
-        if n > 0.0:
-            un[k, 0] = nx / n
-            un[k, 1] = ny / n
-            un[k, 2] = nz / n
-        else:
-            un[k, 0] = 0.0
-            un[k, 1] = 0.0
-            un[k, 2] = 0.0
+        ln[k] = _put_unit(un, k, nx, ny, nz)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -178,15 +185,7 @@ def _vertex_normals_kernel(adj, fnt, out):
                     sx += fn[g, 0]
                     sy += fn[g, 1]
                     sz += fn[g, 2]
-        n = math.sqrt(sx * sx + sy * sy + sz * sz)
-        if n > 0.0:
-            out[v, 0] = sx / n
-            out[v, 1] = sy / n
-            out[v, 2] = sz / n
-        else:
-            out[v, 0] = 0.0
-            out[v, 1] = 0.0
-            out[v, 2] = 0.0
+        _put_unit(out, v, sx, sy, sz)
 
 
 @nb.njit(cache=True, parallel=True)
