@@ -28,37 +28,19 @@ References
 
 from importlib import import_module
 
-__all__ = [
-    "trace_exact",
-    "ExactMesh",
-    "area_weighted_vertex_normals",
-    "MeshNormals",
-    "mesh_normals",
-    "STATUS_MISSED",
-    "STATUS_EXITED",
-    "STATUS_BOUNCE_LIMIT",
-    "STATUS_BOUNCE_LIMIT_TIR",
-    "STATUS_LOST",
-    "render_exact",
-    "render_water_exact",
-    "shading_normals",
-    "trace_water_photons",
-    "exact_caustic_stages",
-    "EXACT_DEFAULTS",
-    "ExactKnobs",
-    "exact_knobs",
-]
-
 #: public name -> the module of this package that defines it
 _WHERE = {
-    **dict.fromkeys(("trace_exact", "ExactMesh", "STATUS_MISSED", "STATUS_EXITED", "STATUS_BOUNCE_LIMIT",
-                     "STATUS_BOUNCE_LIMIT_TIR", "STATUS_LOST"), "trace"),
+    **dict.fromkeys(("trace_exact", "ExactMesh"), "trace"),
     **dict.fromkeys(("area_weighted_vertex_normals", "MeshNormals", "mesh_normals"), "normals"),
+    **dict.fromkeys(("STATUS_MISSED", "STATUS_EXITED", "STATUS_BOUNCE_LIMIT", "STATUS_BOUNCE_LIMIT_TIR",
+                     "STATUS_LOST"), "trace"),
     **dict.fromkeys(("render_exact", "render_water_exact", "shading_normals"), "pipeline"),
     "trace_water_photons": "water",
     "exact_caustic_stages": "caustics",
     **dict.fromkeys(("EXACT_DEFAULTS", "ExactKnobs", "exact_knobs"), "knobs"),
 }
+
+__all__ = list(_WHERE)
 
 
 def __getattr__(name):  # lazy (PEP 562): the kernels load on first use, not with the knob block
