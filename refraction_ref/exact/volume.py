@@ -122,14 +122,7 @@ def _st_trace(ctx):
     ctx.stats["trace"] = {"rays": H * W, "solver_steps": int(viewed["steps"].sum()),
                           "drift_max": float(viewed["drift"].max()) if H * W else 0.0}
     return {"ray_origin": origin, "ray_dir": rdir,
-            "hit": viewed["hit"].reshape(H, W),
-            "exit_pos": viewed["exit_pos"].reshape(H, W, 3),
-            "exit_dir": viewed["exit_dir"].reshape(H, W, 3),
-            "interfaces": viewed["interfaces"].reshape(H, W),
-            "path_length": viewed["path_length"].reshape(H, W),
-            "status": viewed["status"].reshape(H, W),
-            "last_dir": viewed["last_dir"].reshape(H, W, 3),
-            "transmittance": viewed["transmittance"].reshape(H, W, 3)}
+            **vp.ray_images(viewed, (H, W), vp.RAY_IMAGES + ("last_dir", "transmittance"))}
 
 
 def _st_shade(ctx):

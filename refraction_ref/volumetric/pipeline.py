@@ -64,7 +64,7 @@ from .receivers import receiver_tuple
 from .smooth import smooth_radiance
 from .view import source_volume, view_grid, view_volume
 
-__all__ = ["render_volumetric", "load_volume", "STAGES", "METHOD"]
+__all__ = ["render_volumetric", "load_volume", "ray_images", "RAY_IMAGES", "STAGES", "METHOD"]
 
 STAGES = ("voxelize", "gradient", "octree", "photons", "march", "smooth", "view")
 
@@ -445,6 +445,33 @@ def _st_smooth(ctx):
     return {"radiance": rad, "direction": dirn, "source": src}
 
 
+#: the per-ray outputs of a viewing pass that are images (docs/oracle.md's output keys)
+RAY_IMAGES = ("hit", "exit_pos", "exit_dir", "interfaces", "path_length", "status")
+
+
+def ray_images(rays, shape, names=RAY_IMAGES):
+    """The per-ray outputs ``names`` of a viewing pass as images: each ``(R, ...)`` array reshaped to ``shape + (...)``.
+
+    Parameters
+    ----------
+    rays : dict of ndarray
+        Per-ray outputs, ``R = prod(shape)`` rows, in pixel order.
+    shape : tuple of int
+        The image's ``(H, W)``.
+    names : sequence of str
+        The keys to reshape, in the order the result lists them.
+
+    Returns
+    -------
+    dict of ndarray
+
+    References
+    ----------
+    Sun et al. (2008), §4.5 (one viewing ray per pixel).
+    """
+    return {k: rays[k].reshape(tuple(shape) + rays[k].shape[1:]) for k in names}
+
+
 def _st_view(ctx):
     d = ctx.scene.data
     buf = ctx.buf
@@ -459,13 +486,7 @@ def _st_view(ctx):
     env = environment_lookup(d["environment"], rays["last_dir"], ctx.scene.base_dir).astype(np.float64)
     img = rays["inscatter"] + rays["transmittance"] * env
     return {
-        "ray_origin": origin, "ray_dir": rdir,
-        "hit": rays["hit"].reshape(H, W),
-        "exit_pos": rays["exit_pos"].reshape(H, W, 3),
-        "exit_dir": rays["exit_dir"].reshape(H, W, 3),
-        "interfaces": rays["interfaces"].reshape(H, W),
-        "path_length": rays["path_length"].reshape(H, W),
-        "status": rays["status"].reshape(H, W),
+        "ray_origin": origin, "ray_dir": rdir, **ray_images(rays, (H, W)),
         "image": img.reshape(H, W, 3).astype(np.float32),
     }
 
