@@ -63,17 +63,13 @@ def rk4_step(field, lo, ih, p, v, g, ds):
         n and its gradient, sampled at the inner stages.
     lo, ih : (3,) float64
         Lower corner and inverse voxel size of the volume.
-    p, v : 3-tuples of float
-        Position and velocity ``n dx/ds``.
-    g : 4-tuple of float
-        ``(n, dn/dx, dn/dy, dn/dz)`` at ``p``.
-    ds : float
-        Step length, world units.
+    p, v, g, ds
+        As for :func:`euler_step`.
 
     Returns
     -------
     tuple of 6 floats
-        New position and velocity.
+        Position and velocity after the step (fourth-order accurate in ``ds``).
 
     References
     ----------
