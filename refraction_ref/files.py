@@ -148,10 +148,6 @@ def check_out_folder(path, what="the output folder"):
     what : str
         What the folder is, for the message.
 
-    Returns
-    -------
-    None
-
     Raises
     ------
     OutputError

@@ -93,8 +93,8 @@ def output_paths(prefix, png=True):
 
     Parameters
     ----------
-    prefix : str or os.PathLike
-        Output prefix; a trailing ``.npz`` is dropped.
+    prefix
+        As :meth:`Result.save`.
     png : bool
         Include the PNG.
 

@@ -130,14 +130,8 @@ def trace_explanations(golden, name, gold, cand, passed):
 
     Parameters
     ----------
-    golden : str
-        The golden suite's folder (the case's ``scene.json``).
-    name : str
-        The case.
-    gold, cand : dict of str to ndarray
-        The golden's and the candidate's arrays of the case.
-    passed : dict of str to bool
-        The keys judged so far and whether they passed.
+    golden, name, gold, cand, passed
+        As :func:`peel_explanations`.
 
     Returns
     -------
@@ -239,14 +233,8 @@ def photon_explanations(golden, name, gold, cand, passed, light):
 
     Parameters
     ----------
-    golden : str
-        The golden suite's folder (the case's ``scene.json``).
-    name : str
-        The case.
-    gold, cand : dict of str to ndarray
-        The golden's and the candidate's arrays of the case.
-    passed : dict of str to bool
-        The keys judged so far and whether they passed.
+    golden, name, gold, cand, passed
+        As :func:`peel_explanations`.
     light : int
         The light.
 
@@ -288,16 +276,8 @@ def hit_explanations(golden, name, gold, cand, passed, light):
 
     Parameters
     ----------
-    golden : str
-        The golden suite's folder (the case's ``scene.json``).
-    name : str
-        The case.
-    gold, cand : dict of str to ndarray
-        The golden's and the candidate's arrays of the case.
-    passed : dict of str to bool
-        The keys judged so far and whether they passed.
-    light : int
-        The light.
+    golden, name, gold, cand, passed, light
+        As :func:`photon_explanations`.
 
     Returns
     -------

@@ -405,10 +405,8 @@ def informative(c, g, over):
 
     Parameters
     ----------
-    c : ndarray
-        Candidate array.
-    g : ndarray
-        Golden array, same shape.
+    c, g
+        As :func:`nonfinite_mismatch`.
     over : {'all', 'nonzero', 'finite'}
         ``nonzero``: where either is nonzero (NaN counts); ``finite``: where
         either is finite (for float arrays); otherwise every element.

@@ -68,10 +68,8 @@ def images_figure(f, path, name):
     f : dict
         ``ours``, ``mitsuba``, ``path``, ``fresnel`` (H, W, 3) and ``judged``
         (H, W) (:func:`~refraction_ref.interop.images.images_case`).
-    path : str
-        The PNG file.
-    name : str
-        The case name (the title).
+    path, name
+        As :func:`paths_figure`.
 
     Returns
     -------
@@ -102,10 +100,8 @@ def caustics_figure(figs, path, name):
     ----------
     figs : list of dict
         Per receiver ``ours`` and ``mitsuba`` (:func:`~refraction_ref.interop.caustics.caustics_case`).
-    path : str
-        The PNG file.
-    name : str
-        The case name (the title).
+    path, name
+        As :func:`paths_figure`.
 
     Returns
     -------

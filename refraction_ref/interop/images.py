@@ -306,8 +306,8 @@ def images_case(case, folder, variant="scalar_rgb", spp_fresnel=64, spp_absorb=6
 
     Parameters
     ----------
-    case : dict
-        A catalogue case with an exact per-pixel reference.
+    case
+        As :func:`~refraction_ref.interop.paths.paths_case`.
     folder : str
         Scratch folder for the scenes and Mitsuba's files.
     variant : str

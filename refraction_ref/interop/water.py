@@ -247,10 +247,8 @@ def water_paths_case(case, folder, variant="llvm_ad_rgb", water_resolution=None)
         A catalogue case with water.
     folder : str
         Scratch folder for the scene and Mitsuba's files.
-    variant : str
-        Mitsuba variant (a vectorised one).
-    water_resolution : int, optional
-        Quads per side of the water mesh (default the export's).
+    variant, water_resolution
+        As :func:`mitsuba_water_photons`.
 
     Returns
     -------

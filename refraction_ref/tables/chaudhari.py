@@ -241,16 +241,8 @@ def highest_complexity_view(scene, views=VIEWS, distance=2.6, res=256, fov_y=30.
 
     Parameters
     ----------
-    scene : dict
-        Scene dict whose objects are measured.
-    views : sequence of View
-        Camera directions (default :data:`VIEWS`, the listed views of Table 4.1).
-    distance : float
-        Eye to target (the origin), scene units.
-    res : int
-        Image side in pixels.
-    fov_y : float
-        Vertical field of view, degrees.
+    scene, views, distance, res, fov_y
+        As :func:`view_complexities`.
 
     Returns
     -------
