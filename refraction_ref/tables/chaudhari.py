@@ -438,10 +438,8 @@ def time_cells(model, view, keys, time_many, cache=None, log=None):
 
     Parameters
     ----------
-    model : Model
-        The table row's objects and camera distance.
-    view : View
-        Camera direction.
+    model, view
+        As :func:`cell_scene`.
     keys : iterable of (int, int, str)
         ``(res, layers, mode)`` cells.
     time_many : callable

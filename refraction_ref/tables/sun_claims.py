@@ -258,31 +258,57 @@ def _supersampling(m):
                              f"{ss[(4, b)]:.3f} at 4x4x4" for b in (5, 9)) + f" ({N}^3)")
 
 
+def _two_tolerances(rows, err, label, what, where, worse, tail=""):
+    """The two tolerances against each one alone: fewer steps than 0.005's and a smaller ``err`` than 0.02's.
+
+    Parameters
+    ----------
+    rows : dict of str to dict
+        Per octree (``_TWO_TOL``, ``_TOL5``, ``_TOL20``) ``steps`` and ``err``.
+    err : {'median', 'rel_l1'}
+        The error compared (``median``: two decimals, followed by ``label[1]`` once; ``rel_l1``: three).
+    label : (str, str)
+        The error's name and the unit after its first value.
+    what : str
+        The scene, opening the text.
+    where : str
+        Where the failure happens (after "octrees").
+    worse : str
+        The failure's reason when the steps held.
+    tail : str
+        Appended to the text.
+
+    Returns
+    -------
+    Finding
+
+    References
+    ----------
+    Sun et al. (2008), §5.3 (the two tolerances of the octree construction).
+    """
+    pd, l5, l20 = rows[_TWO_TOL], rows[_TOL5], rows[_TOL20]
+    ok = pd["steps"] < l5["steps"] and pd[err] < l20[err]
+    f = ".2f" if err == "median" else ".3f"
+    return Finding(ok, f"{what}: the paper's two tolerances {pd['steps']:,} steps, {label[0]} {pd[err]:{f}}{label[1]}; "
+                       f"one tolerance 0.005 {l5['steps']:,} steps, {l5[err]:{f}}; one tolerance 0.02 "
+                       f"{l20['steps']:,} steps, {l20[err]:{f}}{tail}",
+                   "" if ok else f"The two tolerances do not sit between the one-tolerance octrees{where}: "
+                   + ("they take no fewer steps than eps = 0.005 alone" if pd["steps"] >= l5["steps"] else worse) + ".")
+
+
 def _two_tolerances_lens(m):
-    q, N = m["quality"], m["N"]
-    lun, e = q["lun"], q["rel_l1"]
-    pd, l5, l20 = lun[_TWO_TOL], lun[_TOL5], lun[_TOL20]
-    ok = pd["steps"] < l5["steps"] and pd["median"] < l20["median"]
-    return Finding(ok, f"Luneburg lens ({N}^3): the paper's two tolerances {pd['steps']:,} steps, focus miss median "
-                       f"{pd['median']:.2f} voxels; one tolerance 0.005 {l5['steps']:,} steps, {l5['median']:.2f}; one "
-                       f"tolerance 0.02 {l20['steps']:,} steps, {l20['median']:.2f}; the sphere's caustic rel L1: two "
-                       f"tolerances {e[q['defaults']]:.3f}, one tolerance 0.005 {e[_TOL5]:.3f}, 0.02 {e[_TOL20]:.3f}",
-                   "" if ok else "The two tolerances do not sit between the one-tolerance octrees here: "
-                   + ("they take no fewer steps than eps = 0.005 alone" if pd["steps"] >= l5["steps"] else
-                      "their focus is no better than eps = 0.02 alone's") + ".")
+    q, e = m["quality"], m["quality"]["rel_l1"]
+    return _two_tolerances(q["lun"], "median", ("focus miss median", " voxels"), f"Luneburg lens ({m['N']}^3)",
+                           " here", "their focus is no better than eps = 0.02 alone's",
+                           f"; the sphere's caustic rel L1: two tolerances {e[q['defaults']]:.3f}, one tolerance 0.005 "
+                           f"{e[_TOL5]:.3f}, 0.02 {e[_TOL20]:.3f}")
 
 
 def _two_tolerances_blob(m):
-    blob, gn = m["quality"]["blob"], m["quality"]["blob_n"]
-    gpd, gb5, gb20 = blob[_TWO_TOL], blob[_TOL5], blob[_TOL20]
-    ok = gpd["steps"] < gb5["steps"] and gpd["rel_l1"] < gb20["rel_l1"]
-    return Finding(ok, f"GRIN blob ({gn}^3) against the converged reference: the paper's two tolerances "
-                       f"{gpd['steps']:,} steps, caustic rel L1 {gpd['rel_l1']:.3f}; one tolerance 0.005 "
-                       f"{gb5['steps']:,} steps, {gb5['rel_l1']:.3f}; one tolerance 0.02 {gb20['steps']:,} steps, "
-                       f"{gb20['rel_l1']:.3f}",
-                   "" if ok else "The two tolerances do not sit between the one-tolerance octrees on the blob: "
-                   + ("they take no fewer steps than eps = 0.005 alone" if gpd["steps"] >= gb5["steps"] else
-                      "their caustic is no closer to the reference than eps = 0.02 alone's") + ".")
+    q = m["quality"]
+    return _two_tolerances(q["blob"], "rel_l1", ("caustic rel L1", ""),
+                           f"GRIN blob ({q['blob_n']}^3) against the converged reference", " on the blob",
+                           "their caustic is no closer to the reference than eps = 0.02 alone's")
 
 
 def _errors_by_index(m):
