@@ -3,7 +3,8 @@
 * :func:`dot3` and :func:`unit3`, inlined into the kernels that call them;
 * :func:`take_rows`, :func:`put_rows` and :func:`copy_rows`: ``a[idx]``,
   ``a[idx] = vals`` and ``out[at:at + n] = src`` on (N, C) arrays, parallel
-  over rows (NumPy's fancy indexing runs on one thread).
+  over rows (NumPy's fancy indexing runs on one thread); :func:`take_values`,
+  ``out[:] = a[idx]`` of a 1-D array.
 
 Each returns exactly what the NumPy expression it stands for returns (the same
 bits): the row helpers copy, and :func:`dot3` sums in the order NumPy's
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["dot3", "unit3", "take_rows", "put_rows", "copy_rows"]
+__all__ = ["dot3", "unit3", "take_rows", "take_values", "put_rows", "copy_rows"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -80,6 +81,23 @@ def take_rows(a, idx):
     out = np.empty((idx.shape[0], a.shape[1]), np.float64)
     _take_rows_kernel(a, idx, out)
     return out
+
+
+@nb.njit(cache=True, parallel=True)
+def take_values(a, idx, out):
+    """``out[:] = a[idx]`` of a 1-D array, on every thread.
+
+    Parameters
+    ----------
+    a : (N,) array
+    idx : (M,) int64
+        Entries to take, in order.
+    out : (M,) array
+        Written in place (``a``'s values cast to its dtype).
+    """
+    for k0 in nb.prange(idx.shape[0]):
+        k = np.int64(k0)
+        out[k] = a[idx[k]]
 
 
 @nb.njit(cache=True, parallel=True)

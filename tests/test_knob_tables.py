@@ -63,7 +63,7 @@ def test_no_function_default_contradicts_its_knob():
     blocks = load_builtin_blocks()
     bad = []
     for block, pkg in PACKAGE_OF.items():
-        knobs = {k.name: k.default for k in blocks[block].knobs} or dict(blocks[block].defaults or {})
+        knobs = {k.name: k.default for k in blocks[block].knobs}
         folder = os.path.join(ROOT, "refraction_ref", pkg)
         for f in sorted(os.listdir(folder)):
             if not f.endswith(".py"):

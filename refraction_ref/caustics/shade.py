@@ -38,7 +38,7 @@ import numba as nb
 import numpy as np
 
 from ..environment import environment_lookup
-from ..kernels import copy_rows, dot3, put_rows, take_rows
+from ..kernels import copy_rows, dot3, put_rows, take_rows, take_values
 from ..lights import light_direction_at
 from .receivers import map_position, receiver_hits
 from .shadow import LightView, ShadowMaps, screen_of, shadow_margin_at, tie_probes, to_view, view_affine
@@ -128,14 +128,6 @@ def _count_positive(a):
         if a[np.int64(k0)] > 0:
             n += 1
     return n
-
-
-@nb.njit(cache=True, parallel=True)
-def _take_kernel(a, idx, out):
-    # out = a[idx] (1-D)
-    for k0 in nb.prange(idx.shape[0]):
-        k = np.int64(k0)
-        out[k] = a[idx[k]]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -593,7 +585,7 @@ def shade_points(rs, lights, maps_rgb, points, faces, ray_dirs, visibility):
     n = np.empty((M, 3))
     _facing_normals_kernel(rs.normals, faces, np.ascontiguousarray(ray_dirs, dtype=np.float64).reshape(-1, 3), n)
     owner = np.empty(M, np.int64)
-    _take_kernel(np.ascontiguousarray(rs.owner, dtype=np.int64), faces, owner)  # rs.owner[faces]
+    take_values(np.ascontiguousarray(rs.owner, dtype=np.int64), faces, owner)  # rs.owner[faces]
     light_sum = np.zeros((M, 3))
     cos = np.empty(M)
     for l, lt in enumerate(lights):

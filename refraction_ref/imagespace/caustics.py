@@ -43,9 +43,9 @@ from ..caustics.light import texel_flux
 from ..caustics.pipeline import (camera_array, gather_names, gather_stage, per_light_names, photon_buffer_names,
                                  receiver_hit_stage, receiver_stages, splat_stage)
 from ..caustics.receivers import ReceiverHitMode
-from ..caustics.shade import ReceiverLighting, _take_kernel, shade_rays, shade_rows_applies
+from ..caustics.shade import ReceiverLighting, shade_rays, shade_rows_applies
 from ..caustics.shadow import ShadowMaps, shadow_map_test, view_affine
-from ..kernels import put_rows, take_rows
+from ..kernels import put_rows, take_rows, take_values
 from ..environment import environment_lookup
 from ..graph import Stage
 from ..lights import light_camera
@@ -653,7 +653,7 @@ def _final_imagespace(scene, rs, eye, rgb_maps, vis, material, p):
         return base.astype(np.float32), base.astype(np.float32), shadow_out
     # the multi-layer pass: exit rays on to the receivers, else the environment (§3.6-3.8)
     path_length = np.empty(len(oi))  # trace["path_length"] at the object's pixels
-    _take_kernel(np.ascontiguousarray(trace["path_length"], dtype=np.float64).reshape(-1), oi, path_length)
+    take_values(np.ascontiguousarray(trace["path_length"], dtype=np.float64).reshape(-1), oi, path_length)
     trans = beer_lambert(absorption, path_length, ior)  # per pixel: only the object's
     # both passes' rays in one march and one shading: each ray's colour is its own, and one call
     # instead of two halves the serial work around the kernels. The exit rays (world space,

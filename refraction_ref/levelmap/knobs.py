@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..knobs import Knob, declare_block
+from ..knobs import Knob, check_knob, declare_block
 
 __all__ = ["merge_water", "LEVELMAP_KNOBS", "WATER_KNOBS", "WAVE_KNOBS", "VARIANTS", "SPACINGS", "CULLINGS",
            "LEVELMAP_DEFAULTS", "WATER_DEFAULTS", "WAVE_DEFAULTS", "max_slope", "check_water_depth", "STEEP_SLOPE",
@@ -106,7 +106,6 @@ WAVE_DEFAULTS = {k.name: k.default for k in WAVE_KNOBS}
 
 def _check_waves(waves, where, data):
     """Each wave by :data:`WAVE_KNOBS`, then the waves' summed slope (a height field does not fold)."""
-    from ..knobs import check_knob
     from ..validation import SceneError
 
     for k, wave in enumerate(waves):
